@@ -1,0 +1,3 @@
+from occtool.cli.main import main
+
+main()

@@ -1,0 +1,192 @@
+"""Range features: 3D points around the robot with an evidence value each.
+
+A :class:`Features` set is what every reader produces and what the sensor model
+consumes. Points are in the robot frame centred at the sensor (REP-103: x forward,
+y left, z up, metres). A :class:`RangeLog` groups the features of a recording by
+robot :class:`Position`, each with its pose in the world frame when the log has one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Features:
+    """Range features registered from one robot position.
+
+    Parameters
+    ----------
+    points
+        ``(N, 3)`` array of x, y, z in metres, sensor-centred robot frame.
+    evidence
+        ``(N,)`` array of evidence values ``m`` in [0, 1].
+
+    Raises
+    ------
+    InputError
+        If the shapes disagree, a value is not finite, an evidence value lies outside
+        [0, 1] or a point lies at the sensor origin (it has no direction).
+    """
+
+    points: FloatArray
+    evidence: FloatArray
+
+    def __post_init__(self) -> None:
+        points = np.ascontiguousarray(self.points, dtype=np.float64)
+        evidence = np.ascontiguousarray(self.evidence, dtype=np.float64).reshape(-1)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"points must have shape (N, 3), got {points.shape}")
+        if evidence.shape[0] != points.shape[0]:
+            raise InputError(
+                f"{points.shape[0]} points but {evidence.shape[0]} evidence values"
+            )
+        bad = ~np.isfinite(points).all(axis=1) | ~np.isfinite(evidence)
+        if bad.any():
+            raise InputError(f"feature {int(np.argmax(bad))} has a value that is NaN or infinite")
+        outside = (evidence < 0.0) | (evidence > 1.0)
+        if outside.any():
+            i = int(np.argmax(outside))
+            raise InputError(f"feature {i} has evidence {evidence[i]!r} outside [0, 1]")
+        at_origin = ~(np.abs(points) > 0.0).any(axis=1)
+        if at_origin.any():
+            raise InputError(f"feature {int(np.argmax(at_origin))} lies at the sensor origin (0, 0, 0)")
+        points.setflags(write=False)
+        evidence.setflags(write=False)
+        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "evidence", evidence)
+
+    @classmethod
+    def from_xyz(cls, x: ArrayLike, y: ArrayLike, z: ArrayLike, evidence: ArrayLike | float) -> Features:
+        """Build a set from coordinate arrays and an evidence array or constant."""
+        points = np.column_stack([np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)])
+        m = np.broadcast_to(np.asarray(evidence, dtype=np.float64), (points.shape[0],))
+        return cls(points, m.copy())
+
+    @classmethod
+    def concatenate(cls, parts: list[Features]) -> Features:
+        """Join several sets into one."""
+        if not parts:
+            return cls(np.empty((0, 3)), np.empty(0))
+        return cls(
+            np.concatenate([p.points for p in parts]), np.concatenate([p.evidence for p in parts])
+        )
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def alpha(self) -> FloatArray:
+        """Pan angle ``atan2(y, x)`` in radians, in (-pi, pi]."""
+        return np.arctan2(self.points[:, 1], self.points[:, 0])
+
+    @property
+    def height(self) -> FloatArray:
+        """Height ``z`` relative to the sensor, metres."""
+        return self.points[:, 2].copy()
+
+    @property
+    def range(self) -> FloatArray:
+        """Distance ``|p|`` from the sensor, metres."""
+        return np.sqrt(np.einsum("ij,ij->i", self.points, self.points))
+
+    def polar(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return ``(alpha, h, r)``, the paper's robot-centred coordinates."""
+        return self.alpha, self.height, self.range
+
+    def select(self, mask: ArrayLike) -> Features:
+        """The features where ``mask`` is true (or at the given indices)."""
+        index = np.asarray(mask)
+        return Features(self.points[index], self.evidence[index])
+
+    def transformed(self, rotation: ArrayLike, translation: ArrayLike = (0.0, 0.0, 0.0)) -> Features:
+        """Features moved by ``p' = R p + t`` (rotation a 3x3 matrix)."""
+        R = np.asarray(rotation, dtype=np.float64).reshape(3, 3)
+        t = np.asarray(translation, dtype=np.float64).reshape(3)
+        return Features(self.points @ R.T + t, self.evidence)
+
+    def rotated(self, yaw: float) -> Features:
+        """Features rotated by ``yaw`` radians about z (counter-clockwise seen from above)."""
+        return self.transformed(Pose(yaw=yaw).rotation)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A robot pose in the world (``map``/``odom``) frame: planar position, height and yaw."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    yaw: float = 0.0
+
+    @property
+    def rotation(self) -> FloatArray:
+        """The 3x3 rotation matrix about z."""
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    @property
+    def translation(self) -> FloatArray:
+        return np.array([self.x, self.y, self.z])
+
+    def to_world(self, xy: ArrayLike) -> FloatArray:
+        """Move ``(K, 2)`` robot-frame x, y coordinates into the world frame."""
+        pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        return np.column_stack([self.x + c * pts[:, 0] - s * pts[:, 1], self.y + s * pts[:, 0] + c * pts[:, 1]])
+
+    def to_dict(self) -> dict[str, float]:
+        return {"x": float(self.x), "y": float(self.y), "z": float(self.z), "yaw": float(self.yaw)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, float]) -> Pose:
+        return cls(**{k: float(data[k]) for k in ("x", "y", "z", "yaw") if k in data})
+
+
+@dataclass(frozen=True, eq=False)
+class Position:
+    """The features registered at one robot position, with the position's world pose.
+
+    ``pose`` is ``None`` when the log carries no poses.
+    """
+
+    index: int
+    features: Features
+    pose: Pose | None = None
+    stamp: float | None = None
+    source: str = ""
+
+
+@dataclass(eq=False)
+class RangeLog:
+    """What a reader returns: the positions of a recording and notes for the user."""
+
+    positions: list[Position]
+    source: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def has_poses(self) -> bool:
+        return any(p.pose is not None for p in self.positions)
+
+    def single(self, position: int | None = None) -> Position:
+        """One position: the one given, or the only one; an error if the choice is ambiguous."""
+        if not self.positions:
+            raise InputError(f"{self.source or 'the log'} holds no range data")
+        if position is None:
+            if len(self.positions) > 1:
+                raise InputError(
+                    f"{self.source or 'the log'} holds {len(self.positions)} robot positions: "
+                    "pick one with --position N or write a model set to a folder"
+                )
+            return self.positions[0]
+        if not 0 <= position < len(self.positions):
+            raise InputError(f"position {position} is out of range (the log has {len(self.positions)})")
+        return self.positions[position]
