@@ -93,3 +93,12 @@ output_option = click.option(
     help="Output file ('-' or absent: standard output, where the command allows it).",
 )
 seed_option = click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+
+# --- range-log reading (owner: readers) ------------------------------------------------
+# log_options / read_log_from_kwargs go here.
+
+# --- sensor model and fit (owner: core model) -----------------------------------------
+# sensor_options / fit_options and their *_from_kwargs helpers go here.
+
+# --- navigation extraction (owner: navigation) ----------------------------------------
+# extract_options / extract_from_kwargs go here.
