@@ -39,6 +39,10 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
     if not directory.is_dir():
         raise FileNotFoundError(f"output folder {directory} does not exist")
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    # mkstemp makes the file private (0600); give the result the mode a plain open() would.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp_name, 0o666 & ~umask)
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": "\n"})) as handle:
             yield handle
