@@ -1,0 +1,308 @@
+"""Reading range logs and writing features.
+
+:func:`read_log` is the one entry point every command uses: it picks the reader by
+the file's content and extension (or ``format=``) and returns a
+:class:`~occtool.features.RangeLog` whose positions hold features in the
+sensor-centred robot frame. Supported formats (docs/formats.md):
+
+``csv``
+    header ``x,y,z,m`` (+ optional ``position`` / ``pose_*`` columns), ``.gz``/``.bz2`` too.
+``mcap``
+    ROS 2 ``sensor_msgs/msg/PointCloud2`` and ``LaserScan``, ``foxglove.PointCloud`` and
+    ``foxglove.LaserScan`` (JSON or protobuf), and occtool's own JSON channel.
+``carmen``
+    CARMEN ``FLASER``/``RLASER``/``ROBOTLASER1`` logs (``.log``, ``.log.gz``).
+``xyz``
+    plain ``x y z`` point lines, as OctoMap's ``scan.dat`` (``.dat``, ``.xyz``, ``.bz2``/``.gz``).
+``pcd``, ``ply``
+    point-cloud files, ASCII or binary.
+
+The readers are imported only when used, and nothing here imports the model or
+GeoJSON writers.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import os
+import zlib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from occtool.errors import InputError
+
+if TYPE_CHECKING:
+    from occtool.features import Features, Position, RangeLog
+
+__all__ = ["FORMATS", "detect_format", "read_log", "describe_log", "write_csv", "write_mcap"]
+
+FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply")
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+DEFAULT_CONSTANT_EVIDENCE = 0.9
+CARMEN_RECORDS = (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"NEFF", b"SYNC", b"TRUEPOS")
+
+
+def _head(path: Path, size: int = 4096) -> bytes:
+    """The first bytes of a file, decompressed if it is gzip or bzip2."""
+    with open(path, "rb") as raw:
+        start = raw.read(4)
+    try:
+        if start[:2] == b"\x1f\x8b":
+            with gzip.open(path, "rb") as handle:
+                return handle.read(size)
+        if start[:3] == b"BZh":
+            with bz2.open(path, "rb") as handle:
+                return handle.read(size)
+    except (OSError, EOFError) as exc:
+        raise InputError(f"{path}: the compressed file is corrupt ({exc})") from None
+    with open(path, "rb") as handle:
+        return handle.read(size)
+
+
+def detect_format(path: str | os.PathLike[str]) -> str:
+    """Name the format of a range log from its content, then its extension.
+
+    Raises
+    ------
+    InputError
+        If the content matches no supported format.
+    FileNotFoundError
+        If the file does not exist.
+    """
+    target = Path(path)
+    if target.is_dir():
+        raise InputError(f"{target} is a folder, not a range log")
+    head = _head(target)
+    if not head:
+        raise InputError(f"{target} is empty")
+    if head.startswith(MCAP_MAGIC):
+        return "mcap"
+    if head.startswith(b"ply") and head[3:4] in (b"\n", b"\r"):
+        return "ply"
+    text_lines = [line.strip() for line in head.splitlines()[:-1] or head.splitlines()]
+    content = [line for line in text_lines if line and not line.startswith(b"#")]
+    if b".PCD" in head[:200] or (content and content[0].split()[:1] in ([b"VERSION"], [b"FIELDS"])):
+        return "pcd"
+    if content and content[0].split()[:1] and content[0].split()[0] in CARMEN_RECORDS:
+        return "carmen"
+    if content:
+        first = content[0].decode("utf-8", "replace")
+        names = {c.strip().strip('"').lower() for c in first.split(",")}
+        if {"x", "y", "z"} <= names:
+            return "csv"
+        if _numeric_fields(first) >= 3 and "," not in first:
+            return "xyz"
+        if first.split()[:1] == ["NODE"]:
+            return "xyz"
+    suffixes = [s.lower() for s in target.suffixes]
+    for suffix in reversed([s for s in suffixes if s not in (".gz", ".bz2")]):
+        by_suffix = {".csv": "csv", ".mcap": "mcap", ".log": "carmen", ".dat": "xyz", ".xyz": "xyz",
+                     ".pcd": "pcd", ".ply": "ply"}.get(suffix)
+        if by_suffix:
+            return by_suffix
+    raise InputError(
+        f"cannot tell the format of {target}: expected CSV with an x,y,z header, MCAP, "
+        "a CARMEN log, x y z point lines, PCD or PLY (or give --format)"
+    )
+
+
+def _numeric_fields(line: str) -> int:
+    count = 0
+    for item in line.split():
+        try:
+            float(item)
+        except ValueError:
+            return 0
+        count += 1
+    return count
+
+
+def read_log(
+    path: str | os.PathLike[str],
+    *,
+    format: str | None = None,
+    topics: Sequence[str] | None = None,
+    evidence_field: str = "evidence",
+    evidence: float | None = None,
+    use_intensities: bool = False,
+    sensor_frame: str | None = None,
+    base_frame: str | None = None,
+    position_tolerance: Sequence[float] = (0.25, 0.26),
+    group_by: str = "position",
+    skip_invalid: bool = False,
+) -> RangeLog:
+    """Read a range log into positions of features.
+
+    Parameters
+    ----------
+    path
+        The log file.
+    format
+        One of :data:`FORMATS`; by default chosen from the content and extension.
+    topics
+        MCAP channels to read (all must exist); by default the one supported range channel.
+    evidence_field
+        Point field (PointCloud2, PCD, PLY) or CSV column holding the evidence value.
+    evidence
+        Constant evidence for data without an evidence field (laser scans, plain
+        points); defaults to 0.9 there. CSV needs it only if it has no ``m`` column.
+    use_intensities
+        For laser scans, take the evidence from the intensities scaled into [0, 1]
+        by the scan's largest intensity.
+    sensor_frame, base_frame
+        MCAP frames: points are moved from the sensor frame into the base frame with
+        ``/tf_static``; by default the message's frame and ``base_link``.
+    position_tolerance
+        ``(metres, radians)``: consecutive scans within this distance and yaw of a
+        position's first scan belong to that position.
+    group_by
+        ``"position"`` (see above) or ``"message"`` (each scan its own position).
+    skip_invalid
+        Drop invalid rows/points (NaN, evidence outside [0, 1], at the origin, a line
+        that does not parse) and report the count in ``notes`` instead of failing.
+
+    Returns
+    -------
+    RangeLog
+        Positions in recording order, with ``notes`` for the user.
+
+    Raises
+    ------
+    InputError
+        For unreadable or invalid data, naming the file and what is wrong.
+
+    Examples
+    --------
+    >>> log = read_log("fixtures/office/features.csv")  # doctest: +SKIP
+    >>> features = log.single().features                # doctest: +SKIP
+    """
+    from occtool.io.positions import GROUP_BY_CHOICES, check_tolerance
+
+    if not Path(path).exists():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    tolerance = check_tolerance(position_tolerance)
+    if group_by not in GROUP_BY_CHOICES:
+        raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {group_by!r}")
+    if evidence is not None and not (0.0 <= float(evidence) <= 1.0):
+        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
+    fmt = (format or detect_format(path)).lower()
+    if fmt == "dat":
+        fmt = "xyz"
+    if fmt not in FORMATS:
+        raise InputError(f"unknown format {format!r}: expected one of {', '.join(FORMATS)}")
+    if topics and fmt != "mcap":
+        raise InputError(f"--topic applies to MCAP logs only, and {path} is {fmt}")
+    options = dict(
+        topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
+        sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
+        skip_invalid=skip_invalid,
+    )
+    try:
+        return _read_format(path, fmt, options)
+    except (EOFError, zlib.error) as exc:
+        raise InputError(f"{path} is truncated or corrupt: {exc}") from None
+    except OSError as exc:
+        # Decompression errors (a damaged .gz/.bz2) are OSErrors too; missing files and
+        # permissions keep their own message.
+        if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
+            raise
+        raise InputError(f"{path} cannot be read: {exc}") from None
+
+
+def _read_format(path: str | os.PathLike[str], fmt: str, options: dict[str, Any]) -> RangeLog:
+    topics = options["topics"]
+    evidence_field = options["evidence_field"]
+    evidence = options["evidence"]
+    use_intensities = options["use_intensities"]
+    sensor_frame = options["sensor_frame"]
+    base_frame = options["base_frame"]
+    tolerance = options["position_tolerance"]
+    group_by = options["group_by"]
+    skip_invalid = options["skip_invalid"]
+    constant = DEFAULT_CONSTANT_EVIDENCE if evidence is None else float(evidence)
+    if fmt == "csv":
+        from occtool.io.csv import read_csv
+
+        return read_csv(
+            path, evidence_field=evidence_field, evidence=evidence, position_tolerance=tolerance,
+            group_by=group_by, skip_invalid=skip_invalid,
+        )
+    if fmt == "mcap":
+        from occtool.io.mcap import read_mcap
+
+        return read_mcap(
+            path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
+            sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
+            skip_invalid=skip_invalid,
+        )
+    if fmt == "carmen":
+        from occtool.io.carmen import read_carmen
+
+        return read_carmen(
+            path, evidence=constant, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid
+        )
+    from occtool.io.pointcloud import read_pointcloud
+
+    return read_pointcloud(
+        path, format=fmt, evidence_field=evidence_field, evidence=evidence, position_tolerance=tolerance,
+        group_by=group_by, skip_invalid=skip_invalid,
+    )
+
+
+def describe_log(path: str | os.PathLike[str]) -> Any:
+    """A rich renderable describing a range log, for ``occtool info LOG``.
+
+    For MCAP: the channels (topic, schema, encoding, message count) and whether
+    occtool can read each, from the summary section (the file is not scanned). For
+    other formats: the format, size and counts of features and positions.
+    """
+    from rich.console import Group
+    from rich.table import Table
+
+    target = Path(path)
+    if not target.exists():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    fmt = detect_format(target)
+    size = target.stat().st_size
+    header = Table.grid(padding=(0, 2))
+    header.add_column(style="bold")
+    header.add_column()
+    header.add_row("file", str(target))
+    header.add_row("format", fmt)
+    header.add_row("size", f"{size:,} bytes")
+    if fmt == "mcap":
+        from occtool.io.mcap import describe_channels
+
+        rows, extra = describe_channels(target)
+        table = Table(title="channels", show_lines=False)
+        for column in ("topic", "schema", "encoding", "messages", "occtool reads it"):
+            table.add_column(column, justify="right" if column == "messages" else "left")
+        for row in rows:
+            table.add_row(row.topic, row.schema, row.encoding, "?" if row.messages is None else f"{row.messages:,}",
+                          row.support)
+        for key, value in extra.items():
+            header.add_row(key, value)
+        return Group(header, table)
+    log = read_log(target, format=fmt, skip_invalid=True)
+    header.add_row("positions", f"{len(log.positions):,}")
+    header.add_row("features", f"{sum(len(p.features) for p in log.positions):,}")
+    header.add_row("poses", "yes" if log.has_poses else "no")
+    for note in log.notes:
+        header.add_row("note", note)
+    return header
+
+
+def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.PathLike[str]) -> None:
+    """Write features or a whole log as CSV (see :func:`occtool.io.csv.write_csv`)."""
+    from occtool.io.csv import write_csv as _write_csv
+
+    _write_csv(features_or_log, path)
+
+
+def write_mcap(log: RangeLog | Features, path: str | os.PathLike[str]) -> None:
+    """Write a log as MCAP on occtool's JSON channel (see :func:`occtool.io.mcap.write_mcap`)."""
+    from occtool.io.mcap import write_mcap as _write_mcap
+
+    _write_mcap(log, path)

@@ -1,0 +1,182 @@
+"""Read CARMEN laser logs (the classic 2D data sets: Intel lab, Freiburg 079, ACES, ...).
+
+One record per line, whitespace-separated, optionally gzip-compressed
+(``../shared/data/CARMEN_FORMAT.md``)::
+
+    FLASER N r_0 ... r_{N-1} x y theta odom_x odom_y odom_theta ipc_timestamp host logger_timestamp
+    RLASER (the same, for a rear laser)
+    ROBOTLASER1 type start_angle fov resolution max_range accuracy remission_mode
+                N r_0 ... r_{N-1} M v_0 ... v_{M-1} laser_x laser_y laser_theta robot_x robot_y robot_theta
+                tv rv forward_safety side_safety turn_axis ipc_timestamp host logger_timestamp
+
+Other records (``ODOM``, ``PARAM``, ``NEFF``, ``SYNC``, ``TRUEPOS``, comments) are
+skipped: only scans carry the (corrected) laser pose.
+
+Beam angles for ``FLASER``/``RLASER``: ``-pi/2 + i * delta`` with ``delta = pi / N``
+for even ``N`` (180 or 360 beams covering -90..+89(.5) degrees) and
+``pi / (N - 1)`` for odd ``N`` (361 beams covering -90..+90 degrees). Every reading
+becomes a point in the scan plane (``z = 0``) of the laser pose, with constant
+evidence.
+
+Max-range readings mean "no return" and are dropped, not taken as obstacles: a
+reading at or above ``max_range`` when it is given, otherwise at or above the largest
+reading of the file when that value repeats (a sentinel such as 81.83 m: at least 10
+times, or twice and in 1% of the readings), and readings <= 0.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.features import Pose, RangeLog
+from occtool.io.csv import open_text
+from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+
+# The largest reading of a file is taken as the no-return sentinel when it occurs this
+# often (or, in short logs, at least twice and in 1% of the readings).
+SENTINEL_MIN_COUNT = 10
+LASER_RECORDS = ("FLASER", "RLASER", "ROBOTLASER1")
+OTHER_RECORDS = ("ODOM", "PARAM", "NEFF", "SYNC", "TRUEPOS", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4",
+                 "ROBOTLASER2", "GPSNMEA", "GPSGGA", "GPSRMC", "SONAR", "BUMPER", "SCANMARK", "POSITIONLASER")
+
+
+def _beam_angles(count: int) -> NDArray[np.float64]:
+    delta = np.pi / (count - 1) if count % 2 == 1 and count > 1 else np.pi / max(count, 1)
+    return -np.pi / 2 + delta * np.arange(count)
+
+
+class _Problem(Exception):
+    pass
+
+
+def _parse_laser(fields: list[str]) -> tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None]:
+    """Ranges, beam angles, laser pose and stamp of one laser record."""
+    kind = fields[0]
+    try:
+        if kind in ("FLASER", "RLASER"):
+            count = int(fields[1])
+            if count < 1:
+                raise _Problem(f"{kind} with {count} readings")
+            if len(fields) < 2 + count + 6:
+                raise _Problem(f"{kind} announces {count} readings but has only {len(fields) - 2} more fields")
+            ranges = np.array(fields[2 : 2 + count], dtype=np.float64)
+            x, y, theta = (float(v) for v in fields[2 + count : 5 + count])
+            angles = _beam_angles(count)
+            if kind == "RLASER":
+                angles = angles + np.pi
+            stamp_index = 2 + count + 6
+        else:  # ROBOTLASER1
+            start, _fov, resolution = float(fields[2]), float(fields[3]), float(fields[4])
+            count = int(fields[8])
+            ranges = np.array(fields[9 : 9 + count], dtype=np.float64)
+            remissions = int(fields[9 + count])
+            base = 10 + count + remissions
+            if len(fields) < base + 6:
+                raise _Problem(f"ROBOTLASER1 announces {count} readings and {remissions} remissions but is too short")
+            x, y, theta = (float(v) for v in fields[base : base + 3])
+            angles = start + resolution * np.arange(count)
+            stamp_index = base + 11
+        stamp = float(fields[stamp_index]) if len(fields) > stamp_index else None
+    except (ValueError, IndexError) as exc:
+        if isinstance(exc, _Problem):
+            raise
+        raise _Problem(f"{kind} record has a field that is not a number ({exc})") from None
+    if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(theta)):
+        raise _Problem(f"{kind} pose is not finite")
+    return ranges, angles, Pose(x, y, 0.0, theta), stamp
+
+
+def read_carmen(
+    path: str | os.PathLike[str],
+    *,
+    evidence: float = 0.9,
+    max_range: float | None = None,
+    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
+    group_by: str = "position",
+    skip_invalid: bool = False,
+) -> RangeLog:
+    """Read the laser scans of a CARMEN log into positions of features.
+
+    Parameters
+    ----------
+    path
+        ``.log`` or ``.log.gz`` file.
+    evidence
+        Evidence given to every reading (a 2D laser reports none).
+    max_range
+        Readings at or above this are "no return" and dropped; by default the file's
+        repeated largest reading (see the module notes).
+    position_tolerance, group_by, skip_invalid
+        As for :func:`occtool.io.read_log`; ``skip_invalid`` skips laser lines that do
+        not parse.
+
+    Raises
+    ------
+    InputError
+        For a laser line that does not parse (naming it) or a log without scans.
+    """
+    name = str(path)
+    if not 0.0 <= evidence <= 1.0:
+        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
+    raw: list[tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None, int]] = []
+    skipped_lines = 0
+    unknown: set[str] = set()
+    try:
+        with open_text(path) as handle:
+            for line_number, line in enumerate(handle, start=1):
+                fields = line.split()
+                if not fields or fields[0].startswith("#"):
+                    continue
+                if fields[0] not in LASER_RECORDS:
+                    if fields[0] not in OTHER_RECORDS:
+                        unknown.add(fields[0][:20])
+                    continue
+                try:
+                    ranges, angles, pose, stamp = _parse_laser(fields)
+                except _Problem as problem:
+                    if not skip_invalid:
+                        raise InputError(f"{name}, line {line_number}: {problem}") from None
+                    skipped_lines += 1
+                    continue
+                raw.append((ranges, angles, pose, stamp, line_number))
+    except (OSError, EOFError) as exc:
+        if isinstance(exc, FileNotFoundError):
+            raise
+        raise InputError(f"{name}: cannot read the log ({exc})") from None
+    if not raw:
+        raise InputError(f"{name} holds no laser scans (FLASER, RLASER or ROBOTLASER1 lines)")
+
+    notes: list[str] = []
+    all_ranges = np.concatenate([r[0] for r in raw])
+    limit = max_range
+    if limit is None:
+        finite = all_ranges[np.isfinite(all_ranges)]
+        top = float(finite.max()) if finite.size else np.inf
+        repeats = int((finite == top).sum())
+        if repeats >= SENTINEL_MIN_COUNT or (repeats >= 2 and repeats >= 0.01 * finite.size):
+            limit = top
+    scans = []
+    no_return = 0
+    for ranges, angles, pose, stamp, line_number in raw:
+        valid = np.isfinite(ranges) & (ranges > 0.0)
+        if limit is not None:
+            valid &= ranges < limit
+        no_return += int(ranges.size - valid.sum())
+        r, a = ranges[valid], angles[valid]
+        points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
+        scans.append(Scan(points, np.full(r.size, evidence), pose, stamp, f"{name}:{line_number}"))
+    if no_return:
+        where = f" (readings >= {limit:g} m)" if limit is not None else ""
+        notes.append(f"dropped {no_return} of {all_ranges.size} readings as no return{where}")
+    notes.append(f"constant evidence {evidence} for laser readings (--evidence)")
+    if skipped_lines:
+        notes.append(f"skipped {skipped_lines} laser line(s) that do not parse")
+    if unknown:
+        notes.append(f"ignored records of unknown type: {', '.join(sorted(unknown)[:5])}")
+    return build_log(scans, source=name, tolerance=position_tolerance, group_by=group_by, notes=notes)
+

@@ -1,0 +1,406 @@
+"""Read and write range features as CSV.
+
+The format (docs/formats.md): a header row naming the columns, then one feature per
+row. ``x, y, z`` are metres in the sensor-centred robot frame (REP-103: x forward,
+y left, z up); ``m`` (or ``evidence``) is the evidence value in [0, 1]. Extra columns
+are ignored and ``#`` starts a comment. Optional columns group rows into robot
+positions: ``position`` (an integer id), or a pose ``pose_x, pose_y, pose_yaw``
+(and ``pose_z``) in the world frame, and ``stamp`` (seconds).
+
+Parsing is vectorised (:func:`numpy.loadtxt`, compiled code); only when it fails does a
+slower pass run, to name the offending line or, with ``skip_invalid``, to drop it.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import logging
+import os
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import IO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.features import Features, Pose, Position, RangeLog
+from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, assign_positions, to_reference_frame
+
+logger = logging.getLogger(__name__)
+
+EVIDENCE_ALIASES = ("m", "evidence")
+POSE_COLUMNS = ("pose_x", "pose_y", "pose_z", "pose_yaw")
+STAMP_ALIASES = ("stamp", "time", "t")
+
+
+def open_text(path: str | os.PathLike[str]) -> IO[str]:
+    """Open a text file for reading, decompressing ``.gz`` and ``.bz2`` transparently."""
+    name = str(path)
+    if name.endswith(".gz"):
+        return gzip.open(name, "rt", encoding="utf-8", errors="replace")
+    if name.endswith(".bz2"):
+        return bz2.open(name, "rt", encoding="utf-8", errors="replace")
+    return open(name, encoding="utf-8", errors="replace", newline=None)
+
+
+def _content(line: str) -> str:
+    """A line without its comment and surrounding blanks (what numpy.loadtxt sees)."""
+    return line.split("#", 1)[0].strip()
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Which column holds what, found from the header row."""
+
+    header_line: int
+    names: tuple[str, ...]
+    xyz: tuple[int, int, int]
+    evidence: int | None
+    position: int | None
+    pose: tuple[int, int, int | None, int] | None
+    stamp: int | None
+
+    @property
+    def used(self) -> tuple[int, ...]:
+        """Column indices to parse, in the order x, y, z, [m], [position], [pose...], [stamp]."""
+        columns = list(self.xyz)
+        for extra in (self.evidence, self.position):
+            if extra is not None:
+                columns.append(extra)
+        if self.pose is not None:
+            columns.extend(c for c in self.pose if c is not None)
+        if self.stamp is not None:
+            columns.append(self.stamp)
+        return tuple(columns)
+
+
+def _find_layout(handle: IO[str], name: str, evidence_field: str, constant_evidence: float | None) -> _Layout:
+    line_number = 0
+    for line in handle:
+        line_number += 1
+        text = _content(line)
+        if text:
+            break
+    else:
+        raise InputError(f"{name} is empty (no header row and no data)")
+    names = tuple(c.strip().strip('"').strip("'").lower() for c in text.split(","))
+    index = {n: i for i, n in enumerate(names)}
+    missing = [c for c in ("x", "y", "z") if c not in index]
+    if missing:
+        raise InputError(
+            f"{name}, line {line_number}: the header needs columns x, y, z (missing {', '.join(missing)}); "
+            f"found {', '.join(names)}"
+        )
+    evidence_column: int | None = None
+    wanted = evidence_field.lower() if evidence_field else "evidence"
+    if wanted in index:
+        evidence_column = index[wanted]
+    elif wanted in EVIDENCE_ALIASES:
+        evidence_column = next((index[a] for a in EVIDENCE_ALIASES if a in index), None)
+    if evidence_column is None and constant_evidence is None:
+        raise InputError(
+            f"{name}, line {line_number}: no evidence column ('{wanted}'"
+            f"{' or m' if wanted in EVIDENCE_ALIASES else ''}): add one or give a constant with --evidence"
+        )
+    pose = None
+    if "pose_x" in index or "pose_y" in index or "pose_yaw" in index:
+        absent = [c for c in ("pose_x", "pose_y", "pose_yaw") if c not in index]
+        if absent:
+            raise InputError(f"{name}, line {line_number}: pose columns need {', '.join(absent)} as well")
+        pose = (index["pose_x"], index["pose_y"], index.get("pose_z"), index["pose_yaw"])
+    stamp = next((index[a] for a in STAMP_ALIASES if a in index), None)
+    return _Layout(
+        header_line=line_number,
+        names=names,
+        xyz=(index["x"], index["y"], index["z"]),
+        evidence=evidence_column,
+        position=index.get("position"),
+        pose=pose,
+        stamp=stamp,
+    )
+
+
+def _slow_parse(
+    handle: IO[str], layout: _Layout
+) -> tuple[NDArray[np.float64], NDArray[np.int64], list[tuple[int, str]]]:
+    """Parse row by row: the fallback that finds the lines that do not parse.
+
+    Returns the values of the rows that parse, the file line number of each and the
+    ``(line number, problem)`` of each row that does not.
+    """
+    used = layout.used
+    width = max(used) + 1
+    rows: list[list[float]] = []
+    lines: list[int] = []
+    unparsable: list[tuple[int, str]] = []
+    line_number = layout.header_line
+    for line in handle:
+        line_number += 1
+        text = _content(line)
+        if not text:
+            continue
+        fields = text.split(",")
+        problem = None
+        if len(fields) < width:
+            problem = f"has {len(fields)} columns, the header names {len(layout.names)}"
+        else:
+            try:
+                values = [float(fields[c]) for c in used]
+            except ValueError:
+                bad = next(c for c in used if not _is_float(fields[c]))
+                problem = f"column '{layout.names[bad]}' is not a number: {fields[bad].strip()!r}"
+        if problem is not None:
+            unparsable.append((line_number, problem))
+            continue
+        rows.append(values)
+        lines.append(line_number)
+    data = np.array(rows, dtype=np.float64).reshape(-1, len(used))
+    return data, np.array(lines, dtype=np.int64), unparsable
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _data_line_numbers(path: str | os.PathLike[str], layout: _Layout) -> NDArray[np.int64]:
+    """The file line number of every data row (a second pass, run only to report an error)."""
+    numbers = []
+    with open_text(path) as handle:
+        for line_number, line in enumerate(handle, start=1):
+            if line_number > layout.header_line and _content(line):
+                numbers.append(line_number)
+    return np.array(numbers, dtype=np.int64)
+
+
+def read_csv(
+    path: str | os.PathLike[str],
+    *,
+    evidence_field: str = "evidence",
+    evidence: float | None = None,
+    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
+    group_by: str = "position",
+    skip_invalid: bool = False,
+) -> RangeLog:
+    """Read a CSV feature file into a :class:`~occtool.features.RangeLog`.
+
+    Parameters
+    ----------
+    path
+        The CSV file (``.csv``, optionally ``.gz`` or ``.bz2`` compressed).
+    evidence_field
+        Name of the evidence column; ``"evidence"`` (the default) also accepts ``m``.
+    evidence
+        Constant evidence for every row, used when the file has no evidence column.
+    position_tolerance
+        ``(metres, radians)``: consecutive poses within it form one position.
+    group_by
+        ``"position"`` or ``"message"`` (every distinct consecutive pose its own position).
+    skip_invalid
+        Drop bad rows (not numeric, NaN or infinite, evidence outside [0, 1], a point at
+        the origin) and report their count in ``notes`` instead of failing.
+
+    Returns
+    -------
+    RangeLog
+        One position per ``position`` id or pose group; one position if there are no
+        pose columns.
+
+    Raises
+    ------
+    InputError
+        For an empty file, a missing column, or a bad row (naming its line).
+    """
+    name = str(path)
+    if evidence is not None and not (0.0 <= evidence <= 1.0):
+        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
+    line_numbers: NDArray[np.int64] | None = None
+    unparsable: list[tuple[int, str]] = []
+    with open_text(path) as handle:
+        layout = _find_layout(handle, name, evidence_field, evidence)
+        try:
+            with warnings.catch_warnings():
+                # A header without rows is reported below as an InputError, not a warning.
+                warnings.simplefilter("ignore", UserWarning)
+                data = np.loadtxt(
+                    handle, delimiter=",", comments="#", usecols=layout.used, ndmin=2, dtype=np.float64
+                )
+            parsed = True
+        except ValueError:
+            parsed = False
+    if not parsed:
+        with open_text(path) as handle:
+            for _ in range(layout.header_line):
+                handle.readline()
+            data, line_numbers, unparsable = _slow_parse(handle, layout)
+    notes: list[str] = []
+    if data.shape[0] == 0 and not unparsable:
+        raise InputError(f"{name} has a header but no data rows")
+
+    columns = {c: data[:, k] for k, c in enumerate(layout.used)}
+    points = np.column_stack([columns[c] for c in layout.xyz])
+    m = columns[layout.evidence] if layout.evidence is not None else np.full(data.shape[0], float(evidence))
+    bad_reason = np.zeros(data.shape[0], dtype=np.int8)
+    not_finite = ~np.isfinite(data).all(axis=1)
+    outside = ~not_finite & ((m < 0.0) | (m > 1.0))
+    at_origin = ~not_finite & ~(np.abs(points) > 0.0).any(axis=1)
+    bad_reason[at_origin] = 3
+    bad_reason[outside] = 2
+    bad_reason[not_finite] = 1
+    bad = bad_reason > 0
+    if (bad.any() or unparsable) and not skip_invalid:
+        problems = list(unparsable[:1])
+        if bad.any():
+            first = int(np.argmax(bad))
+            if line_numbers is None:
+                line_numbers = _data_line_numbers(path, layout)
+            reason = {
+                1: "a value is NaN or infinite",
+                2: f"evidence {float(m[first])!r} lies outside [0, 1]",
+                3: "the point lies at the sensor origin (0, 0, 0) and has no direction",
+            }[int(bad_reason[first])]
+            problems.append((int(line_numbers[first]), reason))
+        line, problem = min(problems)
+        raise InputError(f"{name}, line {line}: {problem} (pass --skip-invalid to drop bad rows)")
+    if bad.any():
+        keep = ~bad
+        data, points, m = data[keep], points[keep], m[keep]
+        columns = {c: data[:, k] for k, c in enumerate(layout.used)}
+    skipped = len(unparsable) + int(bad.sum())
+    if skipped:
+        notes.append(f"skipped {skipped} invalid row(s) of {name}")
+        logger.debug("skipped %d invalid rows of %s", skipped, name)
+    if data.shape[0] == 0:
+        raise InputError(f"{name} holds no valid rows ({skipped} skipped)")
+
+    return _group_rows(name, layout, columns, points, m, position_tolerance, group_by, notes)
+
+
+def _group_rows(
+    name: str,
+    layout: _Layout,
+    columns: dict[int, NDArray[np.float64]],
+    points: NDArray[np.float64],
+    m: NDArray[np.float64],
+    tolerance: Sequence[float],
+    group_by: str,
+    notes: list[str],
+) -> RangeLog:
+    n = points.shape[0]
+    stamps = columns[layout.stamp] if layout.stamp is not None else None
+    pose_rows = None
+    if layout.pose is not None:
+        px, py, pz, pyaw = layout.pose
+        pose_rows = np.column_stack(
+            [columns[px], columns[py], columns[pz] if pz is not None else np.zeros(n), columns[pyaw]]
+        )
+
+    if layout.position is not None:
+        ids = columns[layout.position]
+        if not np.all(ids == np.round(ids)):
+            raise InputError(f"{name}: the 'position' column must hold whole numbers")
+        _, first_index, labels = np.unique(ids, return_index=True, return_inverse=True)
+        # Number positions in order of first appearance in the file.
+        order = np.argsort(np.argsort(first_index))
+        labels = order[labels.reshape(-1)]
+    elif pose_rows is not None:
+        # A scan is a run of rows with the same pose; scans are grouped by tolerance.
+        changes = np.flatnonzero(np.any(np.diff(pose_rows, axis=0) != 0.0, axis=1)) + 1
+        starts = np.concatenate([[0], changes])
+        run_poses = [Pose(*map(float, pose_rows[s])) for s in starts]
+        run_labels = assign_positions(run_poses, tolerance=tolerance, group_by=group_by)
+        run_of_row = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, n)))
+        labels = run_labels[run_of_row]
+    else:
+        # A plain feature file is the features of one robot position, as the paper's sensor gives.
+        labels = np.zeros(n, dtype=np.int64)
+
+    order = np.argsort(labels, kind="stable")
+    sorted_labels = labels[order]
+    boundaries = np.flatnonzero(np.diff(sorted_labels)) + 1
+    positions: list[Position] = []
+    dropped = 0
+    for rows in np.split(order, boundaries):
+        if rows.size == 0:
+            continue
+        pts = points[rows]
+        pose = None
+        if pose_rows is not None:
+            pose = Pose(*map(float, pose_rows[rows[0]]))
+            own = pose_rows[rows]
+            if np.any(own != pose_rows[rows[0]]):
+                pts = to_reference_frame(pts, own, pose)
+                keep = (np.abs(pts) > 0.0).any(axis=1)
+                dropped += int((~keep).sum())
+                pts, rows = pts[keep], rows[keep]
+        positions.append(
+            Position(
+                index=len(positions),
+                features=Features(pts, m[rows]),
+                pose=pose,
+                stamp=float(stamps[rows[0]]) if stamps is not None else None,
+                source=name if layout.position is None else f"{name} position {int(columns[layout.position][rows[0]])}",
+            )
+        )
+    if dropped:
+        notes.append(f"{dropped} point(s) fell on their position's sensor origin and were dropped")
+    return RangeLog(positions=positions, source=name, notes=notes)
+
+
+def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.PathLike[str]) -> None:
+    """Write features (or every position of a log) as CSV, atomically.
+
+    A :class:`RangeLog` with several positions or with poses gets a ``position``
+    column and, where poses are known, ``pose_x, pose_y, pose_z, pose_yaw`` columns;
+    points stay in each position's sensor-centred frame, so reading the file back
+    gives the same positions and features. Values are written as the shortest
+    decimal that reads back to the same number.
+
+    Parameters
+    ----------
+    features_or_log
+        What to write.
+    path
+        Output file, or ``"-"`` for standard output.
+    """
+    from occtool.io._atomic import atomic_write
+
+    if isinstance(features_or_log, Features):
+        positions = [Position(0, features_or_log)]
+    elif isinstance(features_or_log, Position):
+        positions = [features_or_log]
+    else:
+        positions = list(features_or_log.positions)
+    with_position = len(positions) > 1
+    with_pose = any(p.pose is not None for p in positions)
+    header = ["x", "y", "z", "m"]
+    if with_position:
+        header.append("position")
+    if with_pose:
+        header.extend(POSE_COLUMNS)
+    blocks = []
+    for k, position in enumerate(positions):
+        f = position.features
+        columns = [f.points, f.evidence[:, None]]
+        if with_position:
+            columns.append(np.full((len(f), 1), float(k)))
+        if with_pose:
+            pose = position.pose or Pose()
+            columns.append(np.tile([pose.x, pose.y, pose.z, pose.yaw], (len(f), 1)))
+        blocks.append(np.hstack(columns))
+    table = np.vstack(blocks) if blocks else np.empty((0, len(header)))
+    # repr of a Python float is the shortest text that reads back to the same double.
+    template = ",".join(["{!r}"] * 4 + (["{:.0f}"] if with_position else []) + (["{!r}"] * 4 if with_pose else []))
+    with atomic_write(path, "w") as handle:
+        handle.write(",".join(header) + "\n")
+        rows = table.tolist()
+        for start in range(0, len(rows), 65536):
+            chunk = rows[start : start + 65536]
+            handle.write("\n".join(template.format(*row) for row in chunk) + "\n")
+

@@ -1,0 +1,222 @@
+"""Group the scans of a recording into robot positions.
+
+Every reader produces *scans*: the features of one message (or one run of CSV rows)
+with the robot pose it was taken at, if the log has poses. A robot standing still, or
+nearly so, takes several scans from one place; occtool fits one local model per place,
+so consecutive scans whose poses stay within a distance and angle tolerance of the
+first scan of the group form one :class:`~occtool.features.Position`. Each scan's
+points are then re-expressed in the frame of that position's reference pose, so a
+position's features are all in one sensor-centred robot frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.features import Features, Pose, Position, RangeLog
+
+GROUP_BY_CHOICES = ("position", "message")
+DEFAULT_POSITION_TOLERANCE = (0.25, 0.26)
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """The raw output of one message of a log, before grouping into positions.
+
+    Parameters
+    ----------
+    points
+        ``(N, 3)`` points in the sensor-centred robot frame at ``pose``, metres.
+    evidence
+        ``(N,)`` evidence values in [0, 1].
+    pose
+        World pose of the sensor-centred robot frame, or ``None`` if unknown.
+    stamp
+        Time of the scan in seconds, if known.
+    source
+        Where the scan came from (topic, line), for messages.
+    """
+
+    points: NDArray[np.float64]
+    evidence: NDArray[np.float64]
+    pose: Pose | None = None
+    stamp: float | None = None
+    source: str = ""
+
+
+def check_tolerance(tolerance: Sequence[float]) -> tuple[float, float]:
+    """Validate a ``(distance, angle)`` tolerance in metres and radians."""
+    values = tuple(float(v) for v in tolerance)
+    if len(values) != 2 or not all(np.isfinite(v) and v >= 0 for v in values):
+        raise InputError(
+            f"position tolerance must be two numbers >= 0 (metres, radians), got {tolerance!r}"
+        )
+    return values[0], values[1]
+
+
+def _angle_difference(a: float, b: float) -> float:
+    return float(abs((a - b + np.pi) % (2.0 * np.pi) - np.pi))
+
+
+def assign_positions(
+    poses: Sequence[Pose | None],
+    *,
+    tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
+    group_by: str = "position",
+) -> NDArray[np.int64]:
+    """Label each scan with the index of the position it belongs to.
+
+    Parameters
+    ----------
+    poses
+        The pose of each scan in recording order (``None`` where unknown).
+    tolerance
+        ``(distance, angle)``: a scan joins the current position while its pose lies
+        within this distance (metres) and yaw difference (radians) of the position's
+        first pose; otherwise it starts a new position.
+    group_by
+        ``"position"`` groups as above; ``"message"`` makes every scan its own position.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(K,)`` position index of each scan, non-decreasing, starting at 0.
+
+    Notes
+    -----
+    A scan without a pose joins the current position (a log without any poses is one
+    position), since nothing says the robot moved.
+    """
+    if group_by not in GROUP_BY_CHOICES:
+        raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {group_by!r}")
+    max_distance, max_angle = check_tolerance(tolerance)
+    labels = np.zeros(len(poses), dtype=np.int64)
+    if group_by == "message":
+        return np.arange(len(poses), dtype=np.int64)
+    current = 0
+    reference: Pose | None = None
+    # A loop over scans (messages), not points: a log has thousands of scans at most.
+    for k, pose in enumerate(poses):
+        if pose is not None:
+            if reference is None:
+                reference = pose
+            else:
+                distance = float(np.hypot(pose.x - reference.x, pose.y - reference.y))
+                if distance > max_distance or _angle_difference(pose.yaw, reference.yaw) > max_angle:
+                    current += 1
+                    reference = pose
+        labels[k] = current
+    return labels
+
+
+def relative_transform(pose: Pose, reference: Pose) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rotation and translation taking points in ``pose``'s frame into ``reference``'s frame."""
+    rotation = reference.rotation.T @ pose.rotation
+    translation = reference.rotation.T @ (pose.translation - reference.translation)
+    return rotation, translation
+
+
+def to_reference_frame(
+    points: NDArray[np.float64], pose_rows: NDArray[np.float64], reference: Pose
+) -> NDArray[np.float64]:
+    """Move points, each with its own pose, into the frame of ``reference``.
+
+    Parameters
+    ----------
+    points
+        ``(N, 3)`` points in the frame of their pose.
+    pose_rows
+        ``(N, 4)`` pose of each point as ``x, y, z, yaw``.
+    reference
+        The pose whose frame the result is expressed in.
+    """
+    dyaw = pose_rows[:, 3] - reference.yaw
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    # Offset of each point's pose from the reference, rotated into the reference frame.
+    dx = pose_rows[:, 0] - reference.x
+    dy = pose_rows[:, 1] - reference.y
+    cr, sr = np.cos(reference.yaw), np.sin(reference.yaw)
+    tx = cr * dx + sr * dy
+    ty = -sr * dx + cr * dy
+    tz = pose_rows[:, 2] - reference.z
+    out = np.empty_like(points, dtype=np.float64)
+    out[:, 0] = c * points[:, 0] - s * points[:, 1] + tx
+    out[:, 1] = s * points[:, 0] + c * points[:, 1] + ty
+    out[:, 2] = points[:, 2] + tz
+    return out
+
+
+def build_log(
+    scans: Iterable[Scan],
+    *,
+    source: str,
+    tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
+    group_by: str = "position",
+    notes: list[str] | None = None,
+) -> RangeLog:
+    """Group scans into positions and return the :class:`RangeLog`.
+
+    Scans with no points are kept for grouping but contribute nothing; a position
+    left without features is dropped. Points that land on the position's sensor origin
+    after the move into the reference frame are dropped too (they carry no direction).
+    """
+    scan_list = list(scans)
+    notes = list(notes or [])
+    labels = assign_positions([s.pose for s in scan_list], tolerance=tolerance, group_by=group_by)
+    has_poses = any(s.pose is not None for s in scan_list)
+    # A single scan without a pose is the normal case of a one-shot file; say so only when
+    # several scans were merged on the assumption that the robot did not move.
+    if len(scan_list) > 1 and not has_poses and group_by == "position":
+        notes.append(
+            f"the log has no poses: its {len(scan_list)} scans form one position (--group-by message splits them)"
+        )
+    positions: list[Position] = []
+    dropped_at_origin = 0
+    start = 0
+    while start < len(scan_list):
+        stop = start
+        while stop < len(scan_list) and labels[stop] == labels[start]:
+            stop += 1
+        group = scan_list[start:stop]
+        reference = next((s.pose for s in group if s.pose is not None), None)
+        parts_points = []
+        parts_evidence = []
+        for scan in group:
+            if scan.points.shape[0] == 0:
+                continue
+            points = np.asarray(scan.points, dtype=np.float64)
+            if reference is not None and scan.pose is not None and scan.pose != reference:
+                rotation, translation = relative_transform(scan.pose, reference)
+                points = points @ rotation.T + translation
+            parts_points.append(points)
+            parts_evidence.append(np.asarray(scan.evidence, dtype=np.float64))
+        if parts_points:
+            points = np.concatenate(parts_points)
+            evidence = np.concatenate(parts_evidence)
+            keep = (np.abs(points) > 0.0).any(axis=1)
+            dropped_at_origin += int((~keep).sum())
+            if not keep.all():
+                points, evidence = points[keep], evidence[keep]
+            if points.shape[0]:
+                stamps = [s.stamp for s in group if s.stamp is not None]
+                sources = sorted({s.source for s in group if s.source})
+                positions.append(
+                    Position(
+                        index=len(positions),
+                        features=Features(points, evidence),
+                        pose=reference,
+                        stamp=stamps[0] if stamps else None,
+                        source=", ".join(sources) if len(sources) <= 3 else f"{sources[0]} ... ({len(group)} scans)",
+                    )
+                )
+        start = stop
+    if dropped_at_origin:
+        notes.append(f"{dropped_at_origin} point(s) fell on the position's sensor origin and were dropped")
+    if not positions:
+        raise InputError(f"{source} holds no range data")
+    return RangeLog(positions=positions, source=source, notes=notes)
