@@ -95,10 +95,239 @@ output_option = click.option(
 seed_option = click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 
 # --- range-log reading (owner: readers) ------------------------------------------------
-# log_options / read_log_from_kwargs go here.
+
+from typing import TYPE_CHECKING  # noqa: E402  (kept inside this section)
+
+if TYPE_CHECKING:
+    from occtool.features import RangeLog
+
+LOG_OPTION_NAMES = (
+    "format", "topics", "evidence_field", "evidence", "use_intensities", "sensor_frame", "base_frame",
+    "position_tolerance", "group_by", "skip_invalid",
+)
+
+
+def _position_tolerance(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> tuple[float, float]:
+    values = float_list(ctx, param, value)
+    if values is None or len(values) != 2 or any(v < 0 or v != v for v in values):
+        raise click.BadParameter(f"expected 'METRES,RADIANS' (two numbers >= 0), got {value!r}")
+    return values[0], values[1]
+
+
+def _unit_interval(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
+    if value is None:
+        return None
+    if not 0.0 <= float(value) <= 1.0:
+        raise click.BadParameter(f"must lie in [0, 1], got {value}")
+    return float(value)
+
+
+log_options = _compose(
+    click.option(
+        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply"], case_sensitive=False),
+        default=None, help="Log format (default: from the content and extension).",
+    ),
+    click.option(
+        "--topic", "topics", multiple=True,
+        help="MCAP topic to read (repeatable; default: the one supported range channel).",
+    ),
+    click.option(
+        "--evidence-field", default="evidence", show_default=True,
+        help="Point field or CSV column holding the evidence value (CSV also accepts m).",
+    ),
+    click.option(
+        "--evidence", type=float, default=None, callback=_unit_interval,
+        help="Constant evidence for data without an evidence field (laser scans: 0.9 if not given).",
+    ),
+    click.option(
+        "--intensities", "use_intensities", is_flag=True, default=False,
+        help="Laser scans: evidence from the intensities, scaled by the scan's largest.",
+    ),
+    click.option("--sensor-frame", default=None, help="MCAP: frame the points are in (default: the message's)."),
+    click.option("--base-frame", default=None, help="MCAP: robot base frame (default: base_link, if in /tf_static)."),
+    click.option(
+        "--position-tolerance", default="0.25,0.26", show_default=True, callback=_position_tolerance,
+        help="Consecutive scans within DIST,ANGLE (metres, radians) of a position's first scan form one position.",
+    ),
+    click.option(
+        "--group-by", type=click.Choice(["position", "message"]), default="position", show_default=True,
+        help="Group scans into robot positions, or make each message its own position.",
+    ),
+    click.option(
+        "--skip-invalid", is_flag=True, default=False,
+        help="Drop invalid rows/points (NaN, evidence outside [0, 1], unparsable) and report how many.",
+    ),
+)
+
+
+def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
+    """Pop the :data:`log_options` out of a command's keyword arguments and read the log.
+
+    Returns the :class:`occtool.features.RangeLog`; its notes (skipped rows, missing
+    poses) are logged at warning level.
+    """
+    import logging
+
+    from occtool.io import read_log
+
+    options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
+    if "topics" in options:
+        options["topics"] = list(options["topics"]) or None
+    log = read_log(path, **options)
+    logger = logging.getLogger("occtool.io")
+    for note in log.notes:
+        logger.warning("%s: %s", Path(path).name, note)
+    return log
 
 # --- sensor model and fit (owner: core model) -----------------------------------------
-# sensor_options / fit_options and their *_from_kwargs helpers go here.
+
+SENSOR_OPTION_NAMES = (
+    "depth_error", "near_positions", "near_values", "floor", "footprint_samples", "background_samples",
+    "background_weight", "background_range",
+)
+FIT_OPTION_NAMES = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "loss", "huber_delta", "groups", "max_sweeps")
+
+
+def _pair(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> tuple[float, float] | None:
+    values = float_list(ctx, param, value)
+    if values is not None and len(values) != 2:
+        raise click.BadParameter(f"expected two comma-separated numbers, got {value!r}")
+    return values
+
+
+sensor_options = _compose(
+    click.option("--depth-error", type=float, default=None,
+                 help="Relative depth error: hit samples at r(1 -+ e) [default: 0.03]."),
+    click.option("--near-positions", callback=_pair, default=None,
+                 help="Near samples' positions as fractions of the feature's range, 'P1,P2' [default: 0.8,0.9]."),
+    click.option("--near-values", callback=_pair, default=None,
+                 help="Near samples' values as fractions of the feature's evidence, 'V1,V2' [default: 0.2,0.4]."),
+    click.option("--floor", type=click.Choice(["free", "drop", "obstacle"]), default=None,
+                 help="Floor features (below the ground clearance): free-space samples only, dropped, "
+                      "or obstacles [default: free]."),
+    click.option("--footprint-samples", type=click.IntRange(min=0), default=None,
+                 help="Zero-occupancy samples filling the robot's body [default: 512]."),
+    click.option("--background-samples", type=click.IntRange(min=0), default=None,
+                 help="Zero-occupancy background samples for featureless directions [default: 0]."),
+    click.option("--background-weight", type=float, default=None, help="Weight of each background sample [default: 0.05]."),
+    click.option("--background-range", type=float, default=None, help="Farthest background sample, metres [default: 3]."),
+)
+
+
+def fit_options(function: F) -> F:
+    """The fit's options: pieces, basis, constraints, loss, plus the sensor and robot options."""
+    options = _compose(
+        sensor_options,
+        robot_options,
+        click.option("-L", "--pieces", type=click.IntRange(min=1), default=32, show_default=True,
+                     help="Number of linear pieces."),
+        click.option("--basis", type=click.Choice(["trig", "linear"]), default="trig", show_default=True,
+                     help="Pieces a1 cos(alpha) + a2 sin(alpha) + b h + c r + d (seam-free) or the paper's "
+                          "a alpha + b h + c r + d."),
+        click.option("--c-min", type=float, default=None, help="Lower bound of the range weight c, per metre [default: 0.25]."),
+        click.option("--a-max", type=float, default=None, help="Bound of |dF/dalpha|, per radian [default: 12]."),
+        click.option("--b-max", type=float, default=None, help="Bound of the height weight |b|, per metre [default: 8]."),
+        click.option("--c-max", type=float, default=None,
+                     help="Largest range weight of a centre piece, per metre [default: 8]."),
+        click.option("--loss", type=click.Choice(["huber", "squared"]), default="huber", show_default=True,
+                     help="Regression loss (Huber is robust to outliers)."),
+        click.option("--huber-delta", type=float, default=None, help="Huber loss threshold [default: 0.1]."),
+        click.option("--groups", type=click.IntRange(min=1), default=None,
+                     help="Angular segments of the tree [default: pieces // 4]."),
+        click.option("--max-sweeps", type=click.IntRange(min=0), default=None,
+                     help="Least-squares refit sweeps after the construction [default: 0]."),
+    )
+    return options(function)
+
+
+def sensor_from_kwargs(kwargs: dict[str, Any]) -> Any:
+    """Pop the :data:`sensor_options` out of a command's keyword arguments: a :class:`occtool.sensor.SensorModel`."""
+    from occtool.sensor import SensorModel
+
+    values = {name: kwargs.pop(name) for name in SENSOR_OPTION_NAMES if name in kwargs}
+    return SensorModel(**{k: v for k, v in values.items() if v is not None})
+
+
+def fit_from_kwargs(kwargs: dict[str, Any], *, seed: int = 0) -> Any:
+    """Pop the :func:`fit_options` out of a command's keyword arguments: an unfitted
+    :class:`occtool.fit.OccupancyRegressor` with its sensor model and robot."""
+    from occtool.fit import OccupancyRegressor
+
+    sensor = sensor_from_kwargs(kwargs)
+    robot = robot_from_kwargs(kwargs)
+    values = {name: kwargs.pop(name) for name in FIT_OPTION_NAMES if name in kwargs}
+    return OccupancyRegressor(**{k: v for k, v in values.items() if v is not None}, sensor=sensor, robot=robot, seed=seed)
 
 # --- navigation extraction (owner: navigation) ----------------------------------------
-# extract_options / extract_from_kwargs go here.
+
+ROBOT_OPTION_NAMES = ("robot_radius", "sensor_height", "body_height", "ground_clearance")
+EXTRACT_OPTION_NAMES = ("threshold", "heights", "slice_spacing", "max_range", "n_angles", "point_spacing")
+
+
+def _positive(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
+    if value is not None and not (float(value) > 0 and float(value) < float("inf")):
+        raise click.BadParameter(f"must be a finite number > 0, got {value}")
+    return value
+
+
+robot_options = _compose(
+    click.option("--robot-radius", type=float, default=0.25, show_default=True,
+                 help="Robot footprint radius, metres: the navigation polygon is shrunk by it."),
+    click.option("--sensor-height", type=float, default=1.0, show_default=True,
+                 help="Height of the sensor centre above the floor, metres."),
+    click.option("--body-height", type=float, default=1.0, show_default=True,
+                 help="Height of the top of the robot above the floor, metres."),
+    click.option("--ground-clearance", type=float, default=0.05, show_default=True,
+                 help="Obstacles lower than this above the floor are driven over, metres."),
+)
+
+extract_options = _compose(
+    robot_options,
+    click.option("--threshold", type=float, default=0.6, show_default=True,
+                 help="Occupancy at or above which space is an obstacle."),
+    click.option("--heights", callback=float_list, default=None, metavar="H,H,...",
+                 help="Sensor-frame heights to cut the model at, metres, comma-separated (floor at "
+                      "-SENSOR_HEIGHT; default: spanning the robot body)."),
+    click.option("--slice-spacing", type=float, default=None, callback=_positive,
+                 help="Largest gap between cuts, metres: cuts are added between the heights so the map "
+                      "holds between them (default: from the model's slope bounds)."),
+    click.option("--max-range", type=float, default=1.5, show_default=True, callback=_positive,
+                 help="Radius of the circle bounding the navigation polygon, metres."),
+    click.option("--angles", "n_angles", type=click.IntRange(min=8), default=360, show_default=True,
+                 help="Pan angles swept, evenly spaced."),
+    click.option("--point-spacing", type=float, default=None, callback=_positive,
+                 help="Arc length between obstacle/exploration points on the max-range circle, metres "
+                      "(default: the robot radius, at least a tenth of the max range)."),
+)
+
+geojson_options = _compose(
+    click.option("--slices", "include_slices", is_flag=True, default=False,
+                 help="Also write the free polygon at each height (kind 'slice')."),
+    click.option("--sequence/--collection", default=False, show_default=True,
+                 help="Write newline-delimited GeoJSON features instead of one FeatureCollection."),
+    click.option("--precision", type=click.IntRange(min=0), default=None,
+                 help="Decimal places of the coordinates (default: full precision)."),
+    click.option("--indent", type=click.IntRange(min=0), default=None,
+                 help="Indentation of the JSON collection (default: compact)."),
+)
+
+
+def robot_from_kwargs(kwargs: dict[str, Any]) -> Any:
+    """Pop the :data:`robot_options` out of a command's keyword arguments: an :class:`occtool.robot.Robot`."""
+    from occtool.robot import Robot
+
+    values = {name: kwargs.pop(name) for name in ROBOT_OPTION_NAMES if name in kwargs}
+    if "robot_radius" in values:
+        values["radius"] = values.pop("robot_radius")
+    return Robot(**values)
+
+
+def extract_from_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Pop the :data:`extract_options` out of a command's keyword arguments.
+
+    Returns the keyword arguments of :func:`occtool.navigation.navigation_map` (``robot``
+    included), all but ``inverse_range`` and ``slope_bounds``, which come from the model.
+    """
+    options = {name: kwargs.pop(name) for name in EXTRACT_OPTION_NAMES if name in kwargs}
+    options["robot"] = robot_from_kwargs(kwargs)
+    return options

@@ -1,0 +1,1041 @@
+"""Fitting the min/max tree: the :class:`OccupancyRegressor` estimator.
+
+The tree has a fixed two-level shape, ``F = MAX over groups (MIN over the group's
+pieces)``. Its inverse is ``r = MIN over groups (MAX over pieces)``: the free range in a
+direction is the nearest of the groups' ranges, and each group's range is a convex
+function of the pan angle (a MAX of linear ones) - the shape of a wall or a box face
+seen from the sensor. A group covers one angular segment: a *centre* piece models the
+obstacle, two *side* pieces rise steeply (within the bound ``a_max``) outside the
+segment and so switch the group off there. Errors at segment edges therefore make the
+model more occupied, never less: a MAX can only add occupancy.
+
+The fit (see ``docs/method.md`` for the reasons and the measurements):
+
+1. Samples from the :class:`~occtool.sensor.SensorModel`; with ``focus`` only those a
+   function increasing in ``r`` can honour (in front of the first obstacle per pan
+   angle, in the body's height band), plus occupied *frontier* samples where the
+   observed free space ends.
+2. A robust first-obstacle profile over the pan angle (clusters of hits, so that single
+   mismatches do not count); its near runs are cut into segments by dynamic programming,
+   one group per segment.
+3. ``construction="profile"`` (default): each centre piece's level crossing is placed by
+   a small linear programme as far out as the segment's first obstacles allow, at every
+   height of the body band; its slope in ``r`` comes from a robust fit to the samples.
+   ``construction="regression"``: centre pieces by bounded least squares instead.
+4. Optional refit sweeps: each piece is refitted by bounded, Huber-weighted least squares
+   to the samples where it is active, accepted only if the total Huber loss goes down
+   (plain alternation oscillates).
+
+Every constraint (``c >= c_min``, ``|dF/dalpha| <= a_max``, ``|b| <= b_max``) holds exactly
+for every piece at every step, since each candidate piece is projected onto them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import InputError, NotFittedError
+from occtool.features import Features
+from occtool.robot import Robot
+from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
+from occtool.tree import BASES, InverseTree, MinMaxTree, Op, design_matrix
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+ProgressCallback = Callable[[int, int], None]
+
+DEFAULT_BASIS = "trig"
+#: How far (radians) each group's side pieces reach past its segment at the start.
+SEGMENT_OVERLAP = 0.0
+#: Horizontal distance (m) beyond which pushing a crossing farther out gains nothing: the
+#: navigation map looks 1.5 m far by default, and shrinks by the robot radius.
+NAVIGATION_REACH = 2.25
+#: Where obstacles allow, centre crossings stay this far (m) outside the robot's radius.
+BODY_CLEARANCE = 0.1
+#: A centre's crossing stays above this share of the segment's nearest crossing.
+FLAT_SHARE = 0.97
+#: Pan-angle bins of the range profile that places the segments and centre pieces: the
+#: finest resolution, used from :data:`PROFILE_FULL_DENSITY` features on; sparser data
+#: gets coarser bins (down to a third), so each bin still holds enough hits.
+PROFILE_BINS = 360
+PROFILE_FULL_DENSITY = 9000
+#: Heights of the body band at which a centre's crossing is kept in front of obstacles.
+PROFILE_HEIGHTS = 9
+
+
+def features_digest(features: Features) -> str:
+    """sha256 of the features' points and evidence (little-endian float64), hex."""
+    digest = hashlib.sha256()
+    digest.update(np.ascontiguousarray(features.points, dtype="<f8").tobytes())
+    digest.update(np.ascontiguousarray(features.evidence, dtype="<f8").tobytes())
+    return digest.hexdigest()
+
+
+def huber_loss(residual: FloatArray, delta: float) -> FloatArray:
+    """Elementwise Huber loss: quadratic within ``delta``, linear beyond."""
+    a = np.abs(residual)
+    return np.where(a <= delta, 0.5 * residual * residual, delta * (a - 0.5 * delta))
+
+
+class OccupancyRegressor:
+    """Fits ``m = F(alpha, h, r)`` as a MAX of MINs of linear pieces to range features.
+
+    Parameters
+    ----------
+    pieces
+        Number of linear pieces ``L`` (the paper used 8 and "less than 32").
+    basis
+        ``"trig"`` (seam-free, ``a1 cos(alpha) + a2 sin(alpha) + b h + c r + d``, the
+        default) or ``"linear"`` (the paper's ``a alpha + b h + c r + d``).
+    c_min
+        Lower bound of every piece's range weight ``c`` (per metre): F increases with r.
+    a_max
+        Upper bound of ``|dF/dalpha|`` of every piece (per radian): ``|a|`` for the linear
+        basis, ``hypot(a1, a2)`` for the trig basis.
+    b_max
+        Upper bound of every piece's ``|b|`` (per metre of height).
+    c_max
+        Largest range weight the profile construction gives a centre piece (per metre):
+        a steep crossing, but a bounded one, since the navigation map's safety margin
+        grows with the steepest piece.
+    c_floor
+        Least range weight of a centre piece from the profile construction (per metre).
+        The slope fitted to the samples is raised to it: a steep crossing moves little when
+        the navigation map lowers its threshold by its safety margin.
+    level
+        The occupancy level at which the profile construction places each centre piece's
+        crossing in front of the first obstacles (the extraction threshold).
+    construction
+        ``"profile"`` (the default): centre pieces placed by a linear programme just in
+        front of the robust first-obstacle profile, their slopes fitted to the samples;
+        ``"regression"``: centre pieces fitted by bounded least squares to the segment's
+        samples.
+    loss
+        ``"huber"`` (robust to outliers, the default) or ``"squared"``.
+    huber_delta
+        Residual (in occupancy units) beyond which the Huber loss grows linearly.
+    safety
+        Weight factor of a hit sample where the fit under-predicts it (``F < m``): above 1
+        the loss is asymmetric and the model errs towards occupied, the safe side.
+    groups
+        Number of angular segments (groups of pieces); ``None`` picks ``pieces // 4``.
+    max_sweeps
+        Refitting sweeps over all pieces after the construction (0: none). A sweep
+        lowers the Huber loss over the samples, which does not always help the map.
+    tol
+        Stop when a sweep lowers the loss by less than this fraction.
+    sensor
+        The :class:`~occtool.sensor.SensorModel` producing the samples.
+    robot
+        The :class:`~occtool.robot.Robot` (sensor height, clearance, radius).
+    seed
+        Seed of the random parts (background samples); the fit is deterministic.
+    focus
+        Fit only what a function increasing in ``r`` can show and the navigation map
+        uses (:func:`focus_samples`): samples in the robot's height band, in front of the
+        first obstacle at their pan angle and height.
+    focus_range
+        With ``focus``: the farthest horizontal distance that is fitted, metres. The
+        navigation map looks 1.5 m far by default; beyond this the model extrapolates
+        (monotonically) and the initial segments are not spent on distant walls.
+    progress
+        Optional ``callback(done, total)`` called after each group is built and after
+        each refit sweep.
+
+    Examples
+    --------
+    >>> from occtool.simulate import simulate_scene
+    >>> features, scene = simulate_scene("office", n_features=2000, seed=1)
+    >>> model = OccupancyRegressor(pieces=16).fit(features)
+    >>> r = model.inverse_range(0.0, -0.5, 0.6)
+    """
+
+    def __init__(
+        self,
+        pieces: int = 32,
+        basis: str = DEFAULT_BASIS,
+        c_min: float = 0.25,
+        a_max: float = 12.0,
+        b_max: float = 8.0,
+        c_max: float = 8.0,
+        level: float = 0.6,
+        c_floor: float = 8.0,
+        construction: str = "profile",
+        loss: str = "huber",
+        huber_delta: float = 0.1,
+        safety: float = 1.0,
+        groups: int | None = None,
+        max_sweeps: int = 0,
+        tol: float = 1e-4,
+        sensor: SensorModel | None = None,
+        robot: Robot | None = None,
+        seed: int = 0,
+        focus: bool = True,
+        focus_range: float = 2.5,
+        progress: ProgressCallback | None = None,
+    ) -> None:
+        self.pieces = pieces
+        self.basis = basis
+        self.c_min = c_min
+        self.a_max = a_max
+        self.b_max = b_max
+        self.c_max = c_max
+        self.level = level
+        self.c_floor = c_floor
+        self.construction = construction
+        self.loss = loss
+        self.huber_delta = huber_delta
+        self.safety = safety
+        self.groups = groups
+        self.max_sweeps = max_sweeps
+        self.tol = tol
+        self.sensor = sensor
+        self.robot = robot
+        self.seed = seed
+        self.focus = focus
+        self.focus_range = focus_range
+        self.progress = progress
+
+    # ------------------------------------------------------------------ parameters
+    def get_params(self) -> dict[str, Any]:
+        """The constructor arguments (scikit-learn style)."""
+        return {name: getattr(self, name) for name in _PARAM_NAMES}
+
+    def _validate(self) -> None:
+        if isinstance(self.pieces, bool) or int(self.pieces) != self.pieces or self.pieces < 1:
+            raise InputError(f"pieces must be a whole number >= 1, got {self.pieces}")
+        if self.basis not in BASES:
+            raise InputError(f"basis must be one of {', '.join(BASES)}, got {self.basis!r}")
+        for name in ("c_min", "a_max", "b_max", "c_max", "c_floor", "huber_delta", "safety", "level"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value!r}")
+        if self.c_max < self.c_min:
+            raise InputError(f"c max ({self.c_max}) must not be below c min ({self.c_min})")
+        if self.construction not in ("profile", "regression"):
+            raise InputError(f"construction must be 'profile' or 'regression', got {self.construction!r}")
+        if self.loss not in ("huber", "squared"):
+            raise InputError(f"loss must be 'huber' or 'squared', got {self.loss!r}")
+        if self.groups is not None and (int(self.groups) != self.groups or not 1 <= self.groups <= self.pieces):
+            raise InputError(f"groups must be between 1 and the number of pieces ({self.pieces}), got {self.groups}")
+        if not (isinstance(self.focus_range, (int, float)) and self.focus_range > 0):
+            raise InputError(f"focus range must be a positive number of metres, got {self.focus_range!r}")
+        if int(self.max_sweeps) != self.max_sweeps or self.max_sweeps < 0:
+            raise InputError(f"max sweeps must be a whole number >= 0, got {self.max_sweeps}")
+
+    # ------------------------------------------------------------------ fitting
+    def fit(self, features: Features) -> OccupancyRegressor:
+        """Fit the tree to the features of one robot position.
+
+        Parameters
+        ----------
+        features
+            Range features in the sensor-centred robot frame.
+
+        Returns
+        -------
+        OccupancyRegressor
+            ``self``, fitted.
+
+        Raises
+        ------
+        InputError
+            If a parameter is invalid or there are no usable features.
+        """
+        self._validate()
+        sensor = self.sensor if self.sensor is not None else SensorModel()
+        robot = self.robot if self.robot is not None else Robot()
+        rng = np.random.default_rng(self.seed)
+        if len(features) == 0:
+            raise InputError("no features to fit")
+        samples = sensor.samples(features, robot, rng)
+        if samples.count("hit") + samples.count("near") + samples.count("floor") == 0:
+            raise InputError("no features left to fit (every feature was dropped as floor)")
+
+        # The trig basis has no seam, so the angular bins can start anywhere: starting them
+        # at the mean direction of the hits makes the whole fit turn with the scene
+        # (rotating the features rotates the model exactly, not up to a bin).
+        origin = mean_direction(samples) if self.basis == "trig" else 0.0
+        turned = Samples(wrap_angle(samples.alpha - origin), samples.h, samples.r, samples.m, samples.weight,
+                         samples.kind)
+        if self.focus:
+            frontier = frontier_samples(turned, robot, self.focus_range)
+            focused = focus_samples(turned, robot, self.focus_range, floor_is_obstacle=sensor.floor == "obstacle")
+            turned = join_samples(focused, frontier)
+        fitter = _Fitter(self, turned, robot, floor_is_obstacle=sensor.floor == "obstacle")
+        tree, loss_history = fitter.run()
+        if origin:
+            tree = fitter.turned_tree(tree, origin)
+        log.debug(
+            "fit: %d features -> %d samples, %d pieces in %d groups, pan origin %.3f rad",
+            len(features), len(turned), tree.n_pieces, len(tree.root.children) if isinstance(tree.root, Op) else 1,
+            origin,
+        )
+        samples = Samples(wrap_angle(turned.alpha + origin), turned.h, turned.r, turned.m, turned.weight, turned.kind)
+
+        prediction = tree.predict(samples.alpha, samples.h, samples.r)
+        residual = prediction - samples.m
+        self.tree_ = tree
+        self.sensor_ = sensor
+        self.robot_ = robot
+        self.n_features_ = len(features)
+        self.n_samples_ = len(samples)
+        self.sample_counts_ = {kind: samples.count(kind) for kind in SAMPLE_KINDS}
+        self.rmse_ = float(np.sqrt(np.average(residual**2, weights=samples.weight)))
+        self.loss_ = float(loss_history[-1])
+        self.loss_history_ = [float(v) for v in loss_history]
+        self.n_sweeps_ = len(loss_history) - 1
+        self.features_digest_ = features_digest(features)
+        self.slope_bounds_ = slope_bounds(tree)
+        self.inverse_ = tree.inverse()
+        return self
+
+    # ------------------------------------------------------------------ using the fit
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "tree_"):
+            raise NotFittedError("this OccupancyRegressor is not fitted yet: call fit() or load a model file")
+
+    def predict(self, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> FloatArray:
+        """Evaluate the occupancy ``F(alpha, h, r)`` (inputs broadcast together)."""
+        self._check_fitted()
+        return self.tree_.predict(alpha, h, r)
+
+    def invert(self) -> InverseTree:
+        """The inverse tree ``r = F^-1(alpha, h, m)``."""
+        self._check_fitted()
+        return self.inverse_
+
+    def inverse_range(self, alpha: ArrayLike, h: ArrayLike, level: ArrayLike) -> FloatArray:
+        """Distance ``r`` from the sensor at which ``F`` reaches ``level`` at ``(alpha, h)``.
+
+        ``F`` increases strictly and without bound in ``r`` (every ``c >= c_min > 0``), so
+        along ``r >= 0`` the level is crossed exactly once unless ``F`` is at or above it
+        already at ``r = 0``; that gives 0. ``np.inf`` is returned only where the level is
+        infinite. Inputs broadcast together.
+        """
+        self._check_fitted()
+        r = self.inverse_.range(alpha, h, level)
+        r = np.where(np.isnan(r), np.inf, r)
+        return np.maximum(r, 0.0)
+
+    def training_summary(self) -> dict[str, Any]:
+        """Features, samples, fit error and the input digest, as written to a model file."""
+        self._check_fitted()
+        return {
+            "n_features": int(self.n_features_),
+            "n_samples": int(self.n_samples_),
+            "samples_by_kind": {k: int(v) for k, v in self.sample_counts_.items()},
+            "rmse": float(self.rmse_),
+            "loss": float(self.loss_),
+            "sweeps": int(self.n_sweeps_),
+            "features_sha256": self.features_digest_,
+        }
+
+
+_PARAM_NAMES = (
+    "pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
+    "sensor", "robot", "seed", "focus", "focus_range", "progress",
+)
+
+
+def slope_bounds(tree: MinMaxTree) -> dict[str, float]:
+    """The actual extremes of the pieces' weights: ``a_max`` (largest ``|dF/dalpha|``),
+    ``b_max`` (largest ``|b|``), ``c_min`` and ``c_max`` (smallest and largest ``c``)."""
+    return {
+        "a_max": float(tree.angle_weight.max()),
+        "b_max": float(np.abs(tree.b).max()),
+        "c_min": float(tree.c.min()),
+        "c_max": float(tree.c.max()),
+    }
+
+
+# ====================================================================== solver parts
+def box_qp(gram: FloatArray, rhs: FloatArray, lower: FloatArray, upper: FloatArray) -> FloatArray:
+    """Minimise ``x'Gx/2 - rhs'x`` subject to ``lower <= x <= upper`` (small, dense G).
+
+    An active-set method: solve for the free variables, clamp those outside their box,
+    free a clamped one whose multiplier has the wrong sign, repeat. The result lies in the
+    box exactly (clamped values are the bounds themselves).
+    """
+    k = rhs.shape[0]
+    x = np.clip(np.zeros(k), lower, upper)
+    free = np.ones(k, dtype=bool)
+    for _ in range(4 * k + 4):
+        if free.any():
+            fixed = ~free
+            sub_rhs = rhs[free] - gram[np.ix_(free, fixed)] @ x[fixed]
+            try:
+                x[free] = np.linalg.solve(gram[np.ix_(free, free)], sub_rhs)
+            except np.linalg.LinAlgError:
+                x[free] = np.linalg.lstsq(gram[np.ix_(free, free)], sub_rhs, rcond=None)[0]
+        outside = free & ((x < lower) | (x > upper))
+        if outside.any():
+            x = np.clip(x, lower, upper)
+            free &= ~outside
+            continue
+        grad = gram @ x - rhs
+        wrong = ~free & (((x <= lower) & (grad < 0)) | ((x >= upper) & (grad > 0)))
+        if not wrong.any():
+            break
+        free[int(np.argmax(np.where(wrong, np.abs(grad), -1.0)))] = True
+    return np.clip(x, lower, upper)
+
+
+class _Fitter:
+    """One fit: holds the samples, the design matrix and the evolving pieces."""
+
+    def __init__(self, params: OccupancyRegressor, samples: Samples, robot: Robot, *,
+                 floor_is_obstacle: bool = False) -> None:
+        self.p = params
+        self.floor_is_obstacle = floor_is_obstacle
+        self.samples = samples
+        self.robot = robot
+        self.basis = params.basis
+        self.k_angle = 1 if self.basis == "linear" else 2
+        self.X = design_matrix(self.basis, samples.alpha, samples.h, samples.r)
+        self.m = samples.m
+        self.w = samples.weight
+        self.hit = samples.kind == SAMPLE_KINDS["hit"]
+        self.w_safe = self.w * params.safety
+        self.w_total = float(self.w.sum())
+        k = self.X.shape[1]
+        inf = np.inf
+        self.lower = np.full(k, -inf)
+        self.upper = np.full(k, inf)
+        self.lower[: self.k_angle] = -params.a_max
+        self.upper[: self.k_angle] = params.a_max
+        self.lower[self.k_angle] = -params.b_max
+        self.upper[self.k_angle] = params.b_max
+        self.lower[self.k_angle + 1] = params.c_min
+        self.delta = params.huber_delta if params.loss == "huber" else np.inf
+
+    def turned_tree(self, tree: MinMaxTree, origin: float) -> MinMaxTree:
+        """The tree fitted in pan angles measured from ``origin``, in the robot's angles.
+
+        ``cos(alpha - o)`` and ``sin(alpha - o)`` are a rotation of ``cos(alpha)``,
+        ``sin(alpha)``, so the pan weights turn by ``o`` and keep their length.
+        """
+        W = tree.coefficients.copy()
+        co, so = math.cos(origin), math.sin(origin)
+        a1, a2 = W[:, 0].copy(), W[:, 1].copy()
+        W[:, 0] = a1 * co - a2 * so
+        W[:, 1] = a1 * so + a2 * co
+        W = np.array([self.project(row) for row in W])
+        return MinMaxTree(tree.basis, W, tree.root)
+
+    # ---------------------------------------------------------------- constraints
+    def project(self, piece: FloatArray) -> FloatArray:
+        """Move a piece onto the constraint set (box, and the disc for trig angle terms)."""
+        piece = np.clip(piece, self.lower, self.upper)
+        if self.k_angle == 2:
+            norm = math.hypot(piece[0], piece[1])
+            if norm > self.p.a_max:
+                piece[:2] *= self.p.a_max / norm
+                # hypot after scaling can exceed a_max by an ulp; shave it off exactly.
+                while math.hypot(piece[0], piece[1]) > self.p.a_max:
+                    piece[:2] = np.nextafter(piece[:2], 0.0)
+        return piece
+
+    def solve_piece(self, rows: NDArray[np.intp] | NDArray[np.bool_], weights: FloatArray) -> FloatArray | None:
+        """Bounded weighted least squares of one piece on the given samples."""
+        X = self.X[rows]
+        if X.shape[0] < X.shape[1]:
+            return None
+        Xw = X * weights[:, None]
+        gram = Xw.T @ X
+        rhs = Xw.T @ self.m[rows]
+        gram[np.diag_indices_from(gram)] += 1e-9 * (np.trace(gram) + 1.0)
+        piece = box_qp(gram, rhs, self.lower, self.upper)
+        if self.k_angle == 2 and math.hypot(piece[0], piece[1]) > self.p.a_max:
+            # The disc constraint is not a box: keep the direction of the angle weights,
+            # fix their length at the bound and re-solve the remaining weights.
+            angle = piece[:2] * (self.p.a_max / math.hypot(piece[0], piece[1]))
+            rest = slice(2, None)
+            sub_rhs = rhs[rest] - gram[rest, :2] @ angle
+            piece = np.concatenate([angle, box_qp(gram[rest, rest], sub_rhs, self.lower[rest], self.upper[rest])])
+        return self.project(piece)
+
+    def irls_weights(self, residual: FloatArray, weights: FloatArray, hit: NDArray[np.bool_]) -> FloatArray:
+        """Weights of one reweighted least-squares step: ``w min(1, delta/|res|)``, times
+        ``safety`` where a hit is under-predicted."""
+        weights = np.where(hit & (residual < 0), weights * self.p.safety, weights)
+        if not np.isfinite(self.delta):
+            return weights
+        a = np.abs(residual)
+        return weights * np.minimum(1.0, self.delta / np.maximum(a, 1e-300))
+
+    def total_loss(self, prediction: FloatArray) -> float:
+        residual = prediction - self.m
+        weights = np.where(self.hit & (residual < 0), self.w_safe, self.w)
+        return float(np.dot(weights, huber_loss(residual, self.delta))) / self.w_total
+
+    # ---------------------------------------------------------------- initial tree
+    def range_profile(self, n_bins: int) -> FloatArray:
+        """Horizontal distance of the first obstacle per pan-angle bin, outliers ignored."""
+        s = self.samples
+        low, high = self.robot.body_band
+        if self.floor_is_obstacle:
+            low = -np.inf
+        hit = (s.kind == SAMPLE_KINDS["hit"]) & (s.h >= low) & (s.h <= high)
+        distance = np.sqrt(np.maximum(s.r[hit] ** 2 - s.h[hit] ** 2, 0.0))
+        support, _ = adaptive_support(s.count("robot"))
+        profile = first_obstacle_distance(s.alpha[hit], distance, n_bins, support)
+        frontier = s.kind == SAMPLE_KINDS["frontier"]
+        if frontier.any():
+            reach = np.sqrt(np.maximum(s.r[frontier] ** 2 - s.h[frontier] ** 2, 0.0))
+            np.minimum.at(profile, angle_bins(s.alpha[frontier], n_bins), reach)
+        cap = self.p.focus_range if self.p.focus else (distance.max() if distance.size else 1.0)
+        return np.minimum(profile, cap)
+
+    def initial_groups(self, n_groups: int, n_bins: int) -> list[tuple[int, int]]:
+        """Segments ``(first_bin, end_bin)`` (end exclusive, may exceed n_bins: wraps).
+
+        Bins whose first obstacle lies beyond :data:`NAVIGATION_REACH` need no group (where
+        no group is on, the neighbours' sides recede and the space reads free), so only
+        the near runs are cut into at most ``n_groups`` segments.
+        """
+        if n_groups == 1:
+            return [(0, n_bins)]
+        profile = np.minimum(self.range_profile(n_bins), NAVIGATION_REACH)
+        far = profile >= NAVIGATION_REACH
+        if far.all():
+            return [(0, n_bins)]
+        shift = 0
+        if self.basis == "trig":
+            if far.any():
+                # Start where a far run starts, so no segment wraps around the cut.
+                starts = np.flatnonzero(far & ~np.roll(far, 1))
+                shift = int(starts[0]) if starts.size else int(np.flatnonzero(far)[0])
+            else:
+                # Start the linear DP where the profile jumps most: a natural segment edge.
+                shift = int(np.argmax(np.abs(profile - np.roll(profile, 1))))
+        rolled = np.roll(profile, -shift)
+        # A group's sides can only switch it off outside a segment narrower than pi.
+        max_length = min(n_bins // 2 - 1, 2 * int(math.ceil(n_bins / n_groups)))
+        segments = segment_near_runs(rolled, np.roll(far, -shift), n_groups, max_length)
+        return [(a + shift, b + shift) for a, b in segments]
+
+    def run(self) -> tuple[MinMaxTree, list[float]]:
+        p = self.p
+        L = int(p.pieces)
+        # Four pieces a group by default: two centres (low and high part of the body band)
+        # and two sides.
+        n_groups = int(p.groups) if p.groups is not None else max(1, L // 4)
+        if n_groups > 1 and L < 3 * n_groups:
+            n_groups = max(1, L // 3)
+        n_bins = profile_bins(self.samples.count("robot"))
+        segments = self.initial_groups(n_groups, n_bins)
+        width = 2.0 * np.pi / n_bins
+        sample_bin = angle_bins(self.samples.alpha, n_bins)
+        profile = self.range_profile(n_bins)
+
+        pieces: list[FloatArray] = []
+        members: list[list[int]] = []
+        centres_per_group = [1] * len(segments)
+        extra = L - (3 * len(segments) if len(segments) > 1 else 1)
+        # Extra centres go to the segments whose profile a single line fits worst.
+        seg_cost = [segment_cost(profile, first, end) for first, end in segments]
+        order = np.argsort(-np.asarray(seg_cost), kind="stable")
+        for i in range(extra):
+            centres_per_group[int(order[i % len(order)])] += 1
+
+        for g, (first, end) in enumerate(segments):
+            group: list[int] = []
+            if p.construction == "profile":
+                centres = self.profile_centres(profile, first, end, centres_per_group[g], sample_bin)
+            else:
+                mask = np.isin(sample_bin, np.arange(first, end) % n_bins)
+                centres = self.initial_centres(mask, centres_per_group[g], first * width - np.pi, end * width - np.pi)
+            for piece in centres:
+                group.append(len(pieces))
+                pieces.append(piece)
+            if len(segments) > 1:
+                # Side pieces start a little outside the segment: where neighbouring groups
+                # overlap, the MAX keeps the nearer obstacle, the safe side.
+                start_angle = first * width - np.pi - SEGMENT_OVERLAP
+                end_angle = end * width - np.pi + SEGMENT_OVERLAP
+                base = centres[0]
+                for side in (self.side_piece(base, start_angle, +1), self.side_piece(base, end_angle, -1)):
+                    group.append(len(pieces))
+                    pieces.append(side)
+            members.append(group)
+            if p.progress is not None:
+                p.progress(g + 1, len(segments) + int(p.max_sweeps))
+        W = np.array(pieces)
+        self.progress_offset = len(segments)
+        return self.alternate(W, members)
+
+    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int,
+                        sample_bin: NDArray[np.intp]) -> list[FloatArray]:
+        """Centre pieces whose level crossing lies just in front of the segment's first obstacles.
+
+        In range terms a piece crosses ``level`` at ``r* = p0 + p_angle . angle_terms + p_h h``.
+        A linear programme pushes ``r*`` as far out as it may go while staying at or below
+        ``sqrt(D(alpha)^2 + h^2)`` (the first obstacle at horizontal distance ``D``) at the
+        edges of every bin of the segment, its overlap and every height of the body band.
+        The slope ``c`` through the crossing comes from a robust least-squares fit to the
+        segment's samples, so the sensor model decides how sharp the crossing is.
+        """
+        from scipy.optimize import linprog
+
+        n_bins = profile.shape[0]
+        width = 2.0 * np.pi / n_bins
+        # The crossing must stay in front of the obstacles over the segment's own bins only:
+        # where a group reaches past its segment, the MAX over groups keeps the nearer one.
+        bins = np.arange(first, end)
+        D_bins = profile[np.mod(bins, n_bins)]
+        # Between two bins the obstacle may be as near as in either of them.
+        left = np.where(bins > first, np.minimum(D_bins, profile[np.mod(bins - 1, n_bins)]), D_bins)
+        right = np.where(bins < end - 1, np.minimum(D_bins, profile[np.mod(bins + 1, n_bins)]), D_bins)
+        edges = np.concatenate([bins, bins + 1]) * width - np.pi
+        D_edges = np.concatenate([left, right])
+        # From the floor up: the map's lowest cut may lie a little under the clearance.
+        low, high = self.robot.floor_h, self.robot.body_band[1]
+        heights = np.linspace(low, max(high, 0.0), PROFILE_HEIGHTS)
+        if self.k_angle == 1:
+            # The paper's basis is discontinuous at +-pi: keep the overlap on this side.
+            keep = (edges >= -np.pi) & (edges <= np.pi)
+            edges, D_edges = edges[keep], D_edges[keep]
+        A, H = np.meshgrid(edges, heights, indexing="ij")
+        D = np.repeat(D_edges, PROFILE_HEIGHTS).reshape(A.shape)
+        target = np.sqrt(D**2 + H**2).ravel()
+        cap = np.sqrt(np.minimum(D, NAVIGATION_REACH) ** 2 + H**2).ravel()
+        body = np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + H**2).ravel()
+        keep_off = np.minimum(body, target - 1e-6)
+        nearest = np.sqrt(np.min(D, axis=0) ** 2 + heights**2)
+        floor_flat = np.minimum((FLAT_SHARE * nearest)[None, :].repeat(A.shape[0], axis=0).ravel(), target - 1e-6)
+        # The crossing line in local angle terms about the segment's middle, where they are
+        # well conditioned: 1, cos(da) - 1, sin(da), h (linear basis: 1, da, h).
+        middle = (first + end) / 2.0 * width - np.pi
+        delta = A.ravel() - middle
+        local = [delta] if self.k_angle == 1 else [np.cos(delta) - 1.0, np.sin(delta)]
+        rows = np.column_stack([np.ones(target.size), *local, H.ravel()])
+
+        in_segment = np.isin(sample_bin, np.arange(first, end) % n_bins)
+        c = self.crossing_slope(in_segment, float(np.median(D_bins)))
+        # Half the pan-weight budget is left to the side pieces that switch the group off.
+        bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
+        bound_h = self.p.b_max / c
+        if self.k_angle == 1:
+            bounds = [(None, None), (-bound_angle, bound_angle), (-bound_h, bound_h)]
+        else:
+            # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
+            # weight <= 0): far from its segment a group then recedes, and its sides can
+            # switch it off.
+            bounds = [(None, None), (-bound_angle, 0.0), (-bound_angle, bound_angle), (-bound_h, bound_h)]
+        centres = []
+        heights_of_rows = H.ravel()
+        for j in range(count):
+            # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
+            # in h, and the group's crossing (the farthest of its pieces') follows it with one
+            # tangent line per part.
+            part_lo = low + (max(high, 0.0) - low) * j / count
+            part_hi = low + (max(high, 0.0) - low) * (j + 1) / count
+            emphasis = (heights_of_rows >= part_lo - 1e-9) & (heights_of_rows <= part_hi + 1e-9)
+            n_rows, k = rows.shape
+            chosen = np.flatnonzero(emphasis)
+            # Maximise the emphasised crossings, but only up to the range the map looks at
+            # (t_i <= min(r*_i, cap_i)): pushing out far walls must not tilt the line into a
+            # near obstacle. Relative gains: a centimetre near the robot counts more. (Maximising
+            # the linearised horizontal distance per bin edge instead measured 0.01-0.02 worse.)
+            n_aux = chosen.size
+            objective = np.concatenate([np.zeros(k), -1.0 / cap[chosen] ** 2])
+            tie = np.zeros((chosen.size, k + n_aux))
+            tie[:, :k] = -rows[chosen]
+            tie[np.arange(chosen.size), k + np.arange(chosen.size)] = 1.0
+            tie_rhs = np.zeros(chosen.size)
+            aux_bounds = [(None, c) for c in cap[chosen]]
+            below = np.hstack([rows, np.zeros((n_rows, n_aux))])
+            A_ub = np.vstack([below, tie])
+            b_ub = np.concatenate([target, tie_rhs])
+            # Keep the crossing off the robot's body wherever the obstacle allows: at the
+            # floor, a crossing a few centimetres too near in r is a body in collision.
+            # Only this centre's part of the band: the group's crossing is the farthest of its
+            # centres', so each needs to keep off the body where it is the one that counts.
+            # Nor may it dip below (nearly) the segment's nearest obstacle at that height, which
+            # a flat crossing would keep: a tilt that gains far away must not cost near by.
+            # Each floor is dropped again if it makes the programme infeasible.
+            floors = [np.maximum(keep_off, floor_flat)[chosen], keep_off[chosen], None]
+            for lower in floors:
+                if lower is None:
+                    result = linprog(objective, A_ub=A_ub, b_ub=b_ub, bounds=bounds + aux_bounds, method="highs")
+                else:
+                    result = linprog(objective, A_ub=np.vstack([A_ub, -below[chosen]]),
+                                     b_ub=np.concatenate([b_ub, -lower]),
+                                     bounds=bounds + aux_bounds, method="highs")
+                if result.status == 0:
+                    break
+            if result.status == 0:
+                q = result.x[:k]
+            else:
+                q = np.zeros(rows.shape[1])
+                q[0] = float(target.min())
+            # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
+            if self.k_angle == 1:
+                p_angle = np.array([q[1]])
+                p0 = q[0] - q[1] * middle
+            else:
+                cm, sm = math.cos(middle), math.sin(middle)
+                p_angle = np.array([q[1] * cm - q[2] * sm, q[1] * sm + q[2] * cm])
+                p0 = q[0] - q[1]
+            # F = level + c (r - r*): angle and height weights -c p, offset level - c p0.
+            piece = np.empty(self.X.shape[1])
+            piece[: self.k_angle] = -c * p_angle
+            piece[self.k_angle] = -c * q[-1]
+            piece[self.k_angle + 1] = c
+            piece[-1] = self.p.level - c * p0
+            centres.append(self.project(piece))
+        return centres
+
+    def crossing_slope(self, rows: NDArray[np.bool_], distance: float) -> float:
+        """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples."""
+        s = self.samples
+        # Only the samples on rays near their feature say how sharp the crossing is; the
+        # robot and footprint samples would pull c down to level / distance.
+        rows = rows & np.isin(s.kind, [SAMPLE_KINDS["hit"], SAMPLE_KINDS["near"]])
+        r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
+        x = s.r[rows] - r_star
+        y = s.m[rows] - self.p.level
+        w = self.w[rows]
+        c = 1.0
+        for _ in range(4):
+            denominator = float(np.dot(w, x * x))
+            if denominator <= 0:
+                break
+            c = float(np.dot(w, x * y)) / denominator
+            w = self.irls_weights(c * x - y, self.w[rows], self.hit[rows])
+        return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
+
+    def initial_centres(self, mask: NDArray[np.bool_], count: int, start: float, end: float) -> list[FloatArray]:
+        """``count`` centre pieces fitted to consecutive parts of a segment's samples."""
+        alpha = self.samples.alpha
+        offset = np.mod(alpha - start, 2.0 * np.pi)
+        span = max(end - start, 1e-9)
+        centres = []
+        fallback = self.solve_piece(np.ones_like(mask), self.w)
+        for j in range(count):
+            part = mask & (offset >= span * j / count) & (offset <= span * (j + 1) / count) if count > 1 else mask
+            piece = self.huber_fit(part) if part.sum() >= 8 else None
+            if piece is None:
+                piece = self.huber_fit(mask) if mask.sum() >= 8 else None
+            if piece is None:
+                piece = fallback if fallback is not None else self.project(np.array([0.0] * (self.X.shape[1] - 2) + [1.0, 0.0]))
+            centres.append(piece)
+        return centres
+
+    def huber_fit(self, rows: NDArray[np.bool_], iterations: int = 3) -> FloatArray | None:
+        weights = self.w[rows]
+        piece = None
+        for _ in range(iterations):
+            piece = self.solve_piece(rows, weights)
+            if piece is None:
+                return None
+            weights = self.irls_weights(self.X[rows] @ piece - self.m[rows], self.w[rows], self.hit[rows])
+        return piece
+
+    def side_piece(self, centre: FloatArray, angle: float, direction: int) -> FloatArray:
+        """A piece that lets the centre's group recede steeply in range beyond ``angle``.
+
+        The side crosses ``level`` where the centre does at ``angle``, with the least slope
+        in ``r`` (``c_min``) and the full pan weight left within ``a_max``: its crossing then
+        moves away from the robot at ``(a_max - |a_centre|) / c_min`` metres per radian
+        outside the segment, and inside it stays nearer than the centre's crossing, so the
+        group (a MIN: its crossing is the farthest of its pieces') keeps the centre's there.
+        ``direction`` +1: the side rises for pan angles above ``angle`` (segment start);
+        -1: below it (segment end).
+        """
+        scale = min(1.0, self.p.c_min / centre[self.k_angle + 1])
+        level = self.p.level
+        piece = centre * scale
+        piece[-1] = centre[-1] * scale + level * (1.0 - scale)
+        A = self.p.a_max
+        if self.k_angle == 1:
+            a = piece[0]
+            gain = (A - a) if direction > 0 else (A + a)
+            piece[0] = a + direction * gain
+            piece[-1] -= direction * gain * angle
+        else:
+            # direction * sin(alpha - angle) = direction * (cos(angle) sin(alpha) - sin(angle) cos(alpha))
+            u = direction * np.array([-math.sin(angle), math.cos(angle)])
+            v = piece[:2].copy()
+            vu = float(v @ u)
+            gain = -vu + math.sqrt(max(vu * vu - float(v @ v) + A * A, 0.0))
+            piece[:2] = v + gain * u
+        return self.project(piece)
+
+    # ---------------------------------------------------------------- alternation
+    def alternate(self, W: FloatArray, members: list[list[int]]) -> tuple[MinMaxTree, list[float]]:
+        X, m = self.X, self.m
+        n = X.shape[0]
+        V = X @ W.T
+        G = np.column_stack([V[:, g].min(axis=1) for g in members])
+        F = G.max(axis=1)
+        loss = self.total_loss(F)
+        history = [loss]
+        group_of = {piece: gi for gi, g in enumerate(members) for piece in g}
+        n_groups = len(members)
+        for sweep in range(int(self.p.max_sweeps)):
+            before = loss
+            for piece in range(W.shape[0]):
+                gi = group_of[piece]
+                others = [q for q in members[gi] if q != piece]
+                in_group = V[:, others].min(axis=1) if others else np.full(n, np.inf)
+                if n_groups > 1:
+                    other_groups = np.delete(G, gi, axis=1).max(axis=1)
+                else:
+                    other_groups = np.full(n, -np.inf)
+                current = V[:, piece]
+                active = (current <= in_group) & (current >= other_groups)
+                if active.sum() < X.shape[1]:
+                    continue
+                rows = np.flatnonzero(active)
+                candidate = self.solve_piece(rows, self.irls_weights(F[rows] - m[rows], self.w[rows], self.hit[rows]))
+                if candidate is None or np.array_equal(candidate, W[piece]):
+                    continue
+                for step in (1.0, 0.5):
+                    trial = candidate if step == 1.0 else self.project(W[piece] + step * (candidate - W[piece]))
+                    values = X @ trial
+                    group_value = np.minimum(in_group, values)
+                    F_new = np.maximum(other_groups, group_value)
+                    new_loss = self.total_loss(F_new)
+                    if new_loss < loss:
+                        W[piece] = trial
+                        V[:, piece] = values
+                        G[:, gi] = group_value
+                        F = F_new
+                        loss = new_loss
+                        break
+            history.append(loss)
+            if self.p.progress is not None:
+                offset = getattr(self, "progress_offset", 0)
+                self.p.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
+            if before - loss <= self.p.tol * max(before, 1e-12):
+                break
+        root = Op("max", tuple(Op("min", tuple(g)) if len(g) > 1 else g[0] for g in members))
+        if n_groups == 1:
+            root = root.children[0]
+        return MinMaxTree(self.basis, W, root), history
+
+
+# ====================================================================== helpers
+#: Pan-angle bins of :func:`focus_samples`.
+FOCUS_ANGLE_BINS = 120
+#: An obstacle is where at least this many hit samples (two per feature) lie within a
+#: short stretch of distance: three features.
+FOCUS_SUPPORT = 6
+#: The stretch: this fraction of the distance plus :data:`FOCUS_WINDOW_ABS` metres.
+FOCUS_WINDOW = 0.1
+FOCUS_WINDOW_ABS = 0.05
+#: Samples up to this fraction (and the window) beyond the first obstacle are kept.
+FOCUS_MARGIN = 0.1
+
+
+def adaptive_support(n_rays: int) -> tuple[int, int]:
+    """Hit samples that make an obstacle, and the frontier's rank, for ``n_rays`` features.
+
+    Sparse data has fewer features per obstacle, and fewer mismatches per bin to guard
+    against: three features (six hit samples) and the sixth-farthest ray end at 10k
+    features, two features and the second-farthest ray end around 2k.
+    """
+    per_bin = n_rays / FOCUS_ANGLE_BINS
+    support = 2 * int(np.clip(round(per_bin / 30.0), 2, FOCUS_SUPPORT // 2))
+    rank = int(np.clip(round(per_bin / 14.0), 2, FRONTIER_RANK))
+    return support, rank
+
+
+def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int,
+                            support: int = FOCUS_SUPPORT) -> FloatArray:
+    """Per pan-angle bin, the horizontal distance of the nearest cluster of hits.
+
+    Isolated outliers (mismatches at a random range) must not count as an obstacle, so
+    the first obstacle is the nearest hit followed by at least ``support`` - 1
+    more hits within :data:`FOCUS_WINDOW` of its distance. ``inf`` where there is none.
+    Each feature gives two hit samples, so the support counts samples, not features.
+    """
+    bins = angle_bins(alpha, n_bins)
+    order = np.lexsort((distance, bins))
+    bins, distance = bins[order], distance[order]
+    # One sortable key: bin number, then distance (distances are far below 1e6 m).
+    key = bins * 1e6 + distance
+    reach = np.searchsorted(key, key + distance * FOCUS_WINDOW + FOCUS_WINDOW_ABS, side="right")
+    supported = (reach - np.arange(key.size)) >= support
+    first = np.full(n_bins, np.inf)
+    np.minimum.at(first, bins[supported], distance[supported])
+    return first
+
+
+def focus_samples(samples: Samples, robot: Robot, focus_range: float = np.inf, *,
+                  floor_is_obstacle: bool = False) -> Samples:
+    """Keep the samples a monotone occupancy function can honour and navigation needs.
+
+    ``F`` increases with ``r``, and the navigation polygon is cut by the nearest obstacle
+    at any height of the robot's body. Behind that obstacle the samples (the wall above a
+    low box, the free rays over it) can only pull the fit away from the box, so per
+    pan-angle bin the samples farther (horizontally) than the first obstacle in the body's
+    height band (:func:`first_obstacle_distance`, plus a margin) are dropped, as are samples
+    outside the height band: the navigation map never looks there, and samples farther
+    than ``focus_range`` (horizontally).
+    """
+    low = robot.floor_h - 0.05
+    high = max(robot.body_band[1], 0.0) + 0.1
+    in_band = (samples.h >= low) & (samples.h <= high)
+    distance = np.sqrt(np.maximum(samples.r**2 - samples.h**2, 0.0))
+    band_low, band_high = robot.body_band
+    if floor_is_obstacle:
+        band_low = -np.inf
+    hit = (samples.kind == SAMPLE_KINDS["hit"]) & (samples.h >= band_low) & (samples.h <= band_high)
+    support, _ = adaptive_support(samples.count("robot"))
+    first = first_obstacle_distance(samples.alpha[hit], distance[hit], FOCUS_ANGLE_BINS, support)
+    limit = first * (1.0 + FOCUS_WINDOW + FOCUS_MARGIN) + FOCUS_WINDOW_ABS
+    limit = np.minimum(limit, focus_range)
+    in_front = distance <= limit[angle_bins(samples.alpha, FOCUS_ANGLE_BINS)]
+    always = np.isin(samples.kind, [SAMPLE_KINDS["robot"], SAMPLE_KINDS["footprint"], SAMPLE_KINDS["frontier"]])
+    return samples.select(always | (in_band & in_front))
+
+
+#: A bin's observed extent is the distance of its k-th farthest ray end, so that a few
+#: mismatches registered beyond a surface do not open it up.
+FRONTIER_RANK = 6
+FRONTIER_HEIGHTS = 4
+
+
+def frontier_samples(samples: Samples, robot: Robot, focus_range: float) -> Samples:
+    """Occupied samples where the observed free space ends short of ``focus_range``.
+
+    A ray is evidence of free space up to its end; beyond the farthest ray ends of a
+    pan-angle bin nothing has been seen, an untextured wall may stand there, and linear
+    pieces would extrapolate the free space into it. One occupied sample (value 1) per
+    height of the body band is placed just beyond the bin's observed extent.
+    """
+    # The ray ends are the hit samples and the free samples of floor features.
+    rays = np.isin(samples.kind, [SAMPLE_KINDS["hit"], SAMPLE_KINDS["near"], SAMPLE_KINDS["floor"]])
+    distance = np.sqrt(np.maximum(samples.r[rays] ** 2 - samples.h[rays] ** 2, 0.0))
+    bins = angle_bins(samples.alpha[rays], FOCUS_ANGLE_BINS)
+    order = np.lexsort((-distance, bins))
+    bins, distance = bins[order], distance[order]
+    counts = np.bincount(bins, minlength=FOCUS_ANGLE_BINS)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    extent = np.zeros(FOCUS_ANGLE_BINS)
+    _, rank = adaptive_support(samples.count("robot"))
+    enough = counts >= rank
+    extent[enough] = distance[starts[enough] + rank - 1]
+    # The body itself is known free (footprint samples): an unseen direction is closed
+    # just outside it, not inside it, so the robot is never in collision where it stands.
+    extent = np.maximum(extent, robot.radius + BODY_CLEARANCE)
+    short = np.flatnonzero(extent < focus_range)
+    width = 2.0 * np.pi / FOCUS_ANGLE_BINS
+    low, high = robot.body_band
+    heights = np.linspace(low, high, FRONTIER_HEIGHTS)
+    A, H = np.meshgrid(-np.pi + (short + 0.5) * width, heights, indexing="ij")
+    D = np.repeat(extent[short] * (1.0 + FOCUS_MARGIN) + FOCUS_WINDOW_ABS, FRONTIER_HEIGHTS).reshape(A.shape)
+    A, H, D = A.ravel(), H.ravel(), D.ravel()
+    return Samples(A, H, np.hypot(D, H), np.ones_like(A), np.ones_like(A),
+                   np.full(A.shape, SAMPLE_KINDS["frontier"], dtype=np.int8))
+
+
+def join_samples(*parts: Samples) -> Samples:
+    """Concatenate sample sets."""
+    return Samples(*(np.concatenate([getattr(p, name) for p in parts])
+                     for name in ("alpha", "h", "r", "m", "weight", "kind")))
+
+
+def profile_bins(n_rays: int) -> int:
+    """Pan-angle bins of the range profile for ``n_rays`` features (120, 240 or 360)."""
+    thirds = int(np.clip(round(3 * n_rays / PROFILE_FULL_DENSITY), 1, 3))
+    return PROFILE_BINS * thirds // 3
+
+
+def wrap_angle(alpha: FloatArray) -> FloatArray:
+    """Angles wrapped into [-pi, pi)."""
+    return np.mod(np.asarray(alpha) + np.pi, 2.0 * np.pi) - np.pi
+
+
+def mean_direction(samples: Samples) -> float:
+    """The direction of the mean unit vector of the hit samples (0 if there are none)."""
+    hit = samples.kind == SAMPLE_KINDS["hit"]
+    if not hit.any():
+        return 0.0
+    x, y = float(np.cos(samples.alpha[hit]).sum()), float(np.sin(samples.alpha[hit]).sum())
+    return math.atan2(y, x) if math.hypot(x, y) > 1e-9 * hit.sum() else 0.0
+
+
+def angle_bins(alpha: FloatArray, n_bins: int) -> NDArray[np.intp]:
+    """Index of the angular bin (of ``n_bins`` over [-pi, pi)) holding each angle."""
+    index = np.floor((np.asarray(alpha) + np.pi) * (n_bins / (2.0 * np.pi))).astype(np.intp)
+    return np.mod(index, n_bins)
+
+
+def segment_near_runs(profile: FloatArray, far: NDArray[np.bool_], n_segments: int,
+                      max_length: int) -> list[tuple[int, int]]:
+    """Cover the near bins of a profile with at most ``n_segments`` runs.
+
+    Dynamic programming over cut positions: a run costs the area between the profile
+    and the run's nearest value (what a conservative piece gives away), a stretch of far
+    bins may be skipped for free. Returns ``(first, end)`` pairs, ``end`` exclusive.
+    """
+    n = profile.shape[0]
+    y = profile.astype(np.float64)
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    length = j - i
+    sums = np.concatenate([[0.0], np.cumsum(y)])
+    run_min = np.full((n + 1, n + 1), np.inf)
+    for start in range(n):
+        run_min[start, start + 1:] = np.minimum.accumulate(y[start:])
+    area = sums[j] - sums[i] - np.where(length >= 1, run_min, 0.0) * length
+    cost = np.where((length >= 1) & (length <= max_length), np.maximum(area, 0.0) + 1e-9 * length**2, np.inf)
+    far_count = np.concatenate([[0], np.cumsum(far)])
+    skip = np.where((length >= 1) & (far_count[j] - far_count[i] == length), 0.0, np.inf)
+    columns = np.arange(n + 1)
+    # best[g][j]: least cost covering bins [0, j) with g runs; a skip may follow a run.
+    best = np.full(n + 1, np.inf)
+    best[0] = 0.0
+    best = np.minimum(best, (best[:, None] + skip).min(axis=0))
+    layers = [best]
+    run_from, skip_from = [None], [np.argmin(best[:, None] + skip, axis=0)]
+    for _ in range(n_segments):
+        total = layers[-1][:, None] + cost
+        from_run = np.argmin(total, axis=0)
+        after_run = total[from_run, columns]
+        skipped = after_run[:, None] + skip
+        from_skip = np.argmin(skipped, axis=0)
+        after_skip = skipped[from_skip, columns]
+        use_skip = after_skip < after_run
+        layers.append(np.where(use_skip, after_skip, after_run))
+        run_from.append(from_run)
+        skip_from.append(np.where(use_skip, from_skip, -1))
+    finals = [layer[n] for layer in layers]
+    g = int(np.argmin(finals))
+    if not np.isfinite(finals[g]) or g == 0:
+        return [(0, n)]
+    segments = []
+    position = n
+    while g > 0:
+        source = int(skip_from[g][position])
+        if source >= 0:
+            position = source
+        start = int(run_from[g][position])
+        segments.append((start, position))
+        position = start
+        g -= 1
+    return segments[::-1]
+
+
+def segment_cost(profile: FloatArray, first: int, end: int) -> float:
+    """Squared error of the best line through a (circular) run of the profile."""
+    y = profile[np.mod(np.arange(first, end), profile.shape[0])]
+    if y.size < 3:
+        return 0.0
+    x = np.arange(y.size, dtype=np.float64)
+    coefficients = np.polyfit(x, y, 1)
+    return float(np.sum((np.polyval(coefficients, x) - y) ** 2))
+
+
+__all__ = ["DEFAULT_BASIS", "OccupancyRegressor", "box_qp", "features_digest", "huber_loss", "slope_bounds"]

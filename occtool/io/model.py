@@ -1,0 +1,265 @@
+"""Model files: the fitted occupancy tree and its inverse as versioned JSON.
+
+A model file holds everything needed to use and to reproduce the model: the tree and
+its pieces, the constraints the fit enforced, the frame and units, the sensor model and
+robot, the fit parameters and a training summary (with a sha256 digest of the input
+features). Everything that naturally differs between two runs on the same input
+(duration, date, occtool version, host) lives in the one top-level ``run`` object, so two
+fits with the same input and seed give files identical outside ``run``.
+
+Floats are written with Python's shortest round-trip representation, so loading gives
+back bit-identical coefficients and every constraint still holds exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from typing import Any
+
+from occtool.errors import InputError, ModelFormatError
+from occtool.io._atomic import atomic_write
+from occtool.robot import Robot
+from occtool.sensor import SensorModel
+from occtool.tree import InverseTree, MinMaxTree
+
+MODEL_FORMAT = "occtool-model"
+INVERSE_FORMAT = "occtool-inverse"
+#: The newest format version this occtool writes and reads.
+FORMAT_VERSION = 1
+
+FRAME = {
+    "id": "base_link",
+    "origin": "sensor centre",
+    "axes": "REP-103: x forward, y left, z up",
+    "coordinates": "alpha = atan2(y, x), h = z, r = |p|",
+}
+UNITS = {"alpha": "rad", "h": "m", "r": "m", "m": "occupancy in [0, 1]"}
+
+_FIT_PARAMS = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
+               "seed", "focus", "focus_range")
+
+
+def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
+    """The JSON-ready content of a model file for a fitted :class:`OccupancyRegressor`."""
+    model._check_fitted()
+    tree = model.tree_
+    data: dict[str, Any] = {
+        "format": MODEL_FORMAT,
+        "format_version": FORMAT_VERSION,
+        "frame": dict(FRAME),
+        "units": dict(UNITS),
+        "function": "m = tree of MIN/MAX nodes over linear pieces; F increases strictly in r",
+        **tree.to_dict(),
+        "constraints": {"c_min": float(model.c_min), "a_max": float(model.a_max), "b_max": float(model.b_max)},
+        "slope_bounds": dict(model.slope_bounds_),
+        "sensor_model": model.sensor_.to_dict(),
+        "robot": _robot_dict(model.robot_),
+        "fit": {name: getattr(model, name) for name in _FIT_PARAMS},
+        "training": model.training_summary(),
+    }
+    if run is not None:
+        data["run"] = dict(run)
+    return data
+
+
+def _robot_dict(robot: Robot) -> dict[str, float]:
+    return {k: float(getattr(robot, k)) for k in ("radius", "sensor_height", "body_height", "ground_clearance")}
+
+
+def save_model(model: Any, path: str | os.PathLike[str], *, run: dict | None = None) -> None:
+    """Write a fitted model as JSON (atomically: the file is complete or absent).
+
+    Parameters
+    ----------
+    model
+        A fitted :class:`~occtool.fit.OccupancyRegressor`.
+    path
+        Destination file, or ``"-"`` for standard output.
+    run
+        Details of this run (duration, date, version, host) for the ``run`` object.
+    """
+    text = json.dumps(model_to_dict(model, run=run), indent=1, allow_nan=False)
+    with atomic_write(path, "w") as handle:
+        handle.write(text + "\n")
+
+
+def _read_json(path: str | os.PathLike[str]) -> Any:
+    try:
+        with open(path, encoding="utf-8") as handle:
+            return json.load(handle)
+    except json.JSONDecodeError as exc:
+        raise ModelFormatError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    except UnicodeDecodeError:
+        raise ModelFormatError(f"{path}: not a text (UTF-8 JSON) file") from None
+
+
+def _check_header(data: Any, expected: str, path: str | os.PathLike[str]) -> None:
+    if not isinstance(data, dict):
+        raise ModelFormatError(f"{path}: a model file must hold a JSON object")
+    kind = data.get("format")
+    if kind != expected:
+        raise ModelFormatError(f"{path}: not an {expected} file (format is {kind!r})")
+    version = data.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ModelFormatError(f"{path}: format_version must be a whole number >= 1, got {version!r}")
+    if version > FORMAT_VERSION:
+        raise ModelFormatError(
+            f"{path}: written by a newer occtool (format version {version}; this one reads up to {FORMAT_VERSION})"
+        )
+    units = data.get("units")
+    if units is not None and units != UNITS:
+        raise ModelFormatError(f"{path}: unsupported units {units!r} (expected {UNITS})")
+
+
+def model_from_dict(data: Any, source: str = "model") -> Any:
+    """Rebuild a fitted :class:`OccupancyRegressor` from :func:`model_to_dict` output."""
+    from occtool.fit import OccupancyRegressor, slope_bounds
+
+    _check_header(data, MODEL_FORMAT, source)
+    for key in ("constraints", "sensor_model", "robot", "fit", "training"):
+        if not isinstance(data.get(key), dict):
+            raise ModelFormatError(f"{source}: '{key}' is missing or not an object")
+    try:
+        tree = MinMaxTree.from_dict(data)
+    except ModelFormatError as exc:
+        raise ModelFormatError(f"{source}: {exc}") from None
+    try:
+        sensor = SensorModel.from_dict(data["sensor_model"])
+        robot = Robot(**{k: float(v) for k, v in data["robot"].items()})
+        fit_params = {k: v for k, v in data["fit"].items() if k in _FIT_PARAMS}
+        constraints = {k: float(data["constraints"][k]) for k in ("c_min", "a_max", "b_max")}
+    except (InputError, TypeError, ValueError, KeyError) as exc:
+        raise ModelFormatError(f"{source}: invalid settings: {exc}") from None
+    fit_params.update(constraints)
+    _check_constraints(tree, constraints, source)
+    model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
+    training = data["training"]
+    try:
+        model.n_features_ = int(training["n_features"])
+        model.n_samples_ = int(training["n_samples"])
+        model.sample_counts_ = {str(k): int(v) for k, v in training.get("samples_by_kind", {}).items()}
+        model.rmse_ = float(training["rmse"])
+        model.loss_ = float(training.get("loss", math.nan))
+        model.n_sweeps_ = int(training.get("sweeps", 0))
+        model.features_digest_ = str(training["features_sha256"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFormatError(f"{source}: incomplete training summary ({exc})") from None
+    model.loss_history_ = []
+    model.tree_ = tree
+    model.sensor_ = sensor
+    model.robot_ = robot
+    model.slope_bounds_ = slope_bounds(tree)
+    model.inverse_ = tree.inverse()
+    model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}
+    return model
+
+
+def _check_constraints(tree: MinMaxTree, constraints: dict[str, float], source: str) -> None:
+    bounds = {"c_min": float(tree.c.min()), "a_max": float(tree.angle_weight.max()), "b_max": float(abs(tree.b).max())}
+    if bounds["c_min"] < constraints["c_min"] or bounds["c_min"] <= 0:
+        raise ModelFormatError(f"{source}: a piece has c = {bounds['c_min']} below c_min = {constraints['c_min']}")
+    if bounds["a_max"] > constraints["a_max"]:
+        raise ModelFormatError(f"{source}: a piece's pan weight {bounds['a_max']} exceeds a_max = {constraints['a_max']}")
+    if bounds["b_max"] > constraints["b_max"]:
+        raise ModelFormatError(f"{source}: a piece's height weight {bounds['b_max']} exceeds b_max = {constraints['b_max']}")
+
+
+def load_model(path: str | os.PathLike[str]) -> Any:
+    """Read a model file written by :func:`save_model`.
+
+    Returns
+    -------
+    OccupancyRegressor
+        A fitted estimator (``predict``, ``inverse_range``, ``invert`` work; ``run_``
+        holds the file's run details).
+
+    Raises
+    ------
+    ModelFormatError
+        If the file is not JSON, not a model file, written by a newer format, or
+        inconsistent (bad tree, a constraint that does not hold).
+    """
+    return model_from_dict(_read_json(path), str(path))
+
+
+def inverse_to_dict(inverse: InverseTree, *, model: Any | None = None, level_hint: float | None = None,
+                    run: dict | None = None) -> dict[str, Any]:
+    """The JSON-ready content of an inverse file."""
+    data: dict[str, Any] = {
+        "format": INVERSE_FORMAT,
+        "format_version": FORMAT_VERSION,
+        "frame": dict(FRAME),
+        "units": dict(UNITS),
+        "function": "r = tree of MIN/MAX nodes over pieces solved for r (the model's tree with MIN and MAX swapped)",
+        **inverse.to_dict(),
+    }
+    if model is not None:
+        data["slope_bounds"] = dict(model.slope_bounds_)
+        data["robot"] = _robot_dict(model.robot_)
+        data["model_training"] = model.training_summary()
+    if run is not None:
+        data["run"] = dict(run)
+    return data
+
+
+def save_inverse(inverse: InverseTree, path: str | os.PathLike[str], *, model: Any | None = None,
+                 run: dict | None = None) -> None:
+    """Write an inverse tree ``r = F^-1(alpha, h, m)`` as JSON (atomically).
+
+    Parameters
+    ----------
+    inverse
+        The :class:`~occtool.tree.InverseTree`.
+    path
+        Destination file or ``"-"``.
+    model
+        The fitted model it came from: its slope bounds, robot and training summary are
+        copied into the file.
+    run
+        Details of this run for the ``run`` object.
+    """
+    text = json.dumps(inverse_to_dict(inverse, model=model, run=run), indent=1, allow_nan=False)
+    with atomic_write(path, "w") as handle:
+        handle.write(text + "\n")
+
+
+def load_inverse(path: str | os.PathLike[str]) -> InverseTree:
+    """Read an inverse file written by :func:`save_inverse`; :class:`ModelFormatError` if malformed."""
+    data = _read_json(path)
+    _check_header(data, INVERSE_FORMAT, path)
+    try:
+        inverse = InverseTree.from_dict(data)
+    except ModelFormatError as exc:
+        raise ModelFormatError(f"{path}: {exc}") from None
+    if not (inverse.coefficients[:, -2] > 0).all():
+        raise ModelFormatError(f"{path}: every inverse piece needs a positive weight on m")
+    return inverse
+
+
+def read_any(path: str | os.PathLike[str]) -> tuple[str, Any] | None:
+    """``("model", regressor)`` or ``("inverse", tree)`` if ``path`` is one of ours, else ``None``.
+
+    A JSON file that names one of our formats but is broken raises :class:`ModelFormatError`.
+    """
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+    except IsADirectoryError:
+        return None
+    text = head.lstrip()
+    if not text.startswith(b"{") or (MODEL_FORMAT.encode() not in head and INVERSE_FORMAT.encode() not in head):
+        return None
+    data = _read_json(path)
+    if isinstance(data, dict) and data.get("format") == MODEL_FORMAT:
+        return "model", model_from_dict(data, str(path))
+    if isinstance(data, dict) and data.get("format") == INVERSE_FORMAT:
+        return "inverse", load_inverse(path)
+    return None
+
+
+__all__ = [
+    "FORMAT_VERSION", "INVERSE_FORMAT", "MODEL_FORMAT", "inverse_to_dict", "load_inverse", "load_model",
+    "model_to_dict", "model_from_dict", "read_any", "save_inverse", "save_model",
+]

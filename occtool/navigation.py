@@ -1,0 +1,857 @@
+"""The navigation map: the polygon a robot may drive to, obstacle and exploration points.
+
+This is Section 4 of the paper. The inverted occupancy model ``r = F^-1(alpha, h, m)``
+is cut at the threshold ``m`` and a few sensor-frame heights ``h``; each cut, swept over
+the pan angle, gives the free polygon at that height (horizontal distance
+``sqrt(r^2 - h^2)``). The polygons are shrunk by the robot's radius and intersected,
+cut to what the robot can reach in a straight line (the paper's promise, which the
+shrink alone does not keep past a door jamb), then clipped to the max-range disk. The
+polygon's boundary strictly inside that circle carries obstacle points; where the polygon
+lies on the circle it carries exploration points.
+
+Everything here is model-agnostic: :func:`navigation_map` takes any ``inverse_range``
+callable, a fitted :class:`occtool.fit.OccupancyRegressor`'s method or a grid's ray
+marcher alike. With ``slope_bounds`` (the largest pan, height and range weights of a
+piecewise-linear model) the map also holds *between* the slices and rays: see
+docs/navigation.md for the argument.
+
+Coordinates are REP-103 robot-frame x, y in metres centred at the sensor; heights are
+sensor-frame (the floor is at ``-robot.sensor_height``).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike, NDArray
+from shapely.geometry import Polygon
+from shapely.geometry.base import BaseGeometry
+from shapely.geometry.polygon import orient
+
+from occtool.errors import InputError
+from occtool.features import Pose
+from occtool.robot import Robot
+
+FloatArray = NDArray[np.float64]
+InverseRange = Callable[[FloatArray, FloatArray, float], ArrayLike]
+
+#: Default spacing of the default heights across the robot's body band, metres.
+DEFAULT_HEIGHT_SPACING = 0.25
+#: With slope bounds and no ``slice_spacing``: slices are added until the height part of
+#: the threshold margin is at most this (occupancy units) ...
+DEFAULT_HEIGHT_MARGIN = 0.05
+#: ... but never closer than this, metres, so a very steep model cannot ask for
+#: thousands of slices; the rest of the margin then lowers the threshold.
+MIN_AUTO_SLICE_SPACING = 0.01
+#: The max-range circle is drawn with this many times ``n_angles`` vertices (at least
+#: :data:`MIN_CIRCLE_VERTICES`), so its chords sag far less than a ray step.
+CIRCLE_OVERSAMPLING = 4
+MIN_CIRCLE_VERTICES = 720
+#: Arcs shorter than this (metres) where the polygon merely grazes the circle carry no
+#: exploration point.
+MIN_SECTOR_LENGTH = 1e-6
+#: Segments per quarter circle of the arcs the shrink draws round obstacle corners.
+SHRINK_QUAD_SEGMENTS = 16
+#: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).
+MAX_POINTS = 20_000
+#: Ray/edge pairs intersected at a time when placing obstacle points.
+RAY_CAST_BLOCK = 1 << 20
+
+
+class NavigationWarning(UserWarning):
+    """The navigation map was extracted but is degenerate (robot in collision, ...)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Slice:
+    """The free area at one sensor-frame height, before the shrink by the robot radius.
+
+    Parameters
+    ----------
+    height
+        Sensor-frame height of the cut, metres (negative below the sensor).
+    polygon
+        The star-shaped polygon of horizontal free distances swept over the pan angle,
+        robot-frame x, y metres, out to the read range (max range plus robot radius).
+    """
+
+    height: float
+    polygon: Polygon
+
+
+@dataclass(frozen=True, eq=False)
+class NavigationMap:
+    """A local navigation map and the parameters it was extracted with.
+
+    Parameters
+    ----------
+    polygon
+        Where the robot can drive in a straight line with its whole body clear: a
+        shapely Polygon, x/y metres in ``frame_id``, outer ring counter-clockwise
+        (RFC 7946). Empty when the robot is in collision where it stands.
+    slices
+        The free area at each requested height (:class:`Slice`), unshrunk.
+    obstacle_points
+        ``(K, 2)`` points on the polygon's boundary strictly inside the max-range circle,
+        at evenly spaced angles in each obstacle sector (negative reinforcement).
+    exploration_points
+        ``(K, 2)`` points on the max-range circle where the polygon reaches it, at evenly
+        spaced angles in each such sector (positive reinforcement).
+    threshold
+        The occupancy level asked for.
+    effective_threshold
+        The level the model was actually cut at: ``threshold`` minus the margin that
+        makes the map hold between slices and rays (equal to ``threshold`` without
+        slope bounds).
+    heights
+        The requested sensor-frame heights, metres, ascending.
+    robot_radius, max_range
+        Metres.
+    n_angles
+        Pan angles swept (evenly spaced, the first straight ahead).
+    point_spacing
+        Arc length on the max-range circle between neighbouring points, metres.
+    sensor_height, body_height, ground_clearance
+        The robot's geometry above the floor, metres.
+    slice_heights
+        Every height the model was cut at: the requested ones and any added to hold the
+        map between them.
+    margin
+        ``threshold - effective_threshold``.
+    straight_line
+        Whether the polygon was cut to what the robot reaches in a straight line.
+    frame_id
+        ``"base_link"`` for the robot frame, else the world frame the map was moved to.
+    pose
+        The robot's world pose when the map is in a world frame.
+    extra
+        Further properties a GeoJSON file carried, kept for writing it back.
+    """
+
+    polygon: Polygon
+    slices: list[Slice]
+    obstacle_points: FloatArray
+    exploration_points: FloatArray
+    threshold: float
+    effective_threshold: float
+    heights: tuple[float, ...]
+    robot_radius: float
+    max_range: float
+    n_angles: int
+    point_spacing: float
+    sensor_height: float = 1.0
+    body_height: float = 1.0
+    ground_clearance: float = 0.05
+    slice_heights: tuple[float, ...] = ()
+    margin: float = 0.0
+    straight_line: bool = True
+    frame_id: str = "base_link"
+    pose: Pose | None = None
+    extra: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def is_empty(self) -> bool:
+        """True when there is nowhere to go (the robot is in collision)."""
+        return bool(self.polygon.is_empty)
+
+    def in_world(self, pose: Pose, frame_id: str = "map") -> NavigationMap:
+        """The same map moved from the robot frame into a world frame by the robot's pose.
+
+        Parameters
+        ----------
+        pose
+            The robot's pose in the world frame (x, y, yaw are used).
+        frame_id
+            Name of the world frame (REP-105: ``map`` or ``odom``).
+
+        Returns
+        -------
+        NavigationMap
+            Polygon, slices and points rotated by ``pose.yaw`` and moved by ``(x, y)``.
+        """
+        if self.frame_id != "base_link":
+            raise InputError(f"the navigation map is already in the {self.frame_id!r} frame")
+
+        def move(geometry: BaseGeometry) -> BaseGeometry:
+            return shapely.transform(geometry, pose.to_world)
+
+        return replace(
+            self,
+            polygon=move(self.polygon),
+            slices=[Slice(s.height, move(s.polygon)) for s in self.slices],
+            obstacle_points=pose.to_world(self.obstacle_points),
+            exploration_points=pose.to_world(self.exploration_points),
+            frame_id=frame_id,
+            pose=pose,
+        )
+
+
+# --- heights ------------------------------------------------------------------------------
+
+
+def default_heights(robot: Robot, spacing: float = DEFAULT_HEIGHT_SPACING) -> FloatArray:
+    """Sensor-frame heights spanning the robot's body band.
+
+    The band (from the ground clearance to the top of the body) is split into
+    ``ceil(band / spacing)`` equal parts and cut at their midpoints, which puts every
+    body height as close to a cut as that many cuts can.
+
+    Parameters
+    ----------
+    robot
+        The robot whose :attr:`~occtool.robot.Robot.body_band` is spanned.
+    spacing
+        Largest distance between neighbouring heights, metres.
+
+    Returns
+    -------
+    numpy.ndarray
+        Ascending heights, metres.
+
+    Examples
+    --------
+    >>> default_heights(Robot(sensor_height=1.0, body_height=1.0, ground_clearance=0.0)).round(3)
+    array([-0.875, -0.625, -0.375, -0.125])
+    """
+    low, high = robot.body_band
+    count = max(1, math.ceil((high - low) / spacing - 1e-9))
+    return low + (np.arange(count) + 0.5) * (high - low) / count
+
+
+def farthest_from_slices(heights: ArrayLike, band: tuple[float, float]) -> float:
+    """The largest distance from a height of ``band`` (or between the heights) to a slice.
+
+    Parameters
+    ----------
+    heights
+        Slice heights, metres.
+    band
+        ``(low, high)`` heights that must be covered, metres.
+
+    Returns
+    -------
+    float
+        Metres; the heights' own span is covered too when it reaches beyond the band.
+    """
+    cuts = np.sort(np.asarray(heights, dtype=np.float64))
+    low, high = min(band[0], cuts[0]), max(band[1], cuts[-1])
+    gaps = np.diff(cuts) / 2.0
+    return float(max(cuts[0] - low, high - cuts[-1], gaps.max(initial=0.0)))
+
+
+def add_slices(heights: ArrayLike, band: tuple[float, float], spacing: float) -> FloatArray:
+    """Insert heights so that no body height is farther than ``spacing / 2`` from a slice.
+
+    The requested heights are kept; each gap between them is split evenly, and slices
+    are added below the lowest and above the highest down to and up to the band ends.
+
+    Parameters
+    ----------
+    heights
+        Requested heights, metres.
+    band
+        ``(low, high)`` heights that must be covered, metres.
+    spacing
+        Largest allowed gap between neighbouring slices, metres.
+
+    Returns
+    -------
+    numpy.ndarray
+        Ascending heights including the requested ones.
+    """
+    cuts = np.unique(np.asarray(heights, dtype=np.float64))
+    parts = [cuts]
+    for lower, upper in zip(cuts[:-1], cuts[1:]):
+        pieces = math.ceil((upper - lower) / spacing - 1e-9)
+        if pieces > 1:
+            parts.append(lower + (upper - lower) * np.arange(1, pieces) / pieces)
+    below = cuts[0] - band[0]
+    if below > spacing / 2:
+        parts.append(cuts[0] - spacing * np.arange(1, math.ceil((below - spacing / 2) / spacing - 1e-9) + 1))
+    above = band[1] - cuts[-1]
+    if above > spacing / 2:
+        parts.append(cuts[-1] + spacing * np.arange(1, math.ceil((above - spacing / 2) / spacing - 1e-9) + 1))
+    return np.unique(np.concatenate(parts))
+
+
+# --- slope bounds and margin --------------------------------------------------------------
+
+
+def _checked_bounds(slope_bounds: Mapping[str, float]) -> tuple[float, float, float]:
+    values = []
+    for key in ("a_max", "b_max", "c_max"):
+        if key not in slope_bounds:
+            raise InputError(f"slope bounds need a_max, b_max and c_max; {key} is missing")
+        value = float(slope_bounds[key])
+        if not math.isfinite(value) or value < 0:
+            raise InputError(f"slope bound {key} must be a finite number >= 0, got {slope_bounds[key]}")
+        values.append(value)
+    return values[0], values[1], values[2]
+
+
+def height_lipschitz(slope_bounds: Mapping[str, float]) -> float:
+    """How fast the occupancy can change with height at a fixed horizontal distance.
+
+    At a fixed pan angle and horizontal distance ``rho``, a piece ``a alpha + b h + c r + d``
+    with ``r = sqrt(rho^2 + h^2)`` changes with ``h`` at ``b + c h / r``, and ``|h / r| <= 1``;
+    min and max nodes keep the largest of their children's rates.
+
+    Parameters
+    ----------
+    slope_bounds
+        ``a_max``, ``b_max``, ``c_max`` of the model's pieces.
+
+    Returns
+    -------
+    float
+        ``b_max + c_max``, occupancy per metre.
+    """
+    _, b_max, c_max = _checked_bounds(slope_bounds)
+    return b_max + c_max
+
+
+# --- extraction ---------------------------------------------------------------------------
+
+
+def pan_angles(n_angles: int) -> FloatArray:
+    """``n_angles`` evenly spaced pan angles in ``[-pi, pi)``, the first straight ahead.
+
+    They go counter-clockwise (ahead, left, behind, right), the order of a
+    counter-clockwise polygon ring; angles past ``pi`` are wrapped so that a model fitted
+    on ``atan2`` angles is evaluated on its own domain.
+    """
+    alpha = 2.0 * np.pi * np.arange(n_angles) / n_angles
+    return np.where(alpha >= np.pi, alpha - 2.0 * np.pi, alpha)
+
+
+def horizontal_distances(
+    inverse_range: InverseRange, alpha: FloatArray, heights: FloatArray, level: float, read_range: float
+) -> FloatArray:
+    """Free horizontal distance per height and pan angle: ``sqrt(r^2 - h^2)``, capped.
+
+    Parameters
+    ----------
+    inverse_range
+        ``r = F^-1(alpha, h, level)``, broadcasting over ``alpha`` and ``h``.
+    alpha
+        ``(N,)`` pan angles, radians.
+    heights
+        ``(H,)`` sensor-frame heights, metres.
+    level
+        Occupancy level to invert at.
+    read_range
+        Cap for distances (``inf`` where the model stays free along the whole ray).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(H, N)`` metres; 0 where the ray is blocked before it reaches height ``h``
+        (``r < |h|``).
+    """
+    ranges = np.asarray(inverse_range(alpha[None, :], heights[:, None], level), dtype=np.float64)
+    try:
+        ranges = np.broadcast_to(ranges, (heights.size, alpha.size))
+    except ValueError:
+        raise InputError(
+            f"inverse_range returned shape {ranges.shape}, expected one that broadcasts to "
+            f"({heights.size} heights, {alpha.size} angles)"
+        ) from None
+    if np.isnan(ranges).any():
+        raise InputError("inverse_range returned NaN ranges: the model cannot be inverted there")
+    # A negative range (a raw inverse tree: the level is crossed behind the sensor) means
+    # occupied at the sensor; capping the rest keeps inf out of the arithmetic.
+    ranges = np.clip(ranges, 0.0, 2.0 * (read_range + np.abs(heights).max()))
+    squared = np.square(ranges) - np.square(heights)[:, None]
+    return np.minimum(np.sqrt(np.maximum(squared, 0.0)), read_range)
+
+
+def _circle(radius: float, vertices: int) -> Polygon:
+    theta = 2.0 * np.pi * np.arange(vertices) / vertices
+    return Polygon(np.column_stack([radius * np.cos(theta), radius * np.sin(theta)]))
+
+
+def _star_polygon(distances: FloatArray, alpha: FloatArray) -> Polygon:
+    return Polygon(np.column_stack([distances * np.cos(alpha), distances * np.sin(alpha)]))
+
+
+def _component_at_origin(geometry: BaseGeometry) -> Polygon:
+    """The polygon of ``geometry`` that holds the robot (the origin) strictly inside."""
+    origin = shapely.Point(0.0, 0.0)
+    for part in getattr(geometry, "geoms", [geometry]):
+        if isinstance(part, Polygon) and part.contains(origin):
+            return part
+    return Polygon()
+
+
+def navigation_map(
+    inverse_range: InverseRange,
+    *,
+    robot: Robot,
+    threshold: float = 0.6,
+    heights: ArrayLike | None = None,
+    max_range: float = 1.5,
+    n_angles: int = 360,
+    point_spacing: float | None = None,
+    slope_bounds: Mapping[str, float] | None = None,
+    slice_spacing: float | None = None,
+    straight_line: bool = True,
+) -> NavigationMap:
+    """Extract the navigation polygon, obstacle and exploration points from a model.
+
+    Cuts the inverse at the threshold and each height, sweeping the pan angle; shrinks the
+    free area by the robot radius, keeps what the robot can reach in a straight line and
+    clips it to the max-range circle; then places obstacle points on its boundary inside
+    the circle and exploration points where it lies on the circle (docs/navigation.md).
+
+    Parameters
+    ----------
+    inverse_range
+        ``inverse_range(alpha, h, level) -> r``: the distance from the sensor along the
+        ray at pan angle ``alpha`` and height ``h`` where the occupancy first reaches
+        ``level``; ``inf`` where it never does, 0 where it does at the sensor. It must
+        broadcast; it is called once with ``alpha`` of shape ``(1, N)`` and ``h`` of
+        shape ``(H, 1)``.
+    robot
+        The robot: its radius shrinks the polygon, its body band gives the default
+        heights and the band the map must hold for.
+    threshold
+        Occupancy at or above which space is an obstacle.
+    heights
+        Sensor-frame heights to cut at, metres (floor at ``-robot.sensor_height``);
+        default :func:`default_heights`.
+    max_range
+        Radius of the circle bounding the polygon, metres.
+    n_angles
+        Pan angles swept, evenly spaced.
+    point_spacing
+        Arc length on the max-range circle between neighbouring obstacle or exploration
+        points, metres; default the robot radius but at least a tenth of the max range.
+        Every sector gets at least one point, so a channel the robot fits through is
+        not missed however narrow its sector.
+    slope_bounds
+        ``{"a_max", "b_max", "c_max"}``: the largest pan weight magnitude, height weight
+        magnitude and range weight of the model's linear pieces. With them the map
+        also holds between slices and rays (docs/navigation.md): the threshold is lowered
+        by the most the model can vary between a body height and its nearest slice and
+        between a pan angle and its nearest ray, and each ray's distance becomes the
+        least of its own and its neighbours'.
+    slice_spacing
+        With ``slope_bounds``: the largest gap between slices, metres; slices are added
+        between (and beyond) the requested heights until no gap is wider. Default:
+        enough slices for a height margin of :data:`DEFAULT_HEIGHT_MARGIN`, but not
+        closer than :data:`MIN_AUTO_SLICE_SPACING`. Without ``slope_bounds`` it still adds
+        slices, with no margin.
+    straight_line
+        Keep only what the robot reaches in a straight line with its body clear
+        (:func:`visible_from_origin`), as the paper promises; if false, every point where
+        the body fits, including those behind a door jamb or a pole close by.
+
+    Returns
+    -------
+    NavigationMap
+
+    Raises
+    ------
+    InputError
+        For a parameter out of its domain (a height below the floor, a non-positive max
+        range, ...) or an ``inverse_range`` that returns NaN or a wrongly shaped array.
+
+    Warns
+    -----
+    NavigationWarning
+        When the robot is in collision where it stands (the polygon is empty) or when the
+        margin leaves no threshold to cut at.
+
+    Examples
+    --------
+    A circular room of radius 3 m seen from its centre:
+
+    >>> room = lambda alpha, h, level: np.sqrt(3.0 ** 2 + h ** 2) + 0 * alpha
+    >>> nav = navigation_map(room, robot=Robot(radius=0.25), max_range=1.5)
+    >>> round(nav.polygon.area / (np.pi * 1.5 ** 2), 3), len(nav.obstacle_points)
+    (1.0, 0)
+    """
+    threshold, max_range = float(threshold), float(max_range)
+    if not math.isfinite(threshold):
+        raise InputError(f"threshold must be a finite number, got {threshold}")
+    if not (math.isfinite(max_range) and max_range > 0):
+        raise InputError(f"max range must be a finite number > 0, got {max_range}")
+    if int(n_angles) != n_angles or n_angles < 8:
+        raise InputError(f"the number of angles must be an integer >= 8, got {n_angles}")
+    n_angles = int(n_angles)
+    radius = float(robot.radius)
+    if point_spacing is None:
+        point_spacing = max(radius, max_range / 10.0)
+    point_spacing = float(point_spacing)
+    if not (math.isfinite(point_spacing) and point_spacing > 0):
+        raise InputError(f"point spacing must be a finite number > 0, got {point_spacing}")
+    if 2.0 * math.pi * max_range / point_spacing > MAX_POINTS:
+        raise InputError(
+            f"point spacing {point_spacing:g} m would put over {MAX_POINTS} points on the {max_range:g} m circle"
+        )
+    if slice_spacing is not None and not (math.isfinite(slice_spacing) and slice_spacing > 0):
+        raise InputError(f"slice spacing must be a finite number > 0, got {slice_spacing}")
+
+    requested = default_heights(robot) if heights is None else np.asarray(heights, dtype=np.float64).ravel()
+    if requested.size == 0:
+        raise InputError("at least one height is needed")
+    if not np.isfinite(requested).all():
+        raise InputError(f"heights must be finite numbers, got {requested.tolist()}")
+    if (requested <= robot.floor_h).any():
+        raise InputError(
+            f"height {requested.min():g} m is at or below the floor ({robot.floor_h:g} m in the sensor frame, "
+            f"sensor height {robot.sensor_height:g} m)"
+        )
+    requested = np.unique(requested)
+    band = robot.body_band
+
+    margin = 0.0
+    if slope_bounds is not None:
+        a_max, _, _ = _checked_bounds(slope_bounds)
+        lipschitz = height_lipschitz(slope_bounds)
+        if slice_spacing is None and lipschitz > 0:
+            slice_spacing = max(2.0 * DEFAULT_HEIGHT_MARGIN / lipschitz, MIN_AUTO_SLICE_SPACING)
+    cuts = requested if slice_spacing is None else add_slices(requested, band, float(slice_spacing))
+    # Keep added slices above the floor: a cut on the floor sees only the floor.
+    cuts = cuts[cuts > robot.floor_h]
+    if slope_bounds is not None:
+        margin = lipschitz * farthest_from_slices(cuts, band) + a_max * np.pi / n_angles
+    level = threshold - margin
+    if margin > 0 and level <= 0:
+        warnings.warn(
+            f"the margin {margin:.3g} that makes the map hold between slices lowers the threshold "
+            f"{threshold:g} to {level:.3g}: expect an empty map; cut at more heights (--slice-spacing)",
+            NavigationWarning,
+            stacklevel=2,
+        )
+
+    alpha = pan_angles(n_angles)
+    # Chords between rays sag inside the circle through their ends by cos(pi / n): read far
+    # enough that after the shrink the free space still covers the max-range circle.
+    # GEOS draws the arcs round obstacle corners with chords, which cut inside the true
+    # arc: shrink by a little more than the radius so the chords keep the full radius.
+    shrink = radius / math.cos(math.pi / (4 * SHRINK_QUAD_SEGMENTS))
+    read_range = (max_range + shrink) / math.cos(math.pi / n_angles) * (1 + 1e-6) + 1e-9
+    distances = horizontal_distances(inverse_range, alpha, cuts, level, read_range)
+    requested_rows = np.searchsorted(cuts, requested)
+    slice_polygons = shapely.polygons(
+        np.stack([distances[requested_rows] * np.cos(alpha), distances[requested_rows] * np.sin(alpha)], axis=-1)
+    )
+    slices = [Slice(float(cuts[row]), polygon) for row, polygon in zip(requested_rows, slice_polygons)]
+
+    # Star polygons on common rays: the one through the per-ray least distance lies
+    # inside their intersection (each triangle between two rays lies inside every
+    # slice's) and touches it at every ray, and shrinking commutes with intersecting, so
+    # one shrink of one polygon replaces a shrink per slice.
+    nearest = distances.min(axis=0)
+    if slope_bounds is not None:
+        # With the margin, a point occupied between two rays is no nearer than the nearer
+        # ray's distance; the chord between the rays can reach past that, unless each ray
+        # takes the least of its own and its neighbours' distances.
+        nearest = np.minimum(nearest, np.minimum(np.roll(nearest, 1), np.roll(nearest, -1)))
+    circle_vertices = max(CIRCLE_OVERSAMPLING * n_angles, MIN_CIRCLE_VERTICES)
+    polygon = Polygon()
+    if nearest.min() > 0:
+        free = _star_polygon(nearest, alpha)
+        polygon = free
+        if radius > 0:
+            polygon = _component_at_origin(free.buffer(-shrink, quad_segs=SHRINK_QUAD_SEGMENTS))
+            if straight_line and not polygon.is_empty:
+                polygon = visible_from_origin(polygon, alpha, max_range)
+        polygon = _component_at_origin(shapely.intersection(polygon, _circle(max_range, circle_vertices)))
+    if polygon.is_empty:
+        if level > 0:  # otherwise the margin warning above says why
+            blocked = cuts[distances.min(axis=1) <= radius * 1.001]
+            where = (
+                f"at heights {blocked.min() + robot.sensor_height:.2f} to {blocked.max() + robot.sensor_height:.2f} m "
+                "above the floor"
+                if blocked.size else "between its rays"
+            )
+            warnings.warn(
+                f"the robot is in collision where it stands: occupancy reaches {level:.3g} within its "
+                f"radius {radius:g} m {where}, so the navigation polygon is empty",
+                NavigationWarning,
+                stacklevel=2,
+            )
+        obstacles = exploration = np.empty((0, 2))
+    else:
+        polygon = orient(polygon, sign=1.0)  # RFC 7946: outer ring counter-clockwise
+        obstacles, exploration = boundary_points(polygon, max_range, point_spacing, circle_vertices)
+
+    return NavigationMap(
+        polygon=polygon,
+        slices=slices,
+        obstacle_points=obstacles,
+        exploration_points=exploration,
+        threshold=threshold,
+        effective_threshold=float(level),
+        heights=tuple(float(h) for h in requested),
+        robot_radius=radius,
+        max_range=max_range,
+        n_angles=n_angles,
+        point_spacing=point_spacing,
+        sensor_height=float(robot.sensor_height),
+        body_height=float(robot.body_height),
+        ground_clearance=float(robot.ground_clearance),
+        slice_heights=tuple(float(h) for h in cuts),
+        margin=float(margin),
+        straight_line=bool(straight_line),
+    )
+
+
+# --- obstacle and exploration points ------------------------------------------------------
+
+
+def circle_sectors(polygon: Polygon, max_range: float, circle_vertices: int) -> list[tuple[float, float]]:
+    """The angular sectors where the polygon's boundary lies on the max-range circle.
+
+    Parameters
+    ----------
+    polygon
+        A polygon clipped to the max-range disk drawn with ``circle_vertices`` vertices,
+        holding the origin, outer ring counter-clockwise.
+    max_range
+        Radius of the circle, metres.
+    circle_vertices
+        Vertices of the disk it was clipped to: its chords sag by
+        ``max_range * (1 - cos(pi / circle_vertices))``, the tolerance for "on the circle".
+
+    Returns
+    -------
+    list of (start, span)
+        Start angle (radians, counter-clockwise from x) and angular span of each sector;
+        one sector ``(0, 2 pi)`` when the polygon is the whole disk.
+    """
+    ring = np.asarray(polygon.exterior.coords)[:-1]
+    if len(ring) < 3:
+        return []
+    tolerance = max_range * (1.0 - math.cos(math.pi / circle_vertices)) * 1.01 + 1e-9 * max_range
+    on_circle = np.hypot(ring[:, 0], ring[:, 1]) >= max_range - tolerance
+    following = np.roll(ring, -1, axis=0)
+    middle = (ring + following) / 2.0
+    # Both ends on the circle is not enough: an obstacle's chord can join two of its points.
+    is_arc = on_circle & np.roll(on_circle, -1) & (np.hypot(middle[:, 0], middle[:, 1]) >= max_range - tolerance)
+    theta = np.arctan2(ring[:, 1], ring[:, 0])
+    if is_arc.all():
+        return [(0.0, 2.0 * np.pi)]
+    if not is_arc.any():
+        return []
+    # Rotate the ring to start on an edge off the circle, so no run wraps around the end.
+    shift = int(np.flatnonzero(~is_arc)[0])
+    is_arc = np.roll(is_arc, -shift)
+    theta = np.roll(theta, -shift)
+    edges = np.diff(np.concatenate([[0], is_arc.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    sectors = []
+    for first, last in zip(starts, stops):  # a run of arc edges from vertex first to vertex last
+        start, end = theta[first], theta[last % len(theta)]
+        span = (end - start) % (2.0 * np.pi)
+        if span * max_range >= MIN_SECTOR_LENGTH:
+            sectors.append((float(start), float(span)))
+    return sectors
+
+
+def _sector_angles(sectors: Sequence[tuple[float, float]], max_range: float, spacing: float) -> FloatArray:
+    """Evenly spaced angles in each sector: at the middles of equal parts at most ``spacing`` long."""
+    angles = []
+    for start, span in sectors:
+        count = max(1, math.ceil(span * max_range / spacing - 1e-9))
+        angles.append(start + (np.arange(count) + 0.5) * span / count)
+    return np.concatenate(angles) if angles else np.empty(0)
+
+
+def ray_boundary_distances(polygon: Polygon, angles: FloatArray, within: float | None = None) -> FloatArray:
+    """Distance from the origin along each ray to the polygon's outer boundary, first hit.
+
+    Parameters
+    ----------
+    polygon
+        Polygon holding the origin.
+    angles
+        ``(J,)`` ray angles, radians.
+    within
+        Only look for hits this close to the origin, metres (edges wholly farther are
+        skipped, which makes the cast cheap in open space); rays with no hit so close get
+        ``inf``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(J,)`` metres (``inf`` for a ray that misses).
+    """
+    ring = np.asarray(polygon.exterior.coords)
+    start, step = ring[:-1], np.diff(ring, axis=0)
+    if within is not None:
+        # Closest point of each edge to the origin: start + clip(-start.step / |step|^2) step.
+        length2 = np.einsum("ij,ij->i", step, step)
+        along = np.clip(-np.einsum("ij,ij->i", start, step) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+        near = np.hypot(*(start + along[:, None] * step).T) <= within
+        start, step = start[near], step[near]
+    # origin + t d = start + s step  ->  t = (start x step) / (d x step), s = (start x d) / (d x step)
+    start_cross_step = start[:, 0] * step[:, 1] - start[:, 1] * step[:, 0]
+    reach = np.full(len(angles), np.inf)
+    if len(start) == 0:
+        return reach
+    block = max(1, RAY_CAST_BLOCK // len(start))  # bounds the (rays, edges) temporaries
+    for first in range(0, len(angles), block):
+        chunk = angles[first:first + block]
+        dx, dy = np.cos(chunk)[:, None], np.sin(chunk)[:, None]
+        denominator = dx * step[:, 1] - dy * step[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = start_cross_step / denominator
+            s = (start[:, 0] * dy - start[:, 1] * dx) / denominator
+        hit = (denominator != 0) & (s >= 0) & (s <= 1) & (t > 0)
+        reach[first:first + block] = np.where(hit, t, np.inf).min(axis=1, initial=np.inf)
+    return reach
+
+
+def _gaps_overlapping(rays: FloatArray, low: FloatArray, high: FloatArray) -> NDArray[np.bool_]:
+    """Which gaps between sorted rays in ``[-pi, pi)`` (gap j from ray j to ray j+1, the last
+    wrapping round) overlap an arc from ``low`` counter-clockwise to ``high``."""
+    count = len(rays)
+    # An arc overlaps the gaps from the one holding its low end to the one holding its high end.
+    first = (np.searchsorted(rays, low, side="right") - 1) % count
+    last = (np.searchsorted(rays, high, side="left") - 1) % count
+    wraps = last < first
+    marks = np.zeros(count + 1, dtype=np.int64)
+    np.add.at(marks, first, 1)
+    np.add.at(marks, last + 1, -1)
+    # An arc past the last ray runs on from gap `first` to the end and from gap 0 to `last`.
+    np.add.at(marks, np.zeros(wraps.sum(), dtype=np.intp), 1)
+    np.add.at(marks, np.full(wraps.sum(), count), -1)
+    return np.cumsum(marks[:-1]) > 0
+
+
+def visible_from_origin(region: Polygon, angles: FloatArray, reach: float) -> Polygon:
+    """The part of ``region`` the origin sees: where the segment from the origin stays inside.
+
+    The shrunk free area holds every point where the robot's body fits, but not every one
+    it can drive to straight: past a door jamb or a pole close by, the body swept along
+    the way would clip the obstacle. The swept body stays free exactly when the centre's
+    segment stays in the shrunk area, so the reachable part is what the origin sees of it.
+
+    Seen from the origin, the counter-clockwise boundary hides something only where it
+    runs back (clockwise), behind a silhouette vertex where it turns. Rays along
+    ``angles`` and just either side of every silhouette end at their first hit of the
+    boundary. Between two rays with no backward edge in between, a ray cannot leave the
+    region and come back, so all of it is seen; between the others the region is cut
+    along the chord between the two hits: exact along each shadow edge (the silhouette
+    rays), and otherwise short of the visible part only where its boundary bulges away
+    from the origin between two rays.
+
+    Parameters
+    ----------
+    region
+        The shrunk free polygon, holding the origin.
+    angles
+        ``(N,)`` evenly spaced ray angles, radians.
+    reach
+        Distance beyond which nothing matters (the max range), metres.
+
+    Returns
+    -------
+    Polygon
+        ``region`` itself when it hides nothing within reach.
+    """
+    region = orient(region, sign=1.0)  # GEOS's shrink returns the outer ring clockwise
+    ring = np.asarray(region.exterior.coords)[:-1]
+    following = np.roll(ring, -1, axis=0)
+    outside = reach / math.cos(math.pi / len(angles)) * (1 + 1e-6) + 1e-9
+    step = following - ring
+    along = np.clip(-np.einsum("ij,ij->i", ring, step) / np.maximum(np.einsum("ij,ij->i", step, step), 1e-300), 0, 1)
+    near = np.hypot(*(ring + along[:, None] * step).T) <= outside
+    # Edge i runs clockwise, as seen from the origin, when v_i x v_i+1 < 0.
+    backward = (ring[:, 0] * following[:, 1] - ring[:, 1] * following[:, 0] < 0) & near
+    if not backward.any():
+        return region
+    silhouette = (backward != np.roll(backward, 1)) & (np.hypot(ring[:, 0], ring[:, 1]) <= outside)
+    corners = np.arctan2(ring[silhouette, 1], ring[silhouette, 0])
+    side = 1e-7  # radians either side of a silhouette vertex
+    rays = np.unique(np.mod(np.concatenate([angles, corners - side, corners + side]) + np.pi, 2.0 * np.pi) - np.pi)
+
+    shadowed = _gaps_overlapping(
+        rays,
+        np.arctan2(following[backward, 1], following[backward, 0]),  # a backward edge's smaller angle ...
+        np.arctan2(ring[backward, 1], ring[backward, 0]),  # ... and its larger
+    )
+    # Only the rays bounding a shadowed gap need casting.
+    hits = np.full(len(rays), outside)
+    cast = shadowed | np.roll(shadowed, 1)
+    hits[cast] = np.minimum(ray_boundary_distances(region, rays[cast], within=outside), outside)
+
+    # Two vertices per ray: where the gap before it ends, where the gap after it begins;
+    # a gap in the open lets the region through whole, a shadowed one cuts it on the chord.
+    arriving = np.where(np.roll(shadowed, 1), hits, outside)
+    leaving = np.where(shadowed, hits, outside)
+    radii = np.column_stack([arriving, leaving]).ravel()
+    directions = np.repeat(rays, 2)
+    cut = Polygon(np.column_stack([radii * np.cos(directions), radii * np.sin(directions)]))
+    return _component_at_origin(shapely.intersection(region, cut))
+
+
+def boundary_points(
+    polygon: Polygon, max_range: float, spacing: float, circle_vertices: int = MIN_CIRCLE_VERTICES
+) -> tuple[FloatArray, FloatArray]:
+    """Obstacle and exploration points of a navigation polygon clipped to the max-range disk.
+
+    Parameters
+    ----------
+    polygon
+        The navigation polygon (holding the origin, counter-clockwise).
+    max_range
+        Radius of the bounding circle, metres.
+    spacing
+        Arc length on the circle between neighbouring points, metres; every sector gets at
+        least one point, so a doorway narrower than the spacing is not missed.
+    circle_vertices
+        Vertices of the disk the polygon was clipped to.
+
+    Returns
+    -------
+    obstacle_points, exploration_points
+        ``(K, 2)`` arrays: obstacle points on the boundary inside the circle, exploration
+        points on the circle, each at evenly spaced angles in their sectors.
+    """
+    on_circle = circle_sectors(polygon, max_range, circle_vertices)
+    explore_angles = _sector_angles(on_circle, max_range, spacing)
+    exploration = max_range * np.column_stack([np.cos(explore_angles), np.sin(explore_angles)])
+    if on_circle and on_circle[0][1] >= 2.0 * np.pi:
+        return np.empty((0, 2)), exploration
+    if on_circle:
+        order = sorted(on_circle)
+        blocked = []
+        for (start, span), (next_start, _) in zip(order, order[1:] + order[:1]):
+            gap = (next_start - (start + span)) % (2.0 * np.pi)
+            if gap * max_range >= MIN_SECTOR_LENGTH:
+                blocked.append((start + span, gap))
+    else:
+        blocked = [(0.0, 2.0 * np.pi)]
+    obstacle_angles = _sector_angles(blocked, max_range, spacing)
+    reach = ray_boundary_distances(polygon, obstacle_angles)
+    keep = np.isfinite(reach)
+    directions = np.column_stack([np.cos(obstacle_angles), np.sin(obstacle_angles)])
+    obstacles = (reach[keep, None] * directions[keep]).reshape(-1, 2)
+    return obstacles, exploration
+
+
+__all__ = [
+    "NavigationMap",
+    "NavigationWarning",
+    "Slice",
+    "add_slices",
+    "boundary_points",
+    "circle_sectors",
+    "default_heights",
+    "farthest_from_slices",
+    "height_lipschitz",
+    "horizontal_distances",
+    "navigation_map",
+    "pan_angles",
+    "ray_boundary_distances",
+    "visible_from_origin",
+]

@@ -1,0 +1,292 @@
+"""The sensor model: how one range feature becomes regression samples.
+
+Each feature registered at ``(alpha, h, r)`` with evidence ``m`` says two things: the
+point itself is occupied with evidence ``m`` (up to the depth error), and the ray from
+the sensor to it is free. Following the paper, a feature induces five samples on its
+ray (points on the ray keep ``alpha`` and scale ``h`` and ``r`` by the same factor):
+
+* two *hit* samples at ``r (1 - depth_error)`` and ``r (1 + depth_error)`` with value ``m``;
+* two *near* samples at ``near_positions`` (fractions of ``r``) with ``near_values``
+  (fractions of ``m``), because occupancy decreases towards the robot;
+* one *robot* sample at the sensor (``r = 0``) with value 0.
+
+Three further kinds of sample are occtool's own choices (see ``docs/method.md``):
+
+* *floor* features (lower than the robot's ground clearance) are not obstacles: they keep
+  their free near and robot samples but lose their hit samples (``floor="free"``); they can
+  also be dropped altogether (``"drop"``) or treated as obstacles (``"obstacle"``);
+* *footprint* samples with value 0 fill the robot's own body, which the sensor cannot see
+  (the blind cone under its lowest tilt), so the fit cannot place an obstacle there;
+* optional *background* samples with value 0 spread over the space with a small weight,
+  the paper's remedy for featureless directions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import InputError
+from occtool.features import Features
+from occtool.robot import Robot
+
+FloatArray = NDArray[np.float64]
+
+#: Codes of :attr:`Samples.kind`.
+SAMPLE_KINDS: dict[str, int] = {"hit": 0, "near": 1, "robot": 2, "floor": 3, "footprint": 4, "background": 5, "frontier": 6}
+
+FLOOR_MODES = ("free", "drop", "obstacle")
+
+
+@dataclass(frozen=True, eq=False)
+class Samples:
+    """Regression samples ``m = F(alpha, h, r)`` produced by a :class:`SensorModel`.
+
+    Attributes
+    ----------
+    alpha, h, r, m
+        Pan angle (rad), sensor-frame height (m), distance from the sensor (m) and target
+        occupancy value, all ``(n,)``.
+    weight
+        ``(n,)`` regression weight of each sample.
+    kind
+        ``(n,)`` integer code of the sample's origin, see :data:`SAMPLE_KINDS`.
+    """
+
+    alpha: FloatArray
+    h: FloatArray
+    r: FloatArray
+    m: FloatArray
+    weight: FloatArray
+    kind: NDArray[np.int8]
+
+    def __len__(self) -> int:
+        return int(self.m.shape[0])
+
+    def select(self, mask: ArrayLike) -> Samples:
+        """The samples where ``mask`` is true."""
+        index = np.asarray(mask)
+        return Samples(
+            self.alpha[index], self.h[index], self.r[index], self.m[index], self.weight[index], self.kind[index]
+        )
+
+    def count(self, kind: str) -> int:
+        """Number of samples of one kind (``"hit"``, ``"near"``, ...)."""
+        return int(np.count_nonzero(self.kind == SAMPLE_KINDS[kind]))
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Parameters turning features into samples (the paper's "sensor model").
+
+    The defaults were chosen by measurement on the synthetic scenes (``docs/method.md``).
+
+    Parameters
+    ----------
+    depth_error
+        Relative depth error: the two hit samples lie at ``r (1 -+ depth_error)``.
+    near_positions
+        Positions of the two near samples as fractions of the feature's range, in (0, 1).
+        Closer to 1 lets the model show more free space in front of obstacles.
+    near_values
+        Values of the near samples as fractions of the feature's evidence, in [0, 1).
+        Below the extraction threshold, so the space in front of a feature reads free.
+    floor
+        How floor features (lower than the robot's ground clearance) are used: ``"free"``
+        keeps only their free-space samples, ``"drop"`` ignores them, ``"obstacle"`` treats
+        them like any other feature (the floor then shrinks the navigation area).
+    footprint_samples
+        Number of zero-value samples filling the robot's body cylinder (0: none).
+    footprint_weight
+        Weight of each footprint sample.
+    background_samples
+        Number of zero-value background samples spread uniformly over pan angle, the body's
+        height band and range up to ``background_range`` (0: none, the default).
+    background_weight
+        Weight of each background sample; small, so features always win.
+    background_range
+        Largest range of the background samples, metres.
+    """
+
+    depth_error: float = 0.03
+    near_positions: tuple[float, float] = (0.8, 0.9)
+    near_values: tuple[float, float] = (0.2, 0.4)
+    floor: str = "free"
+    footprint_samples: int = 512
+    footprint_weight: float = 1.0
+    background_samples: int = 0
+    background_weight: float = 0.05
+    background_range: float = 3.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "near_positions", tuple(float(v) for v in self.near_positions))
+        object.__setattr__(self, "near_values", tuple(float(v) for v in self.near_values))
+        if not (np.isfinite(self.depth_error) and 0.0 <= self.depth_error < 0.5):
+            raise InputError(f"depth error must lie in [0, 0.5), got {self.depth_error}")
+        if len(self.near_positions) != 2 or len(self.near_values) != 2:
+            raise InputError("the sensor model has exactly two near positions and two near values")
+        for p in self.near_positions:
+            if not (np.isfinite(p) and 0.0 < p < 1.0 - self.depth_error):
+                raise InputError(
+                    f"near positions must lie in (0, 1 - depth error) = (0, {1.0 - self.depth_error:g}), got {p}"
+                )
+        for v in self.near_values:
+            if not (np.isfinite(v) and 0.0 <= v < 1.0):
+                raise InputError(f"near values must lie in [0, 1) (fractions of the evidence), got {v}")
+        if self.near_positions[0] > self.near_positions[1] or self.near_values[0] > self.near_values[1]:
+            raise InputError("near positions and near values must be given in increasing order")
+        if self.floor not in FLOOR_MODES:
+            raise InputError(f"floor handling must be one of {', '.join(FLOOR_MODES)}, got {self.floor!r}")
+        for name in ("footprint_samples", "background_samples"):
+            value = getattr(self, name)
+            if int(value) != value or value < 0:
+                raise InputError(f"{name.replace('_', ' ')} must be a whole number >= 0, got {value}")
+            object.__setattr__(self, name, int(value))
+        for name in ("footprint_weight", "background_weight", "background_range"):
+            value = float(getattr(self, name))
+            if not (np.isfinite(value) and value > 0.0):
+                raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value}")
+            object.__setattr__(self, name, value)
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict:
+        """The parameters as a JSON-ready dict."""
+        data = asdict(self)
+        data["near_positions"] = list(self.near_positions)
+        data["near_values"] = list(self.near_values)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> SensorModel:
+        """Rebuild from :meth:`to_dict`; unknown keys are an :class:`InputError`."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise InputError(f"unknown sensor model settings: {', '.join(unknown)}")
+        return cls(**data)
+
+    # ------------------------------------------------------------------ the model
+    def ray_profile(self, r_feature: ArrayLike, m: ArrayLike, s: ArrayLike) -> FloatArray:
+        """The sensor model's value at distance ``s`` along the ray of a feature.
+
+        The profile runs linearly through the samples a feature induces: 0 at the sensor,
+        the near values at the near positions, ``m`` from ``r (1 - depth_error)`` to
+        ``r (1 + depth_error)``. Beyond that the ray says nothing, and the value is NaN.
+
+        Parameters
+        ----------
+        r_feature
+            Range of the feature, metres (> 0).
+        m
+            Evidence of the feature.
+        s
+            Distance along the ray from the sensor, metres. All three broadcast together.
+
+        Returns
+        -------
+        numpy.ndarray
+            The profile value, broadcast shape of the inputs.
+
+        Examples
+        --------
+        >>> SensorModel().ray_profile(2.0, 1.0, [0.0, 1.0, 2.0, 3.0])
+        array([0.   , 0.125, 1.   ,   nan])
+        """
+        r_feature, m, s = np.broadcast_arrays(
+            np.asarray(r_feature, dtype=np.float64), np.asarray(m, dtype=np.float64), np.asarray(s, dtype=np.float64)
+        )
+        t = np.divide(s, r_feature, out=np.full(s.shape, np.inf), where=r_feature > 0)
+        (p1, p2), (v1, v2) = self.near_positions, self.near_values
+        knots = np.array([0.0, p1, p2, 1.0 - self.depth_error, 1.0 + self.depth_error])
+        fractions = np.array([0.0, v1, v2, 1.0, 1.0])
+        value = np.interp(np.clip(t, 0.0, knots[-1]), knots, fractions) * m
+        return np.where((t > knots[-1]) | (s < 0), np.nan, value)
+
+    def samples(self, features: Features, robot: Robot | None = None, rng: np.random.Generator | None = None) -> Samples:
+        """The regression samples for a set of features.
+
+        Parameters
+        ----------
+        features
+            Features in the sensor-centred robot frame.
+        robot
+            The robot (sensor height, clearance, radius); ``Robot()`` if omitted.
+        rng
+            Random generator for the background samples; a fixed seed if omitted, so the
+            samples are deterministic either way. Footprint samples are on a fixed lattice.
+
+        Returns
+        -------
+        Samples
+            Hit, near and robot samples per obstacle feature, the free samples of floor
+            features, footprint and background samples.
+        """
+        robot = Robot() if robot is None else robot
+        rng = np.random.default_rng(0) if rng is None else rng
+        alpha, h, r = features.polar()
+        m = features.evidence
+        on_floor = self.is_floor(h, robot)
+        obstacle = ~on_floor if self.floor != "obstacle" else np.ones_like(on_floor)
+        free_only = on_floor if self.floor == "free" else np.zeros_like(on_floor)
+        rays = obstacle | free_only
+
+        parts: list[tuple[FloatArray, ...]] = []
+        e = self.depth_error
+        a_obs, h_obs, r_obs, m_obs = alpha[obstacle], h[obstacle], r[obstacle], m[obstacle]
+        for scale in (1.0 - e, 1.0 + e):
+            parts.append((a_obs, h_obs * scale, r_obs * scale, m_obs, np.ones_like(m_obs), SAMPLE_KINDS["hit"]))
+        a_ray, h_ray, r_ray, m_ray = alpha[rays], h[rays], r[rays], m[rays]
+        floor_ray = on_floor[rays] & (self.floor == "free")
+        near_kind = np.where(floor_ray, SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"])
+        for position, value in zip(self.near_positions, self.near_values):
+            parts.append((a_ray, h_ray * position, r_ray * position, m_ray * value, np.ones_like(m_ray), near_kind))
+        zeros = np.zeros_like(m_ray)
+        parts.append((a_ray, zeros, zeros, zeros, np.ones_like(m_ray), SAMPLE_KINDS["robot"]))
+        if self.footprint_samples:
+            parts.append(self._footprint(robot))
+        if self.background_samples:
+            parts.append(self._background(robot, rng))
+
+        columns = [np.concatenate([np.broadcast_to(p[i], p[0].shape) for p in parts]) for i in range(6)]
+        return Samples(
+            alpha=columns[0].astype(np.float64),
+            h=columns[1].astype(np.float64),
+            r=columns[2].astype(np.float64),
+            m=columns[3].astype(np.float64),
+            weight=columns[4].astype(np.float64),
+            kind=columns[5].astype(np.int8),
+        )
+
+    def is_floor(self, h: ArrayLike, robot: Robot) -> NDArray[np.bool_]:
+        """Whether features at sensor-frame heights ``h`` lie below the ground clearance."""
+        return np.asarray(h, dtype=np.float64) < robot.floor_h + robot.ground_clearance
+
+    def _footprint(self, robot: Robot) -> tuple[FloatArray, ...]:
+        # A fixed lattice over the body cylinder (angle x height x radius), so the
+        # samples are identical for every run and the body is covered evenly.
+        n = self.footprint_samples
+        n_heights = 4
+        n_radii = 2
+        n_angles = max(1, -(-n // (n_heights * n_radii)))
+        low, high = robot.body_band[0], max(robot.body_band[1], 0.0)
+        angles = -np.pi + (np.arange(n_angles) + 0.5) * (2.0 * np.pi / n_angles)
+        heights = np.linspace(low, high, n_heights)
+        radii = robot.radius * np.array([0.5, 1.0])
+        A, H, D = np.meshgrid(angles, heights, radii, indexing="ij")
+        A, H, D = A.ravel()[:n], H.ravel()[:n], D.ravel()[:n]
+        R = np.hypot(D, H)
+        return (A, H, R, np.zeros_like(R), np.full_like(R, self.footprint_weight), SAMPLE_KINDS["footprint"])
+
+    def _background(self, robot: Robot, rng: np.random.Generator) -> tuple[FloatArray, ...]:
+        n = self.background_samples
+        low, high = robot.body_band
+        angles = rng.uniform(-np.pi, np.pi, n)
+        heights = rng.uniform(low, high, n)
+        horizontal = self.background_range * np.sqrt(rng.uniform(0.0, 1.0, n))
+        R = np.hypot(horizontal, heights)
+        return (angles, heights, R, np.zeros(n), np.full(n, self.background_weight), SAMPLE_KINDS["background"])
+
+
+__all__ = ["SAMPLE_KINDS", "FLOOR_MODES", "Samples", "SensorModel"]

@@ -1,0 +1,325 @@
+"""The min/max tree of linear pieces: the occupancy function and its inverse.
+
+The occupancy function is ``m = F(alpha, h, r)``, a tree of MIN and MAX nodes whose
+leaves are linear pieces. Two bases are supported:
+
+``"linear"``
+    The paper's pieces ``a*alpha + b*h + c*r + d``. The pan angle jumps from pi to -pi
+    behind the robot, so a piece cannot be continuous across that seam.
+``"trig"``
+    Seam-free pieces ``a1*cos(alpha) + a2*sin(alpha) + b*h + c*r + d``: still linear in
+    ``h`` and ``r`` (so the inverse stays in closed form), periodic in ``alpha``.
+
+With ``c > 0`` every piece, and so the tree, is strictly increasing in ``r``; each piece
+then has the closed-form inverse ``r = (m - a-terms - b*h - d) / c``. Because a MAX of
+increasing functions is at least ``m`` exactly when one child is, the inverse of a MAX
+node is the MIN of its children's inverses (and vice versa): :meth:`MinMaxTree.inverse`
+swaps MIN and MAX and solves every piece for ``r``.
+
+A tree is written as a nested dict: ``{"op": "max", "children": [{"op": "min",
+"children": [0, 1, 2]}, 3]}``, where integers are piece indices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Union
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import ModelFormatError
+
+FloatArray = NDArray[np.float64]
+
+#: Coefficient names of each basis, in column order.
+BASES: dict[str, tuple[str, ...]] = {
+    "linear": ("a", "b", "c", "d"),
+    "trig": ("a1", "a2", "b", "c", "d"),
+}
+#: Coefficient names of the inverse pieces (``r`` as a function of the angle terms, h, m).
+INVERSE_BASES: dict[str, tuple[str, ...]] = {
+    "linear": ("a", "b", "m", "d"),
+    "trig": ("a1", "a2", "b", "m", "d"),
+}
+
+Node = Union[int, "Op"]
+
+
+@dataclass(frozen=True)
+class Op:
+    """An inner node: ``op`` is ``"min"`` or ``"max"`` over ``children``."""
+
+    op: str
+    children: tuple[Node, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"op": self.op, "children": [c if isinstance(c, int) else c.to_dict() for c in self.children]}
+
+    def swapped(self) -> Op:
+        """The same shape with every MIN and MAX exchanged."""
+        return Op(
+            "min" if self.op == "max" else "max",
+            tuple(c if isinstance(c, int) else c.swapped() for c in self.children),
+        )
+
+
+def node_from_dict(data: Any, n_pieces: int, *, where: str = "tree") -> Node:
+    """Parse a nested tree dict, checking every piece index; raises :class:`ModelFormatError`."""
+    if isinstance(data, bool):
+        raise ModelFormatError(f"{where}: expected a piece index or a node, got {data!r}")
+    if isinstance(data, int):
+        if not 0 <= data < n_pieces:
+            raise ModelFormatError(f"{where}: piece index {data} out of range (there are {n_pieces} pieces)")
+        return data
+    if not isinstance(data, dict) or set(data) != {"op", "children"}:
+        raise ModelFormatError(f"{where}: a node must be an object with 'op' and 'children'")
+    if data["op"] not in ("min", "max"):
+        raise ModelFormatError(f"{where}: node op must be 'min' or 'max', got {data['op']!r}")
+    children = data["children"]
+    if not isinstance(children, list) or not children:
+        raise ModelFormatError(f"{where}: node children must be a non-empty list")
+    return Op(data["op"], tuple(node_from_dict(c, n_pieces, where=f"{where}.children[{i}]") for i, c in enumerate(children)))
+
+
+def leaves(node: Node) -> list[int]:
+    """Piece indices under ``node``, left to right."""
+    if isinstance(node, int):
+        return [node]
+    out: list[int] = []
+    for child in node.children:
+        out.extend(leaves(child))
+    return out
+
+
+def angle_terms(basis: str, alpha: ArrayLike) -> list[FloatArray]:
+    """The pan-angle columns of a basis: ``[alpha]`` or ``[cos alpha, sin alpha]``."""
+    alpha = np.asarray(alpha, dtype=np.float64)
+    if basis == "linear":
+        return [alpha]
+    if basis == "trig":
+        return [np.cos(alpha), np.sin(alpha)]
+    raise ModelFormatError(f"unknown basis {basis!r}: expected one of {', '.join(BASES)}")
+
+
+def design_matrix(basis: str, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> FloatArray:
+    """``(n, k)`` matrix of basis columns: angle terms, ``h``, ``r``, 1."""
+    alpha, h, r = np.broadcast_arrays(np.asarray(alpha, float), np.asarray(h, float), np.asarray(r, float))
+    cols = [*angle_terms(basis, alpha.ravel()), h.ravel(), r.ravel(), np.ones(alpha.size)]
+    return np.column_stack(cols)
+
+
+def _evaluate(node: Node, values: FloatArray) -> FloatArray:
+    if isinstance(node, int):
+        return values[:, node]
+    reduce = np.minimum if node.op == "min" else np.maximum
+    out = _evaluate(node.children[0], values)
+    for child in node.children[1:]:
+        out = reduce(out, _evaluate(child, values))
+    return out
+
+
+def _evaluate_active(node: Node, values: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
+    if isinstance(node, int):
+        return values[:, node], np.full(values.shape[0], node, dtype=np.intp)
+    out, active = _evaluate_active(node.children[0], values)
+    for child in node.children[1:]:
+        value, child_active = _evaluate_active(child, values)
+        better = value < out if node.op == "min" else value > out
+        out = np.where(better, value, out)
+        active = np.where(better, child_active, active)
+    return out, active
+
+
+class _PieceTree:
+    """Shared machinery of :class:`MinMaxTree` and :class:`InverseTree`."""
+
+    _names: dict[str, tuple[str, ...]]
+
+    def __init__(self, basis: str, coefficients: ArrayLike, root: Node) -> None:
+        if basis not in self._names:
+            raise ModelFormatError(f"unknown basis {basis!r}: expected one of {', '.join(self._names)}")
+        coefficients = np.array(coefficients, dtype=np.float64, ndmin=2)
+        width = len(self._names[basis])
+        if coefficients.ndim != 2 or coefficients.shape[1] != width or coefficients.shape[0] == 0:
+            raise ModelFormatError(f"basis {basis!r} needs pieces of {width} coefficients, got shape {coefficients.shape}")
+        if not np.isfinite(coefficients).all():
+            raise ModelFormatError("a piece coefficient is NaN or infinite")
+        used = leaves(root)
+        if sorted(set(used)) != list(range(coefficients.shape[0])) or len(used) != len(set(used)):
+            raise ModelFormatError("the tree must use every piece exactly once")
+        coefficients.setflags(write=False)
+        self.basis = basis
+        self.coefficients = coefficients
+        self.root = root
+
+    @property
+    def n_pieces(self) -> int:
+        """Number of linear pieces."""
+        return int(self.coefficients.shape[0])
+
+    def _values(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> tuple[FloatArray, tuple[int, ...]]:
+        alpha, h, x = np.broadcast_arrays(np.asarray(alpha, float), np.asarray(h, float), np.asarray(x, float))
+        return design_matrix(self.basis, alpha, h, x) @ self.coefficients.T, alpha.shape
+
+    def _eval(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> FloatArray:
+        values, shape = self._values(alpha, h, x)
+        return _evaluate(self.root, values).reshape(shape)
+
+    def _active(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> NDArray[np.intp]:
+        values, shape = self._values(alpha, h, x)
+        return _evaluate_active(self.root, values)[1].reshape(shape)
+
+    def pieces(self) -> list[dict[str, float]]:
+        """The pieces as ``{name: coefficient}`` dicts."""
+        names = self._names[self.basis]
+        return [{n: float(v) for n, v in zip(names, row)} for row in self.coefficients]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form: basis, pieces (named coefficients) and the nested tree."""
+        return {"basis": self.basis, "pieces": self.pieces(), "tree": self.root.to_dict() if isinstance(self.root, Op) else self.root}
+
+    @classmethod
+    def from_dict(cls, data: Any):
+        """Rebuild from :meth:`to_dict`, validating; raises :class:`ModelFormatError`."""
+        if not isinstance(data, dict):
+            raise ModelFormatError("a tree must be a JSON object")
+        for key in ("basis", "pieces", "tree"):
+            if key not in data:
+                raise ModelFormatError(f"the tree has no '{key}'")
+        basis = data["basis"]
+        if basis not in cls._names:
+            raise ModelFormatError(f"unknown basis {basis!r}: expected one of {', '.join(cls._names)}")
+        names = cls._names[basis]
+        pieces = data["pieces"]
+        if not isinstance(pieces, list) or not pieces:
+            raise ModelFormatError("'pieces' must be a non-empty list")
+        rows = []
+        for i, piece in enumerate(pieces):
+            if not isinstance(piece, dict) or set(piece) != set(names):
+                raise ModelFormatError(f"piece {i} must have exactly the coefficients {', '.join(names)}")
+            row = []
+            for n in names:
+                v = piece[n]
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise ModelFormatError(f"piece {i} coefficient {n} is not a number: {v!r}")
+                row.append(float(v))
+            rows.append(row)
+        root = node_from_dict(data["tree"], len(rows))
+        return cls(basis, np.array(rows), root)
+
+    def describe(self) -> str:
+        """The tree as a compact formula, e.g. ``max(min(p0, p1), p2)``."""
+
+        def text(node: Node) -> str:
+            if isinstance(node, int):
+                return f"p{node}"
+            return f"{node.op}({', '.join(text(c) for c in node.children)})"
+
+        return text(self.root)
+
+    def depth(self) -> int:
+        """Number of node levels above the pieces."""
+
+        def depth(node: Node) -> int:
+            return 0 if isinstance(node, int) else 1 + max(depth(c) for c in node.children)
+
+        return depth(self.root)
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            type(other) is type(self)
+            and self.basis == other.basis  # type: ignore[attr-defined]
+            and self.root == other.root  # type: ignore[attr-defined]
+            and np.array_equal(self.coefficients, other.coefficients)  # type: ignore[attr-defined]
+        )
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(basis={self.basis!r}, pieces={self.n_pieces}, tree={self.describe()})"
+
+
+class MinMaxTree(_PieceTree):
+    """The occupancy function ``m = F(alpha, h, r)``: MIN/MAX nodes over linear pieces.
+
+    Parameters
+    ----------
+    basis
+        ``"linear"`` (``a*alpha + b*h + c*r + d``) or ``"trig"``
+        (``a1*cos(alpha) + a2*sin(alpha) + b*h + c*r + d``).
+    coefficients
+        ``(L, k)`` piece coefficients in the order of :data:`BASES`.
+    root
+        The tree: a piece index or an :class:`Op`. Every piece appears exactly once.
+
+    Examples
+    --------
+    >>> tree = MinMaxTree("linear", [[0, 0, 1.0, -1.0], [0, 0, 2.0, -1.0]], Op("max", (0, 1)))
+    >>> float(tree.predict(0.0, 0.0, 1.0))
+    1.0
+    >>> float(tree.inverse().range(0.0, 0.0, 1.0))
+    1.0
+    """
+
+    _names = BASES
+
+    @property
+    def c(self) -> FloatArray:
+        """Range weight ``c`` of each piece."""
+        return self.coefficients[:, -2]
+
+    @property
+    def b(self) -> FloatArray:
+        """Height weight ``b`` of each piece."""
+        return self.coefficients[:, -3]
+
+    @property
+    def angle_weight(self) -> FloatArray:
+        """Largest ``|dF/dalpha|`` of each piece: ``|a|``, or ``hypot(a1, a2)`` for ``trig``."""
+        k = len(angle_terms(self.basis, 0.0))
+        return np.hypot.reduce(np.abs(self.coefficients[:, :k]), axis=1) if k > 1 else np.abs(self.coefficients[:, 0])
+
+    def predict(self, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> FloatArray:
+        """Evaluate ``F(alpha, h, r)`` (inputs broadcast together)."""
+        return self._eval(alpha, h, r)
+
+    def active_piece(self, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> NDArray[np.intp]:
+        """Index of the piece that gives ``F`` its value at each point."""
+        return self._active(alpha, h, r)
+
+    def inverse(self) -> InverseTree:
+        """The inverse tree ``r = F^-1(alpha, h, m)``: MIN and MAX swapped, pieces solved for r.
+
+        Raises
+        ------
+        ValueError
+            If a piece has ``c <= 0`` (the function is then not invertible in ``r``).
+        """
+        c = self.c
+        if not (c > 0).all():
+            raise ValueError("the tree is invertible only when every piece has c > 0")
+        k = len(angle_terms(self.basis, 0.0))
+        inv = np.empty_like(self.coefficients)
+        inv[:, :k] = -self.coefficients[:, :k] / c[:, None]
+        inv[:, k] = -self.coefficients[:, k] / c
+        inv[:, k + 1] = 1.0 / c
+        inv[:, k + 2] = -self.coefficients[:, k + 2] / c
+        root = self.root.swapped() if isinstance(self.root, Op) else self.root
+        return InverseTree(self.basis, inv, root)
+
+
+class InverseTree(_PieceTree):
+    """The inverted occupancy function ``r = F^-1(alpha, h, m)``.
+
+    Each piece is ``r = (angle terms) + b*h + m_weight*m + d`` with ``m_weight = 1/c > 0``;
+    the nodes are those of the :class:`MinMaxTree` with MIN and MAX exchanged.
+    """
+
+    _names = INVERSE_BASES
+
+    def range(self, alpha: ArrayLike, h: ArrayLike, m: ArrayLike) -> FloatArray:
+        """The distance ``r`` at which ``F(alpha, h, r) = m`` (may be negative: the level
+        is reached before the sensor). Inputs broadcast together."""
+        return self._eval(alpha, h, m)
+
+
+__all__ = ["BASES", "INVERSE_BASES", "InverseTree", "MinMaxTree", "Op", "design_matrix", "leaves", "node_from_dict"]

@@ -1,0 +1,201 @@
+"""The estimator: constraints, inversion, determinism, floor and pallet, seam."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from occtool.errors import InputError, NotFittedError
+from occtool.features import Features
+from occtool.fit import OccupancyRegressor, box_qp, first_obstacle_distance
+from occtool.robot import Robot
+from occtool.sensor import SensorModel
+
+ROBOT = Robot()
+
+
+def ring_room(n: int = 3000, seed: int = 0, radius: float = 2.0, pallet: bool = False,
+              floor: bool = True) -> Features:
+    """Features on a cylindrical wall around the robot, the floor inside it and optionally
+    a 15 cm pallet at 1 m ahead (x > 0, |y| < 0.3)."""
+    rng = np.random.default_rng(seed)
+    parts = []
+    a = rng.uniform(-np.pi, np.pi, n)
+    z = rng.uniform(-1.0, 1.0, n)
+    parts.append(np.column_stack([radius * np.cos(a), radius * np.sin(a), z]))
+    if floor:
+        a = rng.uniform(-np.pi, np.pi, n)
+        d = rng.uniform(0.9, radius - 0.05, n)
+        parts.append(np.column_stack([d * np.cos(a), d * np.sin(a), np.full(n, -ROBOT.sensor_height)]))
+    if pallet:
+        k = n // 3
+        y = rng.uniform(-0.3, 0.3, k)
+        zz = rng.uniform(-1.0, -0.85, k)
+        parts.append(np.column_stack([np.full(k, 1.0), y, zz]))
+        # the pallet's top, seen from above
+        x = rng.uniform(1.0, 1.4, k)
+        parts.append(np.column_stack([x, rng.uniform(-0.3, 0.3, k), np.full(k, -0.85)]))
+    points = np.concatenate(parts)
+    return Features(points, np.full(points.shape[0], 0.9))
+
+
+@pytest.fixture(scope="module")
+def fitted() -> OccupancyRegressor:
+    return OccupancyRegressor(pieces=16).fit(ring_room(pallet=True))
+
+
+def test_methods_need_fit():
+    model = OccupancyRegressor()
+    for call in (lambda: model.predict(0.0, 0.0, 1.0), lambda: model.inverse_range(0.0, 0.0, 0.6), model.invert):
+        with pytest.raises(NotFittedError):
+            call()
+
+
+def test_init_only_stores_parameters():
+    model = OccupancyRegressor(pieces=-3, basis="cubic")
+    assert model.pieces == -3 and model.basis == "cubic"
+    with pytest.raises(InputError, match="pieces"):
+        model.fit(ring_room(200))
+
+
+@pytest.mark.parametrize("basis", ["trig", "linear"])
+def test_constraints_hold_exactly(basis):
+    model = OccupancyRegressor(pieces=12, basis=basis, c_min=1.5, a_max=5.0, b_max=2.0).fit(ring_room(1500))
+    tree = model.tree_
+    assert tree.n_pieces == 12
+    assert (tree.c >= 1.5).all()
+    assert (tree.angle_weight <= 5.0).all()
+    assert (np.abs(tree.b) <= 2.0).all()
+    assert model.slope_bounds_["c_min"] >= 1.5 and model.slope_bounds_["a_max"] <= 5.0
+
+
+def test_constraints_hold_after_refit_sweeps():
+    model = OccupancyRegressor(pieces=8, max_sweeps=3, a_max=4.0, b_max=1.0).fit(ring_room(1500))
+    assert (model.tree_.angle_weight <= 4.0).all() and (np.abs(model.tree_.b) <= 1.0).all()
+    assert (model.tree_.c >= model.c_min).all()
+    assert all(b <= a + 1e-12 for a, b in zip(model.loss_history_, model.loss_history_[1:]))
+
+
+def test_fit_is_deterministic():
+    features = ring_room(1500, seed=4, pallet=True)
+    a = OccupancyRegressor(pieces=8, seed=3).fit(features)
+    b = OccupancyRegressor(pieces=8, seed=3).fit(features)
+    assert np.array_equal(a.tree_.coefficients, b.tree_.coefficients)
+    assert a.tree_ == b.tree_
+
+
+def test_free_inside_the_wall_occupied_beyond(fitted):
+    alpha = np.array([np.pi / 2, -np.pi / 2, np.pi])
+    r = fitted.inverse_range(alpha, -0.5, 0.6)
+    horizontal = np.sqrt(r**2 - 0.25)
+    assert (horizontal <= 2.0).all() and (horizontal > 1.2).all()
+
+
+def test_pallet_blocks_and_floor_does_not():
+    # Pallet at 1 m ahead: the crossing at the pallet's height lies in front of it,
+    # while the floor inside the wall (behind, no pallet) keeps the way free.
+    model = OccupancyRegressor(pieces=16).fit(ring_room(pallet=True))
+    h = -0.9
+    ahead = float(np.sqrt(model.inverse_range(0.0, h, 0.6) ** 2 - h * h))
+    behind = float(np.sqrt(model.inverse_range(np.pi, h, 0.6) ** 2 - h * h))
+    assert ahead <= 1.0
+    assert behind > 1.2
+    assert model.predict(0.0, h, np.hypot(1.05, h)) > model.predict(np.pi, h, np.hypot(1.05, h))
+
+
+def test_floor_as_obstacle_shrinks_free_space():
+    features = ring_room(2000)
+    free = OccupancyRegressor(pieces=8).fit(features)
+    blocked = OccupancyRegressor(pieces=8, sensor=SensorModel(floor="obstacle")).fit(features)
+    h = -0.9
+    a = np.linspace(-np.pi, np.pi, 36, endpoint=False)
+    assert np.median(blocked.inverse_range(a, h, 0.6)) < np.median(free.inverse_range(a, h, 0.6)) - 0.2
+
+
+@settings(max_examples=40)
+@given(alpha=st.floats(-np.pi, np.pi), h=st.floats(-0.95, 0.0), m=st.floats(0.05, 1.0))
+def test_inverse_range_inverts(fitted, alpha, h, m):
+    r = fitted.inverse_range(alpha, h, m)
+    if r > 0:
+        assert np.isclose(fitted.predict(alpha, h, r), m, atol=1e-9)
+    else:
+        assert fitted.predict(alpha, h, 0.0) >= m - 1e-12
+
+
+@settings(max_examples=40)
+@given(alpha=st.floats(-np.pi, np.pi), h=st.floats(-1.0, 0.5), r=st.floats(0.0, 5.0), dr=st.floats(1e-4, 2.0))
+def test_fitted_model_is_monotone_in_range(fitted, alpha, h, r, dr):
+    assert fitted.predict(alpha, h, r + dr) > fitted.predict(alpha, h, r)
+
+
+def test_inverse_range_broadcasts(fitted):
+    alpha = np.linspace(-np.pi, np.pi, 7)[None, :]
+    h = np.array([-0.9, -0.5, 0.0])[:, None]
+    assert fitted.inverse_range(alpha, h, 0.6).shape == (3, 7)
+
+
+@pytest.mark.parametrize("yaw", [0.7, 2.0, -2.9, np.pi])
+def test_rotation_rotates_the_range_profile(yaw):
+    # The trig fit measures pan angles from the hits' mean direction, so turning the
+    # features turns the whole model: the inverse range profile moves by exactly the yaw.
+    features = ring_room(2500, seed=2, pallet=True, radius=1.8)
+    base = OccupancyRegressor(pieces=16).fit(features)
+    turned = OccupancyRegressor(pieces=16).fit(features.rotated(yaw))
+    alpha = np.linspace(-np.pi, np.pi, 180, endpoint=False)
+    for h in (-0.9, -0.5, 0.0):
+        a = base.inverse_range(alpha, h, 0.6)
+        b = turned.inverse_range(alpha + yaw, h, 0.6)
+        assert np.allclose(a, b, atol=1e-9)
+
+
+def test_trig_basis_has_no_seam_behind_the_robot():
+    features = ring_room(2000, seed=5, radius=1.6)
+    model = OccupancyRegressor(pieces=12).fit(features.rotated(np.pi))
+    eps = 1e-6
+    left = model.inverse_range(np.pi - eps, -0.5, 0.6)
+    right = model.inverse_range(-np.pi + eps, -0.5, 0.6)
+    assert abs(float(left) - float(right)) < 1e-4
+
+
+def test_no_usable_features():
+    only_floor = Features.from_xyz([1.0, 2.0], [0.0, 1.0], [-1.0, -1.0], 0.9)
+    with pytest.raises(InputError, match="no features"):
+        OccupancyRegressor(sensor=SensorModel(floor="drop")).fit(only_floor)
+
+
+def test_first_obstacle_ignores_isolated_outliers():
+    rng = np.random.default_rng(0)
+    alpha = rng.uniform(-0.05, 0.05, 60)
+    distance = np.concatenate([np.full(58, 2.0) + rng.normal(0, 0.01, 58), [0.5, 0.9]])
+    first = first_obstacle_distance(alpha, distance, 120)
+    assert first[60] == pytest.approx(2.0, abs=0.05) or first[59] == pytest.approx(2.0, abs=0.05)
+
+
+@given(st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.floats(0.1, 2.0))
+def test_box_qp_stays_in_box_and_beats_clipping(target, bound):
+    gram = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.2], [0.0, 0.2, 1.5]])
+    rhs = gram @ np.array(target)
+    lower, upper = np.full(3, -bound), np.full(3, bound)
+    x = box_qp(gram, rhs, lower, upper)
+    assert (x >= lower).all() and (x <= upper).all()
+    objective = lambda v: 0.5 * v @ gram @ v - rhs @ v  # noqa: E731
+    assert objective(x) <= objective(np.clip(np.array(target), lower, upper)) + 1e-9
+
+
+def test_overhanging_table_top_cuts_every_height():
+    # A table top 0.7 m above the floor (sensor at 1 m): its features lie at h = -0.3 only,
+    # yet the robot (1 m tall) cannot pass under it, so at every body height the free
+    # range ahead must end before the table's edge at 1 m.
+    rng = np.random.default_rng(3)
+    room = ring_room(2500, seed=3, radius=2.0)
+    k = 800
+    top = np.column_stack([rng.uniform(1.0, 1.6, k), rng.uniform(-0.4, 0.4, k), np.full(k, -0.3)])
+    features = Features.concatenate([room, Features(top, np.full(k, 0.9))])
+    model = OccupancyRegressor(pieces=16).fit(features)
+    for h in (-0.9, -0.6, -0.3, 0.0):
+        horizontal = np.sqrt(np.maximum(model.inverse_range(0.0, h, 0.6) ** 2 - h * h, 0.0))
+        assert horizontal <= 1.0
+    behind = np.sqrt(model.inverse_range(np.pi, -0.6, 0.6) ** 2 - 0.36)
+    assert behind > 1.3

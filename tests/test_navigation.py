@@ -1,0 +1,543 @@
+"""Navigation maps against scenes whose free space is known in closed form."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import Point, Polygon
+
+from occtool.errors import InputError
+from occtool.navigation import (
+    NavigationWarning,
+    add_slices,
+    default_heights,
+    farthest_from_slices,
+    navigation_map,
+    pan_angles,
+)
+from occtool.robot import Robot
+
+ROBOT = Robot(radius=0.25, sensor_height=1.0, body_height=1.0, ground_clearance=0.05)
+
+
+# --- analytic scenes: r = F^-1(alpha, h, level) --------------------------------------------
+
+
+def round_room(radius: float):
+    """A cylindrical room of the given radius around the robot."""
+
+    def inverse(alpha, h, level):
+        return np.broadcast_to(np.sqrt(radius**2 + np.square(h)), np.broadcast(alpha, h).shape)
+
+    return inverse
+
+
+def wall_ahead(distance: float):
+    """An endless wall x = distance; nothing else."""
+
+    def inverse(alpha, h, level):
+        alpha, h = np.broadcast_arrays(alpha, h)
+        cos = np.cos(alpha)
+        along = np.divide(distance, cos, out=np.full(cos.shape, np.inf), where=cos > 1e-12)
+        return np.sqrt(np.square(along) + np.square(h))
+
+    return inverse
+
+
+def room_with_door(radius: float, door_width: float):
+    """A round room with a doorway (a gap of the given chord width) straight ahead."""
+    half_angle = math.asin(door_width / 2 / radius)
+
+    def inverse(alpha, h, level):
+        alpha, h = np.broadcast_arrays(alpha, h)
+        wall = np.sqrt(radius**2 + np.square(h))
+        return np.where(np.abs(alpha) < half_angle, np.inf, wall)
+
+    return inverse, half_angle
+
+
+def star_room(control: np.ndarray, tilt: float):
+    """A room whose wall distance is interpolated between control angles and leans with height."""
+    knots = 2 * np.pi * np.arange(len(control) + 1) / len(control) - np.pi
+    values = np.append(control, control[0])
+
+    def inverse(alpha, h, level):
+        alpha, h = np.broadcast_arrays(alpha, h)
+        wrapped = np.mod(alpha + np.pi, 2 * np.pi) - np.pi
+        rho = np.maximum(np.interp(wrapped, knots, values) + tilt * h, 0.0)
+        return np.sqrt(np.square(rho) + np.square(h))
+
+    return inverse
+
+
+class PiecewiseLinearModel:
+    """A tiny occupancy model: a min/max tree over pieces ``a alpha + b h + c r + d``, c > 0.
+
+    ``tree`` is a piece index or ``(op, [children])``. A MAX of increasing functions
+    reaches a level where its first child does, so the inverse swaps MIN and MAX.
+    """
+
+    def __init__(self, pieces: list[tuple[float, float, float, float]], tree) -> None:
+        self.pieces = np.asarray(pieces, dtype=np.float64)
+        self.tree = tree
+        self.slope_bounds = {
+            "a_max": float(np.abs(self.pieces[:, 0]).max()),
+            "b_max": float(np.abs(self.pieces[:, 1]).max()),
+            "c_max": float(self.pieces[:, 2].max()),
+        }
+
+    def _walk(self, node, leaf, swap: bool):
+        if isinstance(node, int):
+            return leaf(self.pieces[node])
+        op, children = node
+        values = [self._walk(child, leaf, swap) for child in children]
+        use_max = (op == "max") != swap
+        return np.maximum.reduce(values) if use_max else np.minimum.reduce(values)
+
+    def predict(self, alpha, h, r):
+        return self._walk(self.tree, lambda p: p[0] * alpha + p[1] * h + p[2] * r + p[3], swap=False)
+
+    def inverse_range(self, alpha, h, level):
+        r = self._walk(self.tree, lambda p: (level - p[0] * alpha - p[1] * h - p[3]) / p[2], swap=True)
+        return np.maximum(r, 0.0)
+
+
+def table_top(low: float, high: float) -> PiecewiseLinearModel:
+    """A thin table top between sensor-frame heights low and high, ahead (|alpha| < 0.5), from r = 0.8."""
+    slope = 2.0 / (high - low)  # occupancy 1 in the middle of the top
+    pieces = [
+        (0.0, 0.0, 0.02, 0.0),  # background: nearly free everywhere in range
+        (0.0, 0.0, 10.0, -8.0),  # the table's near edge at r = 0.8
+        (0.0, slope, 0.01, -slope * low),  # above its underside
+        (0.0, -slope, 0.01, slope * high),  # below its top
+        (-5.0, 0.0, 0.01, 2.5),  # left edge alpha = 0.5
+        (5.0, 0.0, 0.01, 2.5),  # right edge alpha = -0.5
+    ]
+    return PiecewiseLinearModel(pieces, ("max", [0, ("min", [1, 2, 3, 4, 5])]))
+
+
+class RealTreeModel:
+    """The same table top as occtool's own :class:`~occtool.tree.MinMaxTree` and its inverse."""
+
+    def __init__(self, reference: PiecewiseLinearModel) -> None:
+        from occtool.fit import slope_bounds
+        from occtool.tree import MinMaxTree, Op
+
+        def convert(node):
+            return node if isinstance(node, int) else Op(node[0], tuple(convert(child) for child in node[1]))
+
+        self.tree = MinMaxTree("linear", reference.pieces, convert(reference.tree))
+        self.inverse = self.tree.inverse()
+        self.slope_bounds = slope_bounds(self.tree)
+
+    def inverse_range(self, alpha, h, level):
+        return np.maximum(self.inverse.range(alpha, h, level), 0.0)
+
+
+def true_obstacles(inverse, threshold: float, robot: Robot, max_range: float) -> np.ndarray:
+    """Points where occupancy first reaches the threshold, at 1 mm heights and 0.1 degree angles."""
+    low, high = robot.body_band
+    heights = np.linspace(low, high, int((high - low) / 0.001) + 1)
+    alpha = pan_angles(3600)
+    r = np.asarray(inverse(alpha[None, :], heights[:, None], threshold), dtype=np.float64)
+    rho = np.sqrt(np.maximum(np.square(np.minimum(r, 1e6)) - np.square(heights)[:, None], 0.0))
+    rows, cols = np.nonzero(rho < max_range + 2 * robot.radius)
+    return np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
+
+
+def angles_of(points: np.ndarray) -> np.ndarray:
+    return np.arctan2(points[:, 1], points[:, 0])
+
+
+def reached_straight(free, points: np.ndarray, radius: float) -> np.ndarray:
+    """Whether the body (a disk of the radius) driven straight from the origin to each point stays in ``free``."""
+    paths = shapely.linestrings(np.stack([np.zeros_like(points), points], axis=1))
+    return shapely.within(shapely.buffer(paths, radius, quad_segs=32), free.buffer(1e-9))
+
+
+def disk_grid(max_range: float, step: float) -> np.ndarray:
+    # Offsets keep the grid off the axes, where the scenes' polygons have vertices.
+    axis = np.arange(-max_range, max_range, step)
+    x, y = np.meshgrid(axis + step / 3, axis + step / 7)
+    points = np.column_stack([x.ravel(), y.ravel()])
+    return points[np.hypot(points[:, 0], points[:, 1]) < max_range]
+
+
+# --- known answers --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("room", "max_range"), [(3.0, 1.5), (1.2, 1.5), (0.9, 2.0)])
+def test_round_room_is_the_disk_of_the_smaller_radius(room, max_range):
+    nav = navigation_map(round_room(room), robot=ROBOT, max_range=max_range)
+    expected = min(room - ROBOT.radius, max_range)
+    assert nav.polygon.area == pytest.approx(math.pi * expected**2, rel=2e-3)
+    assert nav.polygon.exterior.is_ccw
+    if room - ROBOT.radius < max_range:
+        assert len(nav.exploration_points) == 0
+        # (the shrink is 0.3 mm more than the radius, so GEOS's chords round corners keep it)
+        np.testing.assert_allclose(np.hypot(*nav.obstacle_points.T), expected, atol=5e-4)
+        # Evenly spaced around the whole circle at about the point spacing.
+        assert len(nav.obstacle_points) == math.ceil(2 * math.pi * max_range / ROBOT.radius)
+    else:
+        assert len(nav.obstacle_points) == 0
+        np.testing.assert_allclose(np.hypot(*nav.exploration_points.T), max_range)
+        gaps = np.diff(np.sort(angles_of(nav.exploration_points)))
+        np.testing.assert_allclose(gaps, gaps[0], rtol=1e-9)
+
+
+def test_wall_ahead_bounds_the_polygon_and_carries_the_obstacle_points():
+    nav = navigation_map(wall_ahead(1.0), robot=ROBOT, max_range=1.5)
+    min_x, min_y, max_x, max_y = nav.polygon.bounds
+    assert max_x == pytest.approx(0.75, abs=5e-4)
+    assert min_x == pytest.approx(-1.5, abs=1e-3) and max_y == pytest.approx(1.5, abs=1e-3)
+    # Obstacle points lie on the wall shrunk by the robot radius ...
+    np.testing.assert_allclose(nav.obstacle_points[:, 0], 0.75, atol=5e-4)
+    assert np.abs(nav.obstacle_points[:, 1]).max() <= math.sqrt(1.5**2 - 0.75**2) + 1e-9
+    # ... and exploration points on the circle, behind the line x = 0.75.
+    np.testing.assert_allclose(np.hypot(*nav.exploration_points.T), 1.5)
+    assert nav.exploration_points[:, 0].max() <= 0.75
+    assert len(nav.obstacle_points) >= 2 * math.sqrt(1.5**2 - 0.75**2) / 1.5 / ROBOT.radius * 1.5 - 1
+
+
+def test_a_doorway_reaching_the_circle_gets_exploration_points_in_its_sector_only():
+    inverse, half_angle = room_with_door(1.0, 0.8)
+    nav = navigation_map(inverse, robot=ROBOT, max_range=1.5, point_spacing=0.05)
+    # Driving straight through the door the body passes the jambs (1 m away) with 0.25 m
+    # to spare: the reachable sector is narrower than the door by asin(0.25 / 1) each side.
+    half_sector = half_angle - math.asin(0.25 / 1.0)
+    explore = angles_of(nav.exploration_points)
+    assert len(explore) >= 5
+    assert np.abs(explore).max() <= half_sector + 0.01  # + the model's 1 degree ray sampling
+    assert np.abs(explore).max() >= half_sector - 0.03
+    np.testing.assert_allclose(np.hypot(*nav.exploration_points.T), 1.5)
+    free = navigation_map(inverse, robot=Robot(radius=0.0), max_range=2.0).polygon
+    assert reached_straight(free, nav.exploration_points * (1 - 1e-3), ROBOT.radius).all()
+    # Everywhere else obstacle points, on the room's wall shrunk by the radius.
+    obstacle = angles_of(nav.obstacle_points)
+    assert np.abs(obstacle).min() >= np.abs(explore).max()
+    walled = np.abs(obstacle) > half_angle + 0.3
+    np.testing.assert_allclose(np.hypot(*nav.obstacle_points[walled].T), 0.75, rtol=1e-3)
+
+
+def test_without_the_straight_line_cut_the_doorway_sends_the_robot_into_a_jamb():
+    inverse, half_angle = room_with_door(1.0, 0.8)
+    fits = navigation_map(inverse, robot=ROBOT, max_range=1.5, point_spacing=0.05, straight_line=False)
+    straight = navigation_map(inverse, robot=ROBOT, max_range=1.5, point_spacing=0.05)
+    assert not fits.straight_line and straight.straight_line
+    # The shrink alone keeps the centre 0.25 m from the jambs' rays at 1.5 m ...
+    assert np.abs(angles_of(fits.exploration_points)).max() > half_angle - math.asin(0.25 / 1.5) - 0.03
+    # ... but some of those points can only be reached by scraping past a jamb.
+    free = navigation_map(inverse, robot=Robot(radius=0.0), max_range=2.0).polygon
+    assert not reached_straight(free, fits.exploration_points * (1 - 1e-3), ROBOT.radius).all()
+    assert straight.polygon.within(fits.polygon.buffer(1e-9))
+
+
+def test_a_doorway_narrower_than_the_robot_gets_no_exploration_point():
+    inverse, _ = room_with_door(1.0, 0.45)
+    nav = navigation_map(inverse, robot=ROBOT, max_range=1.5)
+    assert len(nav.exploration_points) == 0
+    # The robot's centre may nose into the doorway, but never out past the wall.
+    assert math.pi * 0.75**2 * 0.999 <= nav.polygon.area <= math.pi * 0.75**2 * 1.02
+    assert np.hypot(*np.asarray(nav.polygon.exterior.coords).T).max() < 1.0
+
+
+def test_a_narrow_sector_gets_a_point_even_when_narrower_than_the_spacing():
+    inverse, _ = room_with_door(1.0, 0.6)
+    nav = navigation_map(inverse, robot=ROBOT, max_range=1.5, point_spacing=1.0)
+    assert len(nav.exploration_points) == 1
+    assert abs(angles_of(nav.exploration_points)[0]) < 0.02
+
+
+def test_free_space_near_the_bound_is_not_lost_to_the_shrink():
+    # A wall just beyond max range + radius leaves the whole disk; one just inside does not.
+    free = navigation_map(round_room(1.5 + 0.25 + 1e-3), robot=ROBOT, max_range=1.5)
+    assert free.polygon.area == pytest.approx(math.pi * 1.5**2, rel=1e-4)
+    assert len(free.obstacle_points) == 0
+    blocked = navigation_map(round_room(1.5 + 0.25 - 0.01), robot=ROBOT, max_range=1.5)
+    assert len(blocked.exploration_points) == 0
+
+
+def test_the_floor_and_a_low_obstacle_height_matter():
+    # An obstacle 0.4 m tall at 0.8 m only exists below h = -0.6.
+    def box(alpha, h, level):
+        alpha, h = np.broadcast_arrays(alpha, h)
+        return np.where(h < -0.6, np.sqrt(0.8**2 + np.square(h)), np.inf)
+
+    low = navigation_map(box, robot=ROBOT, heights=[-0.9, -0.1])
+    high = navigation_map(box, robot=ROBOT, heights=[-0.5, -0.1])
+    assert low.polygon.area == pytest.approx(math.pi * 0.55**2, rel=5e-3)
+    assert high.polygon.area == pytest.approx(math.pi * 1.5**2, rel=5e-3)
+    assert [s.height for s in low.slices] == [-0.9, -0.1]
+
+
+def test_a_robot_in_collision_gets_an_empty_map_and_a_warning():
+    with pytest.warns(NavigationWarning, match="collision"):
+        nav = navigation_map(round_room(0.2), robot=ROBOT)
+    assert nav.polygon.is_empty and nav.is_empty
+    assert nav.obstacle_points.shape == (0, 2) and nav.exploration_points.shape == (0, 2)
+
+
+def test_occupied_at_the_sensor_is_a_collision_too():
+    with pytest.warns(NavigationWarning):
+        nav = navigation_map(lambda a, h, m: np.zeros(np.broadcast(a, h).shape), robot=ROBOT)
+    assert nav.polygon.is_empty
+
+
+def test_a_negative_range_means_occupied_at_the_sensor():
+    # A raw inverse tree gives r < 0 where the level is crossed behind the sensor.
+    with pytest.warns(NavigationWarning, match="collision"):
+        nav = navigation_map(lambda a, h, m: np.full(np.broadcast(a, h).shape, -5.0), robot=ROBOT)
+    assert nav.polygon.is_empty
+
+
+def test_the_inverse_is_called_once_over_all_angles_and_heights():
+    calls = []
+
+    def inverse(alpha, h, level):
+        calls.append((np.shape(alpha), np.shape(h), level))
+        return np.full(np.broadcast(alpha, h).shape, np.inf)
+
+    navigation_map(inverse, robot=ROBOT, heights=[-0.9, -0.5, -0.1], n_angles=90, threshold=0.7)
+    assert calls == [((1, 90), (3, 1), 0.7)]
+
+
+# --- between the slices --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("tree", ["tiny", "occtool"])
+def test_a_thin_overhang_between_two_heights_is_kept_clear_of_with_the_slope_bounds(tree):
+    model = table_top(-0.33, -0.28)  # 5 cm thick, between the cuts at -0.5 and -0.1
+    if tree == "occtool":
+        model = RealTreeModel(model)
+    heights = [-0.9, -0.5, -0.1]
+    obstacles = true_obstacles(model.inverse_range, 0.6, ROBOT, 1.5)
+    assert len(obstacles) > 0
+    blind = navigation_map(model.inverse_range, robot=ROBOT, heights=heights)
+    safe = navigation_map(model.inverse_range, robot=ROBOT, heights=heights, slope_bounds=model.slope_bounds)
+    # Without the bounds the cuts miss the table and the robot would drive into it ...
+    assert shapely.distance(blind.polygon, shapely.points(obstacles)).min() < ROBOT.radius / 2
+    # ... with them no point of the body at any height comes closer than its radius.
+    assert shapely.distance(safe.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+    assert safe.polygon.contains(Point(0.5, 0.0)) and not safe.polygon.contains(Point(0.65, 0.0))
+    assert safe.effective_threshold < safe.threshold == 0.6
+    assert set(heights) <= set(safe.slice_heights)
+    assert len(safe.slices) == 3  # the requested heights; the added cuts are in slice_heights
+    # The table is ahead only: behind the robot the map still reaches the circle.
+    assert len(safe.exploration_points) > 0 and angles_of(safe.exploration_points).__abs__().min() > 0.5
+
+
+def test_slice_spacing_trades_slices_for_margin():
+    model = table_top(-0.33, -0.28)
+    with pytest.warns(NavigationWarning, match="margin"):  # 10 cm is too coarse for this table
+        coarse = navigation_map(model.inverse_range, robot=ROBOT, slope_bounds=model.slope_bounds, slice_spacing=0.1)
+    fine = navigation_map(model.inverse_range, robot=ROBOT, slope_bounds=model.slope_bounds, slice_spacing=0.02)
+    assert len(fine.slice_heights) > len(coarse.slice_heights)
+    assert fine.margin < coarse.margin
+    assert fine.effective_threshold == pytest.approx(0.6 - fine.margin)
+
+
+def test_a_margin_above_the_threshold_warns():
+    model = table_top(-0.33, -0.28)
+    with pytest.warns(NavigationWarning, match="margin"):
+        navigation_map(model.inverse_range, robot=ROBOT, slope_bounds=model.slope_bounds, slice_spacing=0.5)
+
+
+def test_the_model_agrees_with_its_inverse():
+    model = table_top(-0.33, -0.28)
+    alpha, h = np.meshgrid(np.linspace(-3, 3, 13), np.linspace(-0.9, 0, 10))
+    r = model.inverse_range(alpha, h, 0.6)
+    np.testing.assert_allclose(model.predict(alpha, h, r)[r > 0], 0.6)
+
+
+@given(
+    heights=st.lists(st.floats(-0.95, 0.0), min_size=1, max_size=5),
+    spacing=st.floats(0.01, 0.5),
+)
+def test_added_slices_keep_every_body_height_near_a_cut(heights, spacing):
+    band = ROBOT.body_band
+    cuts = add_slices(heights, band, spacing)
+    assert set(np.round(heights, 12)) <= set(np.round(cuts, 12))
+    assert farthest_from_slices(cuts, band) <= spacing / 2 + 1e-9
+    assert np.all(np.diff(cuts) > 0)
+
+
+def test_default_heights_span_the_body_band():
+    heights = default_heights(ROBOT)
+    low, high = ROBOT.body_band
+    assert low < heights.min() and heights.max() < high
+    assert farthest_from_slices(heights, (low, high)) <= 0.125 + 1e-12
+
+
+# --- properties --------------------------------------------------------------------------
+
+
+scenes = st.builds(
+    star_room,
+    control=st.lists(st.floats(0.3, 3.0), min_size=3, max_size=12).map(np.asarray),
+    tilt=st.floats(-0.5, 0.5),
+)
+
+
+@given(scene=scenes, max_range=st.floats(0.5, 3.0), radius=st.floats(0.0, 0.5))
+def test_the_polygon_lies_in_the_max_range_disk_around_the_free_robot(scene, max_range, radius):
+    robot = Robot(radius=radius)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = navigation_map(scene, robot=robot, max_range=max_range, n_angles=120)
+    if nav.polygon.is_empty:
+        return
+    assert np.hypot(*np.asarray(nav.polygon.exterior.coords).T).max() <= max_range * (1 + 1e-9)
+    assert nav.polygon.contains(Point(0, 0))
+    if len(nav.obstacle_points):
+        assert np.hypot(*nav.obstacle_points.T).max() <= max_range * (1 + 1e-9)
+        assert shapely.distance(nav.polygon.exterior, shapely.points(nav.obstacle_points)).max() < 1e-6
+    np.testing.assert_allclose(np.hypot(*nav.exploration_points.T), max_range)
+
+
+@given(scene=scenes, radius=st.floats(0.0, 0.3))
+def test_a_robot_with_room_around_it_is_free(scene, radius):
+    heights = default_heights(ROBOT)
+    alpha = pan_angles(120)
+    r = scene(alpha[None, :], heights[:, None], 0.6)
+    nearest = np.sqrt(np.maximum(r**2 - heights[:, None] ** 2, 0)).min()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = navigation_map(scene, robot=Robot(radius=radius), n_angles=120)
+    if nearest * math.cos(math.pi / 120) > radius + 1e-6:
+        assert nav.polygon.contains(Point(0, 0))
+    if nearest < radius:
+        assert nav.polygon.is_empty
+
+
+@given(scene=scenes, small=st.floats(0.0, 0.4), extra=st.floats(0.001, 0.3))
+def test_a_larger_robot_never_gets_more_room(scene, small, extra):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        smaller = navigation_map(scene, robot=Robot(radius=small), n_angles=90)
+        larger = navigation_map(scene, robot=Robot(radius=small + extra), n_angles=90)
+    # Up to what the straight-line cut can miss between two rays 4 degrees apart.
+    assert larger.polygon.difference(smaller.polygon.buffer(0.03)).area <= 1e-9
+    assert larger.polygon.area <= smaller.polygon.area * 1.001 + 1e-9
+
+
+@given(scene=scenes, steps=st.integers(0, 89))
+def test_rotating_the_model_rotates_the_polygon(scene, steps):
+    n_angles = 90
+    yaw = 2 * np.pi * steps / n_angles
+
+    def rotated(alpha, h, level):
+        return scene(alpha - yaw, h, level)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        base = navigation_map(scene, robot=ROBOT, n_angles=n_angles)
+        turned = navigation_map(rotated, robot=ROBOT, n_angles=n_angles)
+    expected = shapely.affinity.rotate(base.polygon, yaw, origin=(0, 0), use_radians=True)
+    assert expected.symmetric_difference(turned.polygon).area <= 1e-6 * max(base.polygon.area, 1e-3)
+    assert len(turned.exploration_points) + len(turned.obstacle_points) > 0 or base.polygon.is_empty
+
+
+@settings(max_examples=25)
+@given(scene=scenes, radius=st.floats(0.05, 0.4))
+def test_the_body_reaches_every_point_of_the_polygon_straight(scene, radius):
+    heights = [-0.9, -0.5, -0.1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = navigation_map(scene, robot=Robot(radius=radius), heights=heights, n_angles=180)
+    # The paper's construction: shrink each slice by the radius, intersect, clip.
+    literal = Point(0, 0).buffer(1.5, quad_segs=180)
+    free = Point(0, 0).buffer(5.0)
+    for item in nav.slices:
+        literal = literal.intersection(item.polygon.buffer(-radius))
+        free = free.intersection(item.polygon)
+    assert nav.polygon.difference(literal.buffer(1e-6)).area <= 1e-9
+    points = disk_grid(1.5, 0.05)
+    reached = reached_straight(free, points, radius)
+    inside = shapely.contains_xy(nav.polygon, points[:, 0], points[:, 1])
+    # Safe: from every point of the polygon the body went there straight without a touch
+    # (but for the test's own capsules, drawn with chords 0.4 mm inside their arcs).
+    clear = shapely.distance(nav.polygon.exterior, shapely.points(points)) > 1e-3 if not nav.polygon.is_empty else True
+    assert not (inside & ~reached & clear).any()
+    # Not timid: a point reached with 1 cm to spare is in the polygon (misses only between rays).
+    if nav.polygon.is_empty:
+        return
+    roomy = reached_straight(free, points, radius + 0.01)
+    assert not (roomy & ~inside).any()
+
+
+# --- bad input -----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"heights": [-1.2]}, "floor"),
+        ({"heights": []}, "at least one height"),
+        ({"heights": [float("nan")]}, "finite"),
+        ({"max_range": 0.0}, "max range"),
+        ({"n_angles": 3}, "angles"),
+        ({"point_spacing": -1.0}, "point spacing"),
+        ({"slope_bounds": {"a_max": 1.0, "b_max": 1.0}}, "c_max"),
+        ({"slope_bounds": {"a_max": 1.0, "b_max": -1.0, "c_max": 1.0}}, "b_max"),
+    ],
+)
+def test_bad_parameters_are_named(kwargs, message):
+    with pytest.raises(InputError, match=message):
+        navigation_map(round_room(2.0), robot=ROBOT, **kwargs)
+
+
+def test_an_inverse_returning_nan_or_the_wrong_shape_is_refused():
+    with pytest.raises(InputError, match="NaN"):
+        navigation_map(lambda a, h, m: np.full(np.broadcast(a, h).shape, np.nan), robot=ROBOT)
+    with pytest.raises(InputError, match="shape"):
+        navigation_map(lambda a, h, m: np.ones(7), robot=ROBOT)
+
+
+@settings(max_examples=15)
+@given(
+    pieces=st.lists(
+        st.tuples(st.floats(-1, 1), st.floats(-2, 2), st.floats(0.2, 3), st.floats(-4, -0.8)), min_size=4, max_size=4
+    ),
+    heights=st.lists(st.floats(-0.9, -0.05), min_size=1, max_size=3),
+)
+def test_random_min_max_models_never_let_the_body_touch_an_obstacle(pieces, heights):
+    # Occupied points sampled every 5 mm of the body band and 0.5 degrees must all keep
+    # a robot radius from the polygon (without the bounds most such models fail this).
+    model = PiecewiseLinearModel(pieces, ("max", [("min", [0, 1]), ("min", [2, 3])]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = navigation_map(model.inverse_range, robot=ROBOT, heights=heights, slope_bounds=model.slope_bounds,
+                             n_angles=180)
+    if nav.polygon.is_empty:
+        return
+    low, high = ROBOT.body_band
+    levels = np.linspace(low, high, 191)
+    alpha = pan_angles(720)
+    r = model.inverse_range(alpha[None, :], levels[:, None], 0.6)
+    rho = np.sqrt(np.maximum(np.square(np.minimum(r, 1e6)) - np.square(levels)[:, None], 0.0))
+    rows, cols = np.nonzero(rho < 1.5 + 2 * ROBOT.radius)
+    obstacles = np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
+    if len(obstacles):
+        assert shapely.distance(nav.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+
+
+def test_a_doorway_keeps_its_exploration_points_under_the_guarantee():
+    # A spherical wall at r = 2 (occupancy 0.6 there), opened for |alpha| < 0.4 by two steep pan pieces.
+    pieces = [
+        (0.0, 0.0, 5.0, -9.4),  # the wall
+        (8.0, 0.0, 0.05, -2.6),  # 8 (alpha - 0.4) + 0.6, the door's left jamb
+        (-8.0, 0.0, 0.05, -2.6),  # 8 (-alpha - 0.4) + 0.6, its right jamb
+    ]
+    model = PiecewiseLinearModel(pieces, ("min", [0, ("max", [1, 2])]))
+    nav = navigation_map(model.inverse_range, robot=ROBOT, slope_bounds=model.slope_bounds)
+    assert nav.margin > 0 and len(nav.slice_heights) > len(nav.heights)
+    explore = angles_of(nav.exploration_points)
+    assert len(explore) >= 2
+    assert np.abs(explore).max() < 0.4 - math.asin(0.25 / 1.5)
+    assert nav.polygon.contains(Point(1.45, 0.0)) and not nav.polygon.contains(Point(0.0, 1.49))
