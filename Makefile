@@ -23,7 +23,14 @@ demo: $(STAMP)
 	$(BIN)/occtool invert $(DEMO)/model.json -o $(DEMO)/inverse.json
 	$(BIN)/occtool extract $(DEMO)/model.json -o $(DEMO)/nav.geojson --slices
 	$(BIN)/occtool evaluate $(DEMO)/nav.geojson fixtures/office/truth.json
-	@echo "demo output written to $(DEMO)/: model.json inverse.json nav.geojson"
+	$(BIN)/occtool plot features fixtures/office/features.csv -o $(DEMO)/fig5a-features.png
+	$(BIN)/occtool plot model $(DEMO)/model.json -o $(DEMO)/fig5b-model.png --pieces
+	$(BIN)/occtool plot nav $(DEMO)/nav.geojson --features fixtures/office/features.csv \
+		--truth fixtures/office/truth.json -o $(DEMO)/fig5c-navigation.png
+	@echo
+	@echo "Demo written to $(DEMO)/:"
+	@echo "  model.json inverse.json nav.geojson"
+	@echo "  $(DEMO)/fig5a-features.png  $(DEMO)/fig5b-model.png  $(DEMO)/fig5c-navigation.png"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
