@@ -159,8 +159,17 @@ class _PieceTree:
         return int(self.coefficients.shape[0])
 
     def _values(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> tuple[FloatArray, tuple[int, ...]]:
-        alpha, h, x = np.broadcast_arrays(np.asarray(alpha, float), np.asarray(h, float), np.asarray(x, float))
-        return design_matrix(self.basis, alpha, h, x) @ self.coefficients.T, alpha.shape
+        alpha, h, x = (np.asarray(v, dtype=np.float64) for v in (alpha, h, x))
+        shape = np.broadcast_shapes(alpha.shape, h.shape, x.shape)
+        # Each term is formed on its own (un-broadcast) input and the terms are summed by
+        # broadcasting: a sweep of N angles x H heights computes N cosines and H products,
+        # not N*H of each, and no matrix product (a multi-threaded BLAS made these small
+        # products several times slower on a busy 2-core machine).
+        values: FloatArray = self.coefficients[:, -1]
+        for column, weights in zip([*angle_terms(self.basis, alpha), h, x], self.coefficients[:, :-1].T):
+            values = values + column[..., None] * weights
+        values = np.broadcast_to(values, (*shape, self.n_pieces)).reshape(-1, self.n_pieces)
+        return values, shape
 
     def _eval(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> FloatArray:
         values, shape = self._values(alpha, h, x)
