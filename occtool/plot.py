@@ -230,7 +230,11 @@ def read_navigation_maps(path: str | os.PathLike[str]) -> list[tuple[int | None,
     """
     from occtool.io.geojson import read_navigation as read
 
-    positions = _tagged_positions(Path(path).read_text(encoding="utf-8"))
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"{os.fspath(path)}: not a text (UTF-8) file") from None
+    positions = _tagged_positions(text)
     if not positions:
         return [(None, read(path))]
     return [(position, read(path, position=position)) for position in positions]

@@ -197,7 +197,7 @@ class _PieceTree:
             if key not in data:
                 raise ModelFormatError(f"the tree has no '{key}'")
         basis = data["basis"]
-        if basis not in cls._names:
+        if not isinstance(basis, str) or basis not in cls._names:
             raise ModelFormatError(f"unknown basis {basis!r}: expected one of {', '.join(cls._names)}")
         names = cls._names[basis]
         pieces = data["pieces"]

@@ -59,14 +59,13 @@ def test_unknown_scene_is_a_usage_error_listing_the_scenes(tmp_path) -> None:
     assert not list(tmp_path.iterdir())
 
 
-def test_simulate_refuses_to_overwrite(tmp_path) -> None:
+def test_simulate_replaces_outputs_unless_told_not_to(tmp_path) -> None:
     assert run("simulate", "open", "-o", str(tmp_path), "--features", "100").exit_code == 0
     before = (tmp_path / "features.csv").read_text()
-    result = run("simulate", "open", "-o", str(tmp_path), "--features", "100", "--seed", "1")
-    assert result.exit_code == 1 and "--overwrite" in result.output
+    result = run("simulate", "open", "-o", str(tmp_path), "--features", "100", "--seed", "1", "--no-overwrite")
+    assert result.exit_code == 1 and "exists already" in result.output and "--overwrite" in result.output
     assert (tmp_path / "features.csv").read_text() == before
-    assert run("simulate", "open", "-o", str(tmp_path), "--features", "100", "--seed", "1",
-               "--overwrite").exit_code == 0
+    assert run("simulate", "open", "-o", str(tmp_path), "--features", "100", "--seed", "1").exit_code == 0
     assert (tmp_path / "features.csv").read_text() != before
 
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import click
 
-from occtool.cli.options import config_option, log_options
+from occtool.cli.options import config_option, log_options, overwrite_option, refuse_existing
 
 
 @click.command(short_help="Convert a range log (CSV, MCAP, ...) to CSV or MCAP.")
@@ -19,9 +19,10 @@ from occtool.cli.options import config_option, log_options
     "--to", "target_format", type=click.Choice(["csv", "mcap"]), default=None,
     help="Output format (default: from the output file's extension).",
 )
+@overwrite_option
 @log_options
 @config_option
-def convert(log: str, output: str, target_format: str | None, **kwargs: Any) -> None:
+def convert(log: str, output: str, target_format: str | None, overwrite: bool, **kwargs: Any) -> None:
     """Read LOG (any supported format) and write its positions and features to OUTPUT.
 
     CSV output has columns x, y, z, m, plus position and pose_x, pose_y, pose_z,
@@ -43,6 +44,7 @@ def convert(log: str, output: str, target_format: str | None, **kwargs: Any) -> 
             raise click.BadParameter("cannot tell the output format: use a .csv or .mcap name or --to", param_hint="-o")
     if target_format == "mcap" and output == "-":
         raise click.BadParameter("MCAP cannot go to standard output: name a file", param_hint="-o")
+    refuse_existing(overwrite, output)
     range_log = read_log_from_kwargs(log, kwargs)
     if target_format == "mcap":
         write_mcap(range_log, output)

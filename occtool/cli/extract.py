@@ -6,7 +6,10 @@ from typing import Any
 
 import click
 
-from occtool.cli.options import config_option, extract_from_kwargs, extract_options, geojson_options, output_option
+from occtool.cli.options import (
+    config_option, extract_from_kwargs, extract_options, geojson_options, output_option, overwrite_option,
+    refuse_existing,
+)
 
 
 def load_inverse_function(path: str) -> tuple[Any, dict[str, float] | None, Any]:
@@ -131,8 +134,7 @@ def _robot_given(ctx: click.Context) -> set[str]:
                    "promise), or every point where the body fits.")
 @click.option("--world", is_flag=True, default=False,
               help="Model set: move each position's map into the world (map) frame by its pose.")
-@click.option("--overwrite/--no-overwrite", default=True, show_default=True,
-              help="Replace an existing output file.")
+@overwrite_option
 @config_option
 def extract(
     model: str, output: str | None, ignore_bounds: bool, straight_line: bool, world: bool, overwrite: bool,
@@ -211,10 +213,16 @@ def extract(
     if not _is_model_set(model):
         if world:
             raise click.UsageError("--world needs a model set (a folder from `occtool fit -o DIR/`) with poses")
+        refuse_existing(overwrite, output)
         write_navigation(one_map(model), output or "-", **written)
         return
 
     folder, entries = read_model_set(model)
+    to_folder = output is not None and (output.endswith(("/", os.sep)) or Path(output).is_dir())
+    if to_folder:
+        refuse_existing(overwrite, *(Path(output) / f"nav_{entry['position']:04d}.geojson" for entry in entries))
+    else:
+        refuse_existing(overwrite, output)
     maps = []
     for entry in entries:
         nav = one_map(folder / entry["file"])
@@ -228,7 +236,7 @@ def extract(
                 raise InputError(f"{index}: position {entry['position']}'s pose is not numbers") from None
             nav = nav.in_world(pose)
         maps.append((entry["position"], nav))
-    if output is not None and (output.endswith(("/", os.sep)) or Path(output).is_dir()):
+    if to_folder:
         if not Path(output).is_dir():
             raise InputError(f"output folder {output} does not exist")
         for position, nav in maps:

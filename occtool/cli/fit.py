@@ -4,19 +4,22 @@ from __future__ import annotations
 
 import click
 
-from occtool.cli.options import config_option, fit_options, log_options, output_option, seed_option
+from occtool.cli.options import (
+    config_option, fit_options, log_options, output_option, overwrite_option, refuse_existing, seed_option,
+)
 
 
 @click.command(short_help="Fit a parametric occupancy model to a range log.")
 @click.argument("log_path", metavar="LOG", type=click.Path(exists=True, dir_okay=False))
 @output_option
+@overwrite_option
 @click.option("--position", type=click.IntRange(min=0), default=None,
               help="Robot position of a multi-position log to fit (default: the only one).")
 @fit_options
 @log_options
 @seed_option
 @config_option
-def fit(log_path: str, output: str | None, position: int | None, seed: int, **kwargs) -> None:
+def fit(log_path: str, output: str | None, overwrite: bool, position: int | None, seed: int, **kwargs) -> None:
     """Fit the min/max tree m = F(alpha, h, r) to the features of LOG and write it as JSON.
 
     With -o DIR/ (an existing folder, or a path ending in '/') and a log of several robot
@@ -48,6 +51,11 @@ def fit(log_path: str, output: str | None, position: int | None, seed: int, **kw
             log.single(None)  # raises the "no range data" error
     else:
         chosen = [log.single(position)]
+    if to_folder:
+        refuse_existing(overwrite, *(Path(output) / f"model_{item.index:04d}.json" for item in chosen),
+                        Path(output) / "index.json")
+    else:
+        refuse_existing(overwrite, output)
 
     index = []
     for item in chosen:

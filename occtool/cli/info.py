@@ -9,7 +9,9 @@ import click
 @click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=False))
 @click.option("--pieces/--no-pieces", "show_pieces", default=True, show_default=True,
               help="List the coefficients of every piece.")
-def info(path: str, show_pieces: bool) -> None:
+@click.option("--skip-invalid", is_flag=True, default=False,
+              help="Range log: count invalid rows/points in a note instead of stopping at the first.")
+def info(path: str, show_pieces: bool, skip_invalid: bool) -> None:
     """Summarise FILE: a model or inverse file (pieces, tree, constraints, fit error,
     samples, run) or any range log the readers understand."""
     from rich.console import Console
@@ -21,7 +23,7 @@ def info(path: str, show_pieces: bool) -> None:
     if found is None:
         from occtool.io import describe_log
 
-        console.print(describe_log(path))
+        console.print(describe_log(path, skip_invalid=skip_invalid))
         return
     kind, obj = found
     if kind == "model":

@@ -93,6 +93,19 @@ output_option = click.option(
     help="Output file ('-' or absent: standard output, where the command allows it).",
 )
 seed_option = click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+overwrite_option = click.option(
+    "--overwrite/--no-overwrite", default=True, show_default=True,
+    help="Replace existing output files, or refuse (and write nothing) if one exists.",
+)
+
+
+def refuse_existing(overwrite: bool, *paths: Any) -> None:
+    """With ``--no-overwrite``, stop before any work if one of the output files exists."""
+    if overwrite:
+        return
+    for path in paths:
+        if path is not None and str(path) != "-" and Path(path).exists():
+            raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
 
 # --- range-log reading (owner: readers) ------------------------------------------------
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import click
 
-from occtool.cli.options import _compose, config_option, log_options
+from occtool.cli.options import _compose, config_option, log_options, overwrite_option, refuse_existing
 
 DEFAULT_DPI = 100.0
 
@@ -22,6 +22,7 @@ def _figure_options(function: Callable[..., Any]) -> Callable[..., Any]:
         config_option,
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                      help="Image to write: .png, .svg or .pdf."),
+        overwrite_option,
         click.option("--dpi", type=click.FloatRange(min=1.0, min_open=False), default=DEFAULT_DPI,
                      show_default=True, help="Resolution, dots per inch (PNG pixels = size x dpi)."),
         click.option("--size", default=None,
@@ -30,12 +31,14 @@ def _figure_options(function: Callable[..., Any]) -> Callable[..., Any]:
     )(function)
 
 
-def _prepare(output: str, size: str | None, dpi: float) -> tuple[float, float] | None:
-    """Fail fast, before any input is read: matplotlib present, format known, size valid."""
+def _prepare(output: str, size: str | None, dpi: float, overwrite: bool) -> tuple[float, float] | None:
+    """Fail fast, before any input is read: matplotlib present, format known, size valid,
+    no existing output with --no-overwrite."""
     from occtool.plot import output_format, parse_size, require_matplotlib
 
     require_matplotlib()
     output_format(output)
+    refuse_existing(overwrite, output)
     return parse_size(size, dpi) if size else None
 
 
@@ -63,15 +66,15 @@ def plot() -> None:
 @click.option("--robot-radius", type=click.FloatRange(min=0.0), default=0.25, show_default=True,
               help="Radius of the robot disc, metres.")
 @_figure_options
-def features(log: str, position: int | None, robot_radius: float, output: str, dpi: float, size: str | None,
-             title: str | None, **kwargs: Any) -> None:
+def features(log: str, position: int | None, robot_radius: float, output: str, overwrite: bool, dpi: float,
+             size: str | None, title: str | None, **kwargs: Any) -> None:
     """Range data of LOG projected on the floor (the paper's Figure 5a).
 
     Brighter where the evidence is higher, the robot at the centre. A log of several
     positions with poses is drawn in the world frame along the robot's path unless
     --position picks one.
     """
-    figure_size = _prepare(output, size, dpi)
+    figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.cli.options import read_log_from_kwargs
     from occtool.plot import DEFAULT_SIZE, features_figure
     from occtool.robot import Robot
@@ -100,13 +103,14 @@ def features(log: str, position: int | None, robot_radius: float, output: str, d
               help="Heat-map cells along each side.")
 @_figure_options
 def model(model: str, level: float, height: float | None, heights: str | None, extent: float | None,
-          pieces: bool, resolution: int, output: str, dpi: float, size: str | None, title: str | None) -> None:
+          pieces: bool, resolution: int, output: str, overwrite: bool, dpi: float, size: str | None,
+          title: str | None) -> None:
     """The occupancy model in MODEL (the paper's Figure 5b), and F at one height.
 
     Where F > --level, projected on the floor, beside a heat map of F over (x, y) at
     --height; --pieces adds the regions of the tree's linear pieces.
     """
-    figure_size = _prepare(output, size, dpi)
+    figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.cli.options import float_list
     from occtool.io.model import load_model
     from occtool.plot import model_extent, model_figure, model_robot
@@ -132,7 +136,7 @@ def model(model: str, level: float, height: float | None, heights: str | None, e
 @click.option("--slices/--no-slices", default=True, show_default=True, help="Draw the per-height slices.")
 @_figure_options
 def nav(maps: tuple[str, ...], features_log: str | None, position: int | None, truth: str | None, slices: bool,
-        output: str, dpi: float, size: str | None, title: str | None, **kwargs: Any) -> None:
+        output: str, overwrite: bool, dpi: float, size: str | None, title: str | None, **kwargs: Any) -> None:
     """Navigation map(s) NAV from occtool extract (the paper's Figure 5c).
 
     The polygon, per-height slices, obstacle and exploration points, the max-range
@@ -143,7 +147,7 @@ def nav(maps: tuple[str, ...], features_log: str | None, position: int | None, t
     extracted with --world stay where they are, robot-frame maps are placed at the
     poses of the --features log's positions.
     """
-    figure_size = _prepare(output, size, dpi)
+    figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.cli.options import read_log_from_kwargs
     from occtool.plot import DEFAULT_SIZE, expand_navigation_paths, navigation_figure, read_navigation_maps
 
@@ -167,12 +171,13 @@ def nav(maps: tuple[str, ...], features_log: str | None, position: int | None, t
 @click.option("--bench", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Benchmark results JSON (bench/results.json) for the scaling curves.")
 @_figure_options
-def compare(report: str, bench: str | None, output: str, dpi: float, size: str | None, title: str | None) -> None:
+def compare(report: str, bench: str | None, output: str, overwrite: bool, dpi: float, size: str | None,
+            title: str | None) -> None:
     """The grid comparison REPORT from occtool compare-grid --json.
 
     Each model's navigation polygon side by side; time and memory against scene scale and feature count come from --bench, on log axes.
     """
-    figure_size = _prepare(output, size, dpi)
+    figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.plot import compare_figure, read_json
 
     document = read_json(report, "comparison report")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from occtool.cli.options import config_option, seed_option
+from occtool.cli.options import config_option, overwrite_option, refuse_existing, seed_option
 
 
 def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
@@ -40,7 +40,7 @@ def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
               help="Obstacles lower than this are driven over, metres.")
 @click.option("--sensor-range", type=click.FloatRange(min=0.0, min_open=True), default=6.0, show_default=True,
               help="Farthest range at which the camera registers features, metres.")
-@click.option("--overwrite", is_flag=True, default=False, help="Replace existing output files.")
+@overwrite_option
 @config_option
 def simulate(scene: str, output: str, features: int, seed: int, noise: float, outlier_rate: float,
              yaw: float, sensor_height: float, body_height: float, radius: float, ground_clearance: float,
@@ -58,10 +58,7 @@ def simulate(scene: str, output: str, features: int, seed: int, noise: float, ou
 
     folder = Path(output)
     features_path, truth_path = folder / "features.csv", folder / "truth.json"
-    if not overwrite:
-        for path in (features_path, truth_path):
-            if path.exists():
-                raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
+    refuse_existing(overwrite, features_path, truth_path)
     robot = Robot(radius=radius, sensor_height=sensor_height, body_height=body_height,
                   ground_clearance=ground_clearance)
     registered, truth = simulate_scene(scene, n_features=features, seed=seed, range_noise=noise,

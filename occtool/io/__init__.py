@@ -251,12 +251,14 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: dict[str, Any]
     )
 
 
-def describe_log(path: str | os.PathLike[str]) -> Any:
+def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False) -> Any:
     """A rich renderable describing a range log, for ``occtool info LOG``.
 
     For MCAP: the channels (topic, schema, encoding, message count) and whether
     occtool can read each, from the summary section (the file is not scanned). For
-    other formats: the format, size and counts of features and positions.
+    other formats: the format, size and counts of features and positions; an invalid
+    row is an :class:`InputError` naming it, as for every command that reads the log,
+    unless ``skip_invalid`` (then the skipped rows are counted in a note).
     """
     from rich.console import Group
     from rich.table import Table
@@ -268,7 +270,7 @@ def describe_log(path: str | os.PathLike[str]) -> Any:
     size = target.stat().st_size
     header = Table.grid(padding=(0, 2))
     header.add_column(style="bold")
-    header.add_column()
+    header.add_column(overflow="fold")  # a long path or note wraps, it is not cut to "..."
     header.add_row("file", str(target))
     header.add_row("format", fmt)
     header.add_row("size", f"{size:,} bytes")
@@ -278,14 +280,17 @@ def describe_log(path: str | os.PathLike[str]) -> Any:
         rows, extra = describe_channels(target)
         table = Table(title="channels", show_lines=False)
         for column in ("topic", "schema", "encoding", "messages", "occtool reads it"):
-            table.add_column(column, justify="right" if column == "messages" else "left")
+            # Topic and schema are what --topic and the user need: folded onto the next line
+            # in a narrow terminal, never cut to "...".
+            table.add_column(column, justify="right" if column == "messages" else "left",
+                             overflow="fold" if column in ("topic", "schema") else "ellipsis")
         for row in rows:
             table.add_row(row.topic, row.schema, row.encoding, "?" if row.messages is None else f"{row.messages:,}",
                           row.support)
         for key, value in extra.items():
             header.add_row(key, value)
         return Group(header, table)
-    log = read_log(target, format=fmt, skip_invalid=True)
+    log = read_log(target, format=fmt, skip_invalid=skip_invalid)
     header.add_row("positions", f"{len(log.positions):,}")
     header.add_row("features", f"{sum(len(p.features) for p in log.positions):,}")
     header.add_row("poses", "yes" if log.has_poses else "no")

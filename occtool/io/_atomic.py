@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 import tempfile
@@ -35,6 +36,13 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
     target = Path(path)
     if not overwrite and target.exists():
         raise FileExistsError(f"{target} exists already (pass --overwrite to replace it)")
+    if target.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "Is a directory (name an output file)", str(target))
+    if target.exists() and not target.is_file():
+        # A device or pipe (/dev/null, /dev/stdout, a FIFO): write into it, never replace it.
+        with open(target, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": "\n"})) as handle:
+            yield handle
+        return
     directory = target.parent if str(target.parent) else Path(".")
     if not directory.is_dir():
         raise FileNotFoundError(f"output folder {directory} does not exist")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
@@ -358,7 +359,10 @@ def _geometry(feature: Mapping[str, Any], kinds: tuple[str, ...], source: str, w
     if not isinstance(data, Mapping) or data.get("type") not in kinds:
         raise InputError(f"{source}: the {what} geometry is not a {' or '.join(kinds)}")
     try:
-        geometry = shape(data)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            # NaN coordinates are reported below, without shapely's RuntimeWarning.
+            warnings.simplefilter("ignore", RuntimeWarning)
+            geometry = shape(data)
     except (TypeError, ValueError, KeyError, IndexError, AttributeError, shapely.errors.ShapelyError) as exc:
         raise InputError(f"{source}: the {what} geometry is malformed ({exc})") from None
     coordinates = shapely.get_coordinates(geometry)

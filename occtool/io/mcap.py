@@ -498,6 +498,16 @@ def _mcap_errors() -> tuple[type[BaseException], ...]:
         errors.append(DecodeError)
     except ImportError:
         pass
+    try:  # a corrupt zstd chunk
+        from zstandard import ZstdError
+
+        errors.append(ZstdError)
+    except ImportError:
+        pass
+    # A damaged chunk or index also surfaces as a plain error inside the mcap library: a
+    # channel id missing from the summary (KeyError), a corrupt lz4 frame (RuntimeError).
+    # A corrupt record length can ask for more memory than there is (MemoryError).
+    errors += [KeyError, IndexError, ValueError, OverflowError, RuntimeError, MemoryError]
     return tuple(errors)
 
 
@@ -515,7 +525,7 @@ class _Reader:
             self.reader = make_reader(self.handle, decoder_factories=_decoder_factories())
             self.reader.get_header()
             self.summary = self.reader.get_summary()
-        except _mcap_errors() as exc:
+        except (*_mcap_errors(), OSError) as exc:  # OSError: a seek to a corrupt summary offset
             self.handle.close()
             raise self.corrupt(exc) from None
         return self
@@ -525,6 +535,8 @@ class _Reader:
 
     def corrupt(self, exc: BaseException) -> InputError:
         detail = str(exc) or type(exc).__name__
+        if isinstance(exc, MemoryError):
+            detail = "a record's length exceeds the memory available"
         return InputError(f"{self.path} is not a readable MCAP file (corrupt or truncated): {detail}")
 
     def channels(self) -> list[tuple[int, str, str, str, int | None]]:

@@ -130,8 +130,11 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
         robot = Robot(**{k: float(v) for k, v in data["robot"].items()})
         fit_params = {k: v for k, v in data["fit"].items() if k in _FIT_PARAMS}
         constraints = {k: float(data["constraints"][k]) for k in ("c_min", "a_max", "b_max")}
-    except (InputError, TypeError, ValueError, KeyError) as exc:
+    except (InputError, TypeError, ValueError, KeyError, AttributeError) as exc:
         raise ModelFormatError(f"{source}: invalid settings: {exc}") from None
+    for key, value in constraints.items():
+        if not (math.isfinite(value) and value > 0):
+            raise ModelFormatError(f"{source}: constraint {key} must be a finite number > 0, got {value}")
     fit_params.update(constraints)
     _check_constraints(tree, constraints, source)
     model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
@@ -141,11 +144,14 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
         model.n_samples_ = int(training["n_samples"])
         model.sample_counts_ = {str(k): int(v) for k, v in training.get("samples_by_kind", {}).items()}
         model.rmse_ = float(training["rmse"])
-        model.loss_ = float(training.get("loss", math.nan))
+        loss = training.get("loss")
+        model.loss_ = math.nan if loss is None else float(loss)
         model.n_sweeps_ = int(training.get("sweeps", 0))
         model.features_digest_ = str(training["features_sha256"])
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFormatError(f"{source}: incomplete training summary ({exc})") from None
+    if not math.isfinite(model.rmse_):
+        raise ModelFormatError(f"{source}: the training summary's rmse is not a finite number")
     model.loss_history_ = []
     model.tree_ = tree
     model.sensor_ = sensor

@@ -1,0 +1,478 @@
+"""Bad input on the command line: a one-line ``Error: ...``, a non-zero exit, no traceback,
+and no output file (complete or absent, no stray temporary file).
+
+Every command but ``compare-grid`` (tests/test_cli_compare.py) is fed a missing file,
+broken CSV rows, damaged MCAP files, malformed model and GeoJSON files and an output
+path it cannot write; the overwrite behaviour (replace by default, ``--no-overwrite``
+refuses) is checked for every command that writes files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+import threading
+import traceback
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from occtool.cli.main import cli
+from occtool.io import read_log, write_mcap
+
+FIXTURES = Path(__file__).resolve().parent.parent / "fixtures"
+TRUTH = FIXTURES / "office" / "truth.json"
+
+
+def run(*args: object):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def assert_fails(result, *fragments: str, exit_code: int | None = None) -> str:
+    """Non-zero exit, no traceback, an ``Error:`` line naming each fragment (case-insensitive)."""
+    if result.exception is not None and not isinstance(result.exception, SystemExit):
+        raise AssertionError("uncaught exception:\n" + "".join(traceback.format_exception(*result.exc_info)))
+    output = " ".join(result.output.split())
+    assert result.exit_code != 0, output
+    if exit_code is not None:
+        assert result.exit_code == exit_code, output
+    assert "Traceback" not in output
+    assert "Error:" in output, output
+    for fragment in fragments:
+        assert fragment.lower() in output.lower(), f"{fragment!r} not in {output!r}"
+    return output
+
+
+def assert_nothing_written(folder: Path) -> None:
+    """The output folder holds nothing: no result, no ``.name.*.tmp``."""
+    assert sorted(p.name for p in folder.iterdir()) == []
+
+
+# --- inputs ----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> dict[str, Path]:
+    """A small valid log (CSV and MCAP), a model fitted to it, its inverse and navigation map."""
+    folder = tmp_path_factory.mktemp("inputs")
+    lines = (FIXTURES / "office" / "features.csv").read_text().splitlines()
+    header_end = next(i for i, line in enumerate(lines) if line.startswith("x,"))
+    csv = folder / "features.csv"
+    csv.write_text("\n".join(lines[: header_end + 1 + 400]) + "\n")
+    mcap = folder / "features.mcap"
+    write_mcap(read_log(csv), mcap)
+    model = folder / "model.json"
+    for args in (("fit", csv, "-o", model, "--pieces", "8"), ("invert", model, "-o", folder / "inverse.json"),
+                 ("extract", model, "-o", folder / "nav.geojson", "--angles", "72")):
+        result = run(*args)
+        assert result.exit_code == 0, result.output
+    return {"csv": csv, "mcap": mcap, "model": model, "inverse": folder / "inverse.json",
+            "nav": folder / "nav.geojson"}
+
+
+@pytest.fixture
+def out(tmp_path) -> Path:
+    folder = tmp_path / "out"
+    folder.mkdir()
+    return folder
+
+
+# Commands reading a range log: (arguments for LOG and an output folder, output suffix).
+LOG_COMMANDS = {
+    "fit": lambda log, out, inputs: ["fit", log, "-o", out / "model.json", "--pieces", "8"],
+    "info": lambda log, out, inputs: ["info", log],
+    "convert": lambda log, out, inputs: ["convert", log, "-o", out / "log.csv"],
+    "convert-mcap": lambda log, out, inputs: ["convert", log, "-o", out / "log.mcap"],
+    "plot-features": lambda log, out, inputs: ["plot", "features", log, "-o", out / "features.png"],
+    "plot-nav": lambda log, out, inputs: ["plot", "nav", inputs["nav"], "--features", log, "-o", out / "nav.png"],
+}
+# Commands reading a model (or inverse) file.
+MODEL_COMMANDS = {
+    "info": lambda model, out, inputs: ["info", model],
+    "invert": lambda model, out, inputs: ["invert", model, "-o", out / "inverse.json"],
+    "extract": lambda model, out, inputs: ["extract", model, "-o", out / "nav.geojson", "--angles", "72"],
+    "plot-model": lambda model, out, inputs: ["plot", "model", model, "-o", out / "model.png", "--resolution", "16"],
+}
+# Commands reading a navigation GeoJSON.
+NAV_COMMANDS = {
+    "evaluate": lambda nav, out, inputs: ["evaluate", nav, TRUTH, "--rays", "64"],
+    "plot-nav": lambda nav, out, inputs: ["plot", "nav", nav, "-o", out / "nav.png"],
+}
+
+
+# --- missing input ---------------------------------------------------------------------------
+
+MISSING = {
+    "fit": lambda m, out, inputs: ["fit", m, "-o", out / "model.json"],
+    "info": lambda m, out, inputs: ["info", m],
+    "invert": lambda m, out, inputs: ["invert", m, "-o", out / "inverse.json"],
+    "extract": lambda m, out, inputs: ["extract", m, "-o", out / "nav.geojson"],
+    "evaluate-nav": lambda m, out, inputs: ["evaluate", m, TRUTH],
+    "evaluate-truth": lambda m, out, inputs: ["evaluate", inputs["nav"], m],
+    "convert": lambda m, out, inputs: ["convert", m, "-o", out / "log.csv"],
+    "plot-features": lambda m, out, inputs: ["plot", "features", m, "-o", out / "features.png"],
+    "plot-nav": lambda m, out, inputs: ["plot", "nav", m, "-o", out / "nav.png"],
+    "plot-nav-features": lambda m, out, inputs: ["plot", "nav", inputs["nav"], "--features", m, "-o", out / "n.png"],
+    "plot-nav-truth": lambda m, out, inputs: ["plot", "nav", inputs["nav"], "--truth", m, "-o", out / "n.png"],
+    "plot-model": lambda m, out, inputs: ["plot", "model", m, "-o", out / "model.png"],
+}
+
+
+@pytest.mark.parametrize("command", sorted(MISSING))
+def test_missing_input_file(command, inputs, out, tmp_path):
+    missing = tmp_path / "no_such_file.csv"
+    result = run(*MISSING[command](missing, out, inputs))
+    assert_fails(result, "no_such_file.csv", "does not exist", exit_code=2)
+    assert_nothing_written(out)
+
+
+# --- broken CSV ------------------------------------------------------------------------------
+
+BAD_CSV = {
+    # name: (content, what the message must say)
+    "not a number": ("# a comment\nx,y,z,m\n1,0,0,0.5\n1,abc,0,0.5\n", ["line 4", "not a number", "abc"]),
+    "nan": ("x,y,z,m\n1,0,0,0.5\n1,nan,0,0.5\n", ["line 3", "NaN"]),
+    "evidence 1.5": ("x,y,z,m\n1,0,0,0.5\n1,0,0,1.5\n", ["line 3", "evidence 1.5", "[0, 1]"]),
+    "origin": ("x,y,z,m\n1,0,0,0.5\n0,0,0,0.5\n", ["line 3", "origin"]),
+    "short row": ("x,y,z,m\n1,0,0,0.5\n1,0,0\n", ["line 3", "3 columns"]),
+    "header only": ("x,y,z,m\n", ["no data rows"]),
+    "empty": ("", ["is empty"]),
+}
+
+
+@pytest.mark.parametrize("command", sorted(LOG_COMMANDS))
+@pytest.mark.parametrize("case", sorted(BAD_CSV))
+def test_bad_csv(case, command, inputs, out, tmp_path):
+    content, fragments = BAD_CSV[case]
+    log = tmp_path / "bad.csv"
+    log.write_text(content)
+    result = run(*LOG_COMMANDS[command](log, out, inputs))
+    assert_fails(result, "bad.csv", *fragments, exit_code=1)
+    assert_nothing_written(out)
+
+
+def test_skip_invalid_drops_the_bad_rows(inputs, out, tmp_path):
+    log = tmp_path / "bad.csv"
+    log.write_text(inputs["csv"].read_text() + "1,nan,0,0.5\n")
+    result = run("info", log, "--skip-invalid")
+    assert result.exit_code == 0 and "skipped 1 invalid row" in result.output
+    result = run("convert", log, "-o", out / "log.csv", "--skip-invalid")
+    assert result.exit_code == 0, result.output
+    assert len(read_log(out / "log.csv").single().features) == 400
+
+
+# --- broken MCAP -----------------------------------------------------------------------------
+
+
+def _truncated(inputs, tmp_path, fraction):
+    data = inputs["mcap"].read_bytes()
+    path = tmp_path / "broken.mcap"
+    path.write_bytes(data[: int(len(data) * fraction)])
+    return path
+
+
+def _random_bytes(inputs, tmp_path, fraction):
+    path = tmp_path / "broken.mcap"
+    path.write_bytes(os.urandom(3000))
+    return path
+
+
+def _flipped(inputs, tmp_path, fraction):
+    data = bytearray(inputs["mcap"].read_bytes())
+    position = int(len(data) * fraction)
+    data[position: position + 16] = bytes(16)
+    path = tmp_path / "broken.mcap"
+    path.write_bytes(bytes(data))
+    return path
+
+
+BROKEN_MCAP = {
+    "truncated to 9 bytes": (_truncated, 9 / 10**9),
+    "truncated at 30%": (_truncated, 0.3),
+    "truncated at 99%": (_truncated, 0.99),
+    "random bytes": (_random_bytes, 0.0),
+    "zeroed at 20%": (_flipped, 0.2),
+    "zeroed at 50%": (_flipped, 0.5),
+}
+
+
+@pytest.mark.parametrize("command", sorted(LOG_COMMANDS))
+@pytest.mark.parametrize("case", sorted(BROKEN_MCAP))
+def test_broken_mcap(case, command, inputs, out, tmp_path):
+    make, fraction = BROKEN_MCAP[case]
+    log = make(inputs, tmp_path, fraction)
+    result = run(*LOG_COMMANDS[command](log, out, inputs))
+    if case.startswith("zeroed") and result.exit_code == 0:
+        return  # the damage missed everything that is read (info reads only the summary)
+    assert_fails(result, "broken.mcap", exit_code=1)
+    assert_nothing_written(out)
+
+
+def test_damaged_mcap_anywhere_is_a_clear_error(inputs, tmp_path):
+    """Damage at any offset (a corrupt zstd chunk, a bad channel id, a bad summary offset)
+    gives an OcctoolError, never another exception."""
+    from occtool.errors import OcctoolError
+    from occtool.io import describe_log
+
+    data = inputs["mcap"].read_bytes()
+    path = tmp_path / "damaged.mcap"
+    for offset in range(8, len(data), max(1, len(data) // 150)):
+        for damage in (bytes(4), b"\xff" * 4):
+            damaged = bytearray(data)
+            damaged[offset: offset + 4] = damage
+            path.write_bytes(bytes(damaged))
+            for function in (read_log, describe_log):
+                try:
+                    function(path)
+                except OcctoolError:
+                    pass
+
+
+@pytest.mark.parametrize("command", sorted(set(LOG_COMMANDS) - {"info"}))
+def test_mcap_unknown_topic_lists_the_channels(command, inputs, out):
+    args = LOG_COMMANDS[command](inputs["mcap"], out, inputs)
+    result = run(*args, "--topic", "/camera/points")
+    assert_fails(result, "no topic '/camera/points'", "/occtool/features", exit_code=1)
+    assert_nothing_written(out)
+
+
+def test_topic_on_a_csv_is_an_error(inputs, out):
+    result = run("fit", inputs["csv"], "--topic", "/points", "-o", out / "model.json")
+    assert_fails(result, "--topic applies to MCAP logs only")
+    assert_nothing_written(out)
+
+
+# --- broken model files ----------------------------------------------------------------------
+
+
+def _model_variants(model: dict) -> dict[str, tuple[str, list[str]]]:
+    def changed(**updates):
+        data = json.loads(json.dumps(model))
+        for key, value in updates.items():
+            if value is None:
+                del data[key]
+            else:
+                data[key] = value
+        return json.dumps(data)
+
+    text = json.dumps(model)
+    training = dict(model["training"], samples_by_kind=7)
+    no_loss = {k: v for k, v in model["training"].items() if k != "loss"}
+    return {
+        "truncated": (text[: len(text) // 2], ["not valid JSON"]),
+        "newer format": (changed(format_version=2), ["newer occtool", "format version 2"]),
+        "format version text": (changed(format_version="1"), ["format_version"]),
+        "no training": (changed(training=None), ["'training'"]),
+        "samples not an object": (changed(training=training), ["training summary"]),
+        "piece not numbers": (changed(pieces=[dict(p, c="x") for p in model["pieces"]]), ["not a number"]),
+        "basis a list": (changed(basis=["trig"]), ["unknown basis"]),
+        "constraint NaN": (changed(constraints=dict(model["constraints"], c_min=float("nan"))), ["c_min"]),
+        "rmse NaN": (changed(training=dict(model["training"], rmse=float("nan"))), ["rmse"]),
+        "bad tree": (changed(tree={"op": "max", "children": [0, 99]}), ["99"]),
+        "binary": ("\x00\xff" * 10, []),
+        "no loss": (changed(training=no_loss), []),  # optional: must load, and re-save
+    }
+
+
+@pytest.mark.parametrize("command", sorted(MODEL_COMMANDS))
+@pytest.mark.parametrize("case", [
+    "truncated", "newer format", "format version text", "no training", "samples not an object",
+    "piece not numbers", "basis a list", "constraint NaN", "rmse NaN", "bad tree", "no loss",
+])
+def test_broken_model(case, command, inputs, out, tmp_path):
+    content, fragments = _model_variants(json.loads(inputs["model"].read_text()))[case]
+    path = tmp_path / "model.json"
+    path.write_text(content)
+    result = run(*MODEL_COMMANDS[command](path, out, inputs))
+    if case == "no loss":
+        assert result.exit_code == 0, result.output
+        return
+    assert_fails(result, "model.json", *fragments, exit_code=1)
+    assert_nothing_written(out)
+
+
+@pytest.mark.parametrize("command", ["invert", "extract", "plot-model"])
+def test_not_a_model(command, inputs, out, tmp_path):
+    for content in ('{"a": 1}', "\x00\xff" * 10, ""):
+        path = tmp_path / "model.json"
+        path.write_bytes(content.encode("latin-1"))
+        result = run(*MODEL_COMMANDS[command](path, out, inputs))
+        assert_fails(result, "model.json", exit_code=1)
+        assert_nothing_written(out)
+
+
+def test_broken_inverse(inputs, out, tmp_path):
+    data = json.loads(inputs["inverse"].read_text())
+    data["format_version"] = 7
+    path = tmp_path / "inverse.json"
+    path.write_text(json.dumps(data))
+    for args in (["extract", path, "-o", out / "nav.geojson"], ["info", path]):
+        assert_fails(run(*args), "inverse.json", "newer occtool", exit_code=1)
+    assert_nothing_written(out)
+
+
+# --- broken GeoJSON --------------------------------------------------------------------------
+
+POLYGON = {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 0]]]}
+BAD_GEOJSON = {
+    "truncated": ('{"type": "FeatureCollection", "features": [', ["not valid GeoJSON"]),
+    "not a feature": ('{"a": 1}', ["not a GeoJSON Feature"]),
+    "a list": ("[1, 2]", ["not a GeoJSON Feature"]),
+    "no navigation": ('{"type": "FeatureCollection", "features": []}', ["kind 'navigation'"]),
+    "bad coordinates": (json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"kind": "navigation"},
+         "geometry": {"type": "Polygon", "coordinates": "x"}}]}), ["malformed"]),
+    "NaN coordinate": (json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"kind": "navigation"},
+         "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [float("nan"), 1], [0, 0]]]}}]}),
+        ["not a finite number"]),
+    "point not polygon": (json.dumps({"type": "Feature", "properties": {"kind": "navigation"},
+                                      "geometry": {"type": "Point", "coordinates": [0, 0]}}), ["not a Polygon"]),
+    "empty": ("", ["empty"]),
+    "binary": ("\x00\xc4\xff" * 20, ["not a text"]),
+}
+
+
+@pytest.mark.parametrize("command", sorted(NAV_COMMANDS))
+@pytest.mark.parametrize("case", sorted(BAD_GEOJSON))
+def test_broken_geojson(case, command, inputs, out, tmp_path):
+    content, fragments = BAD_GEOJSON[case]
+    path = tmp_path / "nav.geojson"
+    path.write_bytes(content.encode("latin-1"))
+    result = run(*NAV_COMMANDS[command](path, out, inputs))
+    output = assert_fails(result, "nav.geojson", *fragments, exit_code=1)
+    assert "Warning" not in output
+    assert_nothing_written(out)
+
+
+def test_broken_truth(inputs, out, tmp_path):
+    path = tmp_path / "truth.json"
+    path.write_text('{"format": "occtool-scene-truth", ')
+    assert_fails(run("evaluate", inputs["nav"], path), "truth.json", "not valid JSON", exit_code=1)
+    assert_fails(run("evaluate", inputs["nav"], inputs["model"]), "not a scene truth file", exit_code=1)
+    assert_fails(run("plot", "nav", inputs["nav"], "--truth", path, "-o", out / "nav.png"), "truth.json",
+                 exit_code=1)
+    assert_nothing_written(out)
+
+
+# --- outputs ---------------------------------------------------------------------------------
+
+# Commands writing one file: arguments given the output path.
+WRITERS = {
+    "fit": (lambda inputs, o: ["fit", inputs["csv"], "-o", o, "--pieces", "8"], "model.json"),
+    "invert": (lambda inputs, o: ["invert", inputs["model"], "-o", o], "inverse.json"),
+    "extract": (lambda inputs, o: ["extract", inputs["model"], "-o", o, "--angles", "72"], "nav.geojson"),
+    "convert-csv": (lambda inputs, o: ["convert", inputs["mcap"], "-o", o], "log.csv"),
+    "convert-mcap": (lambda inputs, o: ["convert", inputs["csv"], "-o", o], "log.mcap"),
+    "plot-features": (lambda inputs, o: ["plot", "features", inputs["csv"], "-o", o], "features.png"),
+    "plot-nav": (lambda inputs, o: ["plot", "nav", inputs["nav"], "-o", o], "nav.png"),
+    "plot-model": (lambda inputs, o: ["plot", "model", inputs["model"], "-o", o, "--resolution", "16"], "model.png"),
+}
+
+
+@pytest.mark.parametrize("command", sorted(WRITERS))
+def test_output_in_a_missing_folder(command, inputs, tmp_path):
+    make, name = WRITERS[command]
+    result = run(*make(inputs, tmp_path / "no_such_folder" / name))
+    assert_fails(result, "no_such_folder", "does not exist", exit_code=1)
+    assert not (tmp_path / "no_such_folder").exists()
+
+
+@pytest.mark.parametrize("command", ["invert", "extract"])  # fit -o DIR writes a model set into DIR
+def test_output_that_is_a_folder(command, inputs, out):
+    make, _ = WRITERS[command]
+    result = run(*make(inputs, out))
+    assert_fails(result, "is a directory", str(out), exit_code=1)
+    assert_nothing_written(out)
+
+
+def test_output_to_a_pipe_is_written_into_it(inputs, tmp_path):
+    """A device or pipe (/dev/null, a FIFO) is written into, never replaced by a file."""
+    if not hasattr(os, "mkfifo"):
+        pytest.skip("no named pipes here")
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    received = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    result = run("invert", inputs["model"], "-o", fifo)
+    reader.join(timeout=10)
+    assert result.exit_code == 0, result.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert received and json.loads(received[0])["format"] == "occtool-inverse"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]
+
+
+def test_simulate_into_a_file_is_an_error(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert_fails(run("simulate", "open", "--features", "50", "-o", blocker / "scene"), "not a directory",
+                 exit_code=1)
+    assert blocker.read_text() == "x"
+
+
+@pytest.mark.parametrize("command", ["fit", "convert-csv", "plot-features"])
+def test_a_failing_command_keeps_the_old_output(command, inputs, out, tmp_path):
+    """An existing output survives a failure untouched: the new file is complete or not written."""
+    make, name = WRITERS[command]
+    target = out / name
+    target.write_text("old")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y,z,m\n1,0,0,0.5\n1,0,0,2\n")
+    args = [bad if a == inputs["csv"] or a == inputs["mcap"] else a for a in make(inputs, target)]
+    assert_fails(run(*args), "line 3")
+    assert target.read_text() == "old"
+    assert sorted(p.name for p in out.iterdir()) == [name]
+
+
+# --- overwrite: replace by default, refuse with --no-overwrite --------------------------------
+
+
+@pytest.mark.parametrize("command", sorted(WRITERS))
+def test_overwrite_by_default_and_no_overwrite_refuses(command, inputs, out):
+    make, name = WRITERS[command]
+    target = out / name
+    target.write_text("old")
+    result = run(*make(inputs, target), "--no-overwrite")
+    assert_fails(result, str(target), "exists already", "--overwrite", exit_code=1)
+    assert target.read_text() == "old"
+    result = run(*make(inputs, target))
+    assert result.exit_code == 0, result.output
+    assert target.read_bytes() != b"old"
+    assert sorted(p.name for p in out.iterdir()) == [name]
+
+
+def test_simulate_overwrite(out):
+    args = ("simulate", "open", "--features", "60", "-o", out)
+    assert run(*args).exit_code == 0
+    (out / "features.csv").unlink()
+    (out / "truth.json").write_text("old")
+    assert_fails(run(*args, "--no-overwrite"), "truth.json", "exists already", exit_code=1)
+    assert sorted(p.name for p in out.iterdir()) == ["truth.json"] and (out / "truth.json").read_text() == "old"
+    assert run(*args).exit_code == 0 and (out / "truth.json").read_text() != "old"
+
+
+def test_model_set_outputs_respect_no_overwrite(inputs, tmp_path):
+    """fit -o DIR/ and extract DIR/ -o DIR/ check every file they would write, before writing any."""
+    log = tmp_path / "two.csv"
+    rows = inputs["csv"].read_text().splitlines()
+    start = next(i for i, line in enumerate(rows) if line.startswith("x,"))
+    body = rows[start + 1:]
+    log.write_text("x,y,z,m,position\n" + "\n".join(f"{r},{i % 2}" for i, r in enumerate(body)) + "\n")
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "index.json").write_text("old")
+    assert_fails(run("fit", log, "-o", f"{models}/", "--pieces", "4", "--no-overwrite"), "index.json",
+                 "exists already")
+    assert sorted(p.name for p in models.iterdir()) == ["index.json"]
+    assert run("fit", log, "-o", f"{models}/", "--pieces", "4").exit_code == 0
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    (maps / "nav_0001.geojson").write_text("old")
+    assert_fails(run("extract", models, "-o", f"{maps}/", "--angles", "36", "--no-overwrite"),
+                 "nav_0001.geojson", "exists already")
+    assert sorted(p.name for p in maps.iterdir()) == ["nav_0001.geojson"]
+    assert run("extract", models, "-o", f"{maps}/", "--angles", "36").exit_code == 0
+    assert sorted(p.name for p in maps.iterdir()) == ["nav_0000.geojson", "nav_0001.geojson"]
