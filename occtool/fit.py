@@ -334,7 +334,8 @@ class OccupancyRegressor:
             "n_samples": int(self.n_samples_),
             "samples_by_kind": {k: int(v) for k, v in self.sample_counts_.items()},
             "rmse": float(self.rmse_),
-            "loss": float(self.loss_),
+            # null when unknown (a model file that recorded none): JSON has no NaN
+            "loss": float(self.loss_) if np.isfinite(self.loss_) else None,
             "sweeps": int(self.n_sweeps_),
             "features_sha256": self.features_digest_,
         }
@@ -436,11 +437,11 @@ class _Fitter:
         """Move a piece onto the constraint set (box, and the disc for trig angle terms)."""
         piece = np.clip(piece, self.lower, self.upper)
         if self.k_angle == 2:
-            norm = math.hypot(piece[0], piece[1])
+            norm = pan_weight(piece[0], piece[1])
             if norm > self.p.a_max:
                 piece[:2] *= self.p.a_max / norm
                 # hypot after scaling can exceed a_max by an ulp; shave it off exactly.
-                while math.hypot(piece[0], piece[1]) > self.p.a_max:
+                while pan_weight(piece[0], piece[1]) > self.p.a_max:
                     piece[:2] = np.nextafter(piece[:2], 0.0)
         return piece
 
@@ -454,10 +455,10 @@ class _Fitter:
         rhs = Xw.T @ self.m[rows]
         gram[np.diag_indices_from(gram)] += 1e-9 * (np.trace(gram) + 1.0)
         piece = box_qp(gram, rhs, self.lower, self.upper)
-        if self.k_angle == 2 and math.hypot(piece[0], piece[1]) > self.p.a_max:
+        if self.k_angle == 2 and pan_weight(piece[0], piece[1]) > self.p.a_max:
             # The disc constraint is not a box: keep the direction of the angle weights,
             # fix their length at the bound and re-solve the remaining weights.
-            angle = piece[:2] * (self.p.a_max / math.hypot(piece[0], piece[1]))
+            angle = piece[:2] * (self.p.a_max / pan_weight(piece[0], piece[1]))
             rest = slice(2, None)
             sub_rhs = rhs[rest] - gram[rest, :2] @ angle
             piece = np.concatenate([angle, box_qp(gram[rest, rest], sub_rhs, self.lower[rest], self.upper[rest])])
@@ -826,6 +827,16 @@ class _Fitter:
 
 
 # ====================================================================== helpers
+def pan_weight(a1: float, a2: float) -> float:
+    """``hypot(a1, a2)``, computed as :attr:`MinMaxTree.angle_weight` computes it.
+
+    The constraint ``|dF/dalpha| <= a_max`` is checked (by the loader and the slope
+    bounds) with numpy's ``hypot``, which can be an ulp above ``math.hypot`` for the same
+    pair; a piece projected with the other function could then load as breaking it.
+    """
+    return float(np.hypot(a1, a2))
+
+
 #: Pan-angle bins of :func:`focus_samples`.
 FOCUS_ANGLE_BINS = 120
 #: An obstacle is where at least this many hit samples (two per feature) lie within a

@@ -57,6 +57,8 @@ MIN_CIRCLE_VERTICES = 720
 MIN_SECTOR_LENGTH = 1e-6
 #: Segments per quarter circle of the arcs the shrink draws round obstacle corners.
 SHRINK_QUAD_SEGMENTS = 16
+#: Most heights a map may be cut at (a guard against a tiny slice spacing or a huge body).
+MAX_SLICES = 10_000
 #: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).
 MAX_POINTS = 20_000
 #: Ray/edge pairs intersected at a time when placing obstacle points.
@@ -497,6 +499,9 @@ def navigation_map(
     if slice_spacing is not None and not (math.isfinite(slice_spacing) and slice_spacing > 0):
         raise InputError(f"slice spacing must be a finite number > 0, got {slice_spacing}")
 
+    band = robot.body_band
+    if heights is None and (band[1] - band[0]) / DEFAULT_HEIGHT_SPACING > MAX_SLICES:
+        raise InputError(f"a body band of {band[1] - band[0]:g} m would need over {MAX_SLICES} cuts")
     requested = default_heights(robot) if heights is None else np.asarray(heights, dtype=np.float64).ravel()
     if requested.size == 0:
         raise InputError("at least one height is needed")
@@ -508,7 +513,6 @@ def navigation_map(
             f"sensor height {robot.sensor_height:g} m)"
         )
     requested = np.unique(requested)
-    band = robot.body_band
 
     margin = 0.0
     if slope_bounds is not None:
@@ -516,6 +520,13 @@ def navigation_map(
         lipschitz = height_lipschitz(slope_bounds)
         if slice_spacing is None and lipschitz > 0:
             slice_spacing = max(2.0 * DEFAULT_HEIGHT_MARGIN / lipschitz, MIN_AUTO_SLICE_SPACING)
+    if slice_spacing is not None:
+        extent = max(band[1], requested[-1]) - min(band[0], requested[0])
+        if extent / slice_spacing > MAX_SLICES:
+            raise InputError(
+                f"slice spacing {slice_spacing:g} m would cut the {extent:g} m the heights and body span over "
+                f"{MAX_SLICES} times"
+            )
     cuts = requested if slice_spacing is None else add_slices(requested, band, float(slice_spacing))
     # Keep added slices above the floor: a cut on the floor sees only the floor.
     cuts = cuts[cuts > robot.floor_h]
@@ -559,7 +570,9 @@ def navigation_map(
     if nearest.min() > 0:
         free = _star_polygon(nearest, alpha)
         polygon = free
-        if radius > 0:
+        # Sub-nanometre radii are a point robot: shrinking by them only feeds GEOS and the
+        # ray casting denormal numbers (overflow in the intersection arithmetic).
+        if radius > 1e-9:
             polygon = _component_at_origin(free.buffer(-shrink, quad_segs=SHRINK_QUAD_SEGMENTS))
             if straight_line and not polygon.is_empty:
                 polygon = visible_from_origin(polygon, alpha, max_range)

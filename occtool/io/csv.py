@@ -357,10 +357,11 @@ def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.Pa
     """Write features (or every position of a log) as CSV, atomically.
 
     A :class:`RangeLog` with several positions or with poses gets a ``position``
-    column and, where poses are known, ``pose_x, pose_y, pose_z, pose_yaw`` columns;
-    points stay in each position's sensor-centred frame, so reading the file back
-    gives the same positions and features. Values are written as the shortest
-    decimal that reads back to the same number.
+    column and, where poses are known, ``pose_x, pose_y, pose_z, pose_yaw`` columns,
+    and a ``stamp`` column when every position has a time stamp; points stay in each
+    position's sensor-centred frame, so reading the file back gives the same
+    positions, poses, stamps and features. Values are written as the shortest decimal
+    that reads back to the same number.
 
     Parameters
     ----------
@@ -379,11 +380,15 @@ def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.Pa
         positions = list(features_or_log.positions)
     with_position = len(positions) > 1
     with_pose = any(p.pose is not None for p in positions)
+    # A column holds numbers only: stamps are written when every position has one.
+    with_stamp = bool(positions) and all(p.stamp is not None for p in positions)
     header = ["x", "y", "z", "m"]
     if with_position:
         header.append("position")
     if with_pose:
         header.extend(POSE_COLUMNS)
+    if with_stamp:
+        header.append("stamp")
     blocks = []
     for k, position in enumerate(positions):
         f = position.features
@@ -393,10 +398,15 @@ def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.Pa
         if with_pose:
             pose = position.pose or Pose()
             columns.append(np.tile([pose.x, pose.y, pose.z, pose.yaw], (len(f), 1)))
+        if with_stamp:
+            columns.append(np.full((len(f), 1), float(position.stamp)))
         blocks.append(np.hstack(columns))
     table = np.vstack(blocks) if blocks else np.empty((0, len(header)))
     # repr of a Python float is the shortest text that reads back to the same double.
-    template = ",".join(["{!r}"] * 4 + (["{:.0f}"] if with_position else []) + (["{!r}"] * 4 if with_pose else []))
+    template = ",".join(
+        ["{!r}"] * 4 + (["{:.0f}"] if with_position else []) + (["{!r}"] * 4 if with_pose else [])
+        + (["{!r}"] if with_stamp else [])
+    )
     with atomic_write(path, "w") as handle:
         handle.write(",".join(header) + "\n")
         rows = table.tolist()
