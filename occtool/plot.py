@@ -723,8 +723,8 @@ def model_robot(model: Any) -> Robot:
 def model_extent(model: Any, level: float, robot: Robot | None = None, *, default: float = 5.0) -> float:
     """Half-width of the area worth drawing around a model, metres.
 
-    One and a half times the horizontal distance at which ``F`` reaches ``level``,
-    taken at the 90th percentile over pan angles and heights of the robot's body band,
+    Twice the horizontal distance at which ``F`` reaches ``level``,
+    taken at the median over pan angles and heights of the robot's body band,
     between 1 and 30 m; ``default`` for a model without ``inverse_range``.
     """
     inverse = getattr(model, "inverse_range", None)
@@ -738,9 +738,10 @@ def model_extent(model: Any, level: float, robot: Robot | None = None, *, defaul
     finite = horizontal[np.isfinite(horizontal)]
     if finite.size == 0 or finite.max() <= 0:
         return default
-    # The 90th percentile, not the maximum: where the model saw no features F rises
-    # slowly and the level is crossed far away, which would shrink the rest to a dot.
-    return float(np.clip(1.5 * np.quantile(finite, 0.9), 1.0, 30.0))
+    # The median, not the maximum or a high percentile: where the model saw no features
+    # (or only far ones) F rises slowly and the level is crossed far away, which would
+    # shrink the surroundings of the robot to a dot.
+    return float(np.clip(2.0 * np.median(finite), 1.0, 30.0))
 
 
 def _model_summary(model: Any) -> str:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import re
 import struct
 import sys
@@ -532,8 +534,10 @@ class Inverted:
 
 
 def test_model_extent_follows_where_the_level_is_reached():
-    # F = max(r - 1, 0.2) reaches 0.4 at r = 1.4: horizontally 1.4 m at h = 0, less below.
-    assert plot.model_extent(Inverted(radial_tree()), 0.4, Robot()) == pytest.approx(1.5 * 1.4)
+    # F = max(r - 1, 0.2) reaches 0.4 at r = 1.4: horizontally 1.4 m at h = 0, less below;
+    # the median over the body band's heights (-0.95, -0.475, 0) is at h = -0.475.
+    expected = 2.0 * math.sqrt(1.4**2 - 0.475**2)
+    assert plot.model_extent(Inverted(radial_tree()), 0.4, Robot()) == pytest.approx(expected)
     assert plot.model_extent(radial_tree(), 0.4, Robot(), default=4.0) == 4.0
 
 
