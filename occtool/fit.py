@@ -55,9 +55,11 @@ ProgressCallback = Callable[[int, int], None]
 DEFAULT_BASIS = "trig"
 #: How far (radians) each group's side pieces reach past its segment at the start.
 SEGMENT_OVERLAP = 0.0
-#: Horizontal distance (m) beyond which pushing a crossing farther out gains nothing: the
-#: navigation map looks 1.5 m far by default, and shrinks by the robot radius.
-NAVIGATION_REACH = 2.25
+#: Share of ``focus_range`` beyond which pushing a crossing farther out gains nothing: with
+#: the default 2.5 m, 2.25 m, the default 1.5 m max range of the navigation map plus
+#: room for the shrink by the robot radius. A share, not a distance, so that the fit
+#: scales with the scene (``focus_range``) as the paper's model does.
+NAVIGATION_REACH_SHARE = 0.9
 #: Where obstacles allow, centre crossings stay this far (m) outside the robot's radius.
 BODY_CLEARANCE = 0.1
 #: A centre's crossing stays above this share of the segment's nearest crossing.
@@ -145,7 +147,8 @@ class OccupancyRegressor:
     focus_range
         With ``focus``: the farthest horizontal distance that is fitted, metres. The
         navigation map looks 1.5 m far by default; beyond this the model extrapolates
-        (monotonically) and the initial segments are not spent on distant walls.
+        (monotonically) and the initial segments are not spent on distant walls. Scale it
+        with the max range of the maps you extract (``--focus-range``; about 1.7 x).
     progress
         Optional ``callback(done, total)`` called after each group is built and after
         each refit sweep.
@@ -499,14 +502,15 @@ class _Fitter:
     def initial_groups(self, n_groups: int, n_bins: int) -> list[tuple[int, int]]:
         """Segments ``(first_bin, end_bin)`` (end exclusive, may exceed n_bins: wraps).
 
-        Bins whose first obstacle lies beyond :data:`NAVIGATION_REACH` need no group (where
+        Bins whose first obstacle lies beyond the navigation reach need no group (where
         no group is on, the neighbours' sides recede and the space reads free), so only
         the near runs are cut into at most ``n_groups`` segments.
         """
         if n_groups == 1:
             return [(0, n_bins)]
-        profile = np.minimum(self.range_profile(n_bins), NAVIGATION_REACH)
-        far = profile >= NAVIGATION_REACH
+        reach = NAVIGATION_REACH_SHARE * self.p.focus_range
+        profile = np.minimum(self.range_profile(n_bins), reach)
+        far = profile >= reach
         if far.all():
             return [(0, n_bins)]
         shift = 0
@@ -608,7 +612,7 @@ class _Fitter:
         A, H = np.meshgrid(edges, heights, indexing="ij")
         D = np.repeat(D_edges, PROFILE_HEIGHTS).reshape(A.shape)
         target = np.sqrt(D**2 + H**2).ravel()
-        cap = np.sqrt(np.minimum(D, NAVIGATION_REACH) ** 2 + H**2).ravel()
+        cap = np.sqrt(np.minimum(D, NAVIGATION_REACH_SHARE * self.p.focus_range) ** 2 + H**2).ravel()
         body = np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + H**2).ravel()
         keep_off = np.minimum(body, target - 1e-6)
         nearest = np.sqrt(np.min(D, axis=0) ** 2 + heights**2)

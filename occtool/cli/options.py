@@ -198,7 +198,8 @@ SENSOR_OPTION_NAMES = (
     "depth_error", "near_positions", "near_values", "floor", "footprint_samples", "background_samples",
     "background_weight", "background_range",
 )
-FIT_OPTION_NAMES = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "loss", "huber_delta", "groups", "max_sweeps")
+FIT_OPTION_NAMES = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "loss", "huber_delta", "groups", "max_sweeps",
+                    "focus_range")
 
 
 def _pair(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> tuple[float, float] | None:
@@ -249,6 +250,9 @@ def fit_options(function: F) -> F:
                      help="Angular segments of the tree [default: pieces // 4]."),
         click.option("--max-sweeps", type=click.IntRange(min=0), default=None,
                      help="Least-squares refit sweeps after the construction [default: 0]."),
+        click.option("--focus-range", type=click.FloatRange(min=0.0, min_open=True), default=None,
+                     help="Farthest horizontal distance fitted, metres; scale it with the maps' "
+                          "--max-range (about 1.7x) [default: 2.5]."),
     )
     return options(function)
 
