@@ -1,0 +1,434 @@
+"""The parametric model against occupancy grids, on the same features and the same output.
+
+:func:`compare_grid` fits the parametric model and builds the baselines from the same
+features (less a held-out share), extracts the navigation polygon from each with the
+same settings, and reports what each costs (samples, time, memory) and how each does
+(agreement with the parametric polygon, IoU and safety against a scene's truth, ROC AUC
+of occupancy on held-out features). The report is a plain dict, the layout of
+``occtool compare-grid --json`` (see docs/comparison.md).
+
+Baselines:
+
+* ``grid``: the dense 3D grid of :mod:`occtool.grid`, fed with the same sensor model;
+* ``octomap``: OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`), optional.
+
+Both get the parametric model's prior on the robot's footprint (it is free), since the
+robot's own sensor never sees the columns under it.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import tempfile
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.features import Features
+from occtool.robot import Robot
+
+if TYPE_CHECKING:
+    from occtool.fit import OccupancyRegressor
+
+FloatArray = NDArray[np.float64]
+
+#: Fractions of a held-out feature's range where the "free" test points lie.
+FREE_FRACTIONS = (0.25, 0.5, 0.75)
+
+REPORT_VERSION = 1
+
+logger = logging.getLogger("occtool.compare")
+
+
+def roc_auc(occupied: FloatArray, free: FloatArray) -> float:
+    """Area under the ROC curve of scores for "occupied" against "free" points.
+
+    The Mann-Whitney statistic: the probability that a random occupied point scores above
+    a random free one, ties counting half. NaN when either set is empty.
+    """
+    from scipy.stats import rankdata
+
+    occupied = np.asarray(occupied, dtype=np.float64)
+    free = np.asarray(free, dtype=np.float64)
+    n_occ, n_free = occupied.size, free.size
+    if n_occ == 0 or n_free == 0:
+        return float("nan")
+    ranks = rankdata(np.concatenate([occupied, free]))
+    return float((ranks[:n_occ].sum() - n_occ * (n_occ + 1) / 2.0) / (n_occ * n_free))
+
+
+def polygon_iou(a: shapely.Geometry, b: shapely.Geometry) -> float:
+    """Intersection over union of two areas; 1 when both are empty."""
+    area_a, area_b = float(a.area), float(b.area)
+    if area_a == 0.0 and area_b == 0.0:
+        return 1.0
+    overlap = float(shapely.intersection(a, b).area)
+    union = area_a + area_b - overlap
+    return overlap / union if union > 0 else 0.0
+
+
+def split_holdout(n: int, holdout: float, seed: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices of the features used to build the models and of the held-out ones.
+
+    Parameters
+    ----------
+    n
+        Number of features.
+    holdout
+        Share held out, in [0, 0.5].
+    seed
+        Seed of the random split.
+    """
+    if not 0.0 <= holdout <= 0.5:
+        raise InputError(f"the held-out share must lie in [0, 0.5], got {holdout}")
+    order = np.random.default_rng(seed).permutation(n)
+    n_out = int(round(holdout * n))
+    if n - n_out < 1:
+        raise InputError(f"{n} features leave none to build the models from")
+    return np.sort(order[n_out:]), np.sort(order[:n_out])
+
+
+def holdout_points(features: Features, is_floor: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+    """Test points from held-out features: their end points and points along their rays.
+
+    Floor features are left out of the occupied points (every model here reads the floor
+    as free space, as the sensor model says); their rays still give free points.
+
+    Returns
+    -------
+    occupied, free
+        ``(K, 3)`` and ``(M, 3)`` points in the sensor frame.
+    """
+    points = features.points
+    occupied = points[~is_floor]
+    free = np.concatenate([points * f for f in FREE_FRACTIONS]) if len(points) else np.zeros((0, 3))
+    return occupied, free
+
+
+@dataclass
+class ModelResult:
+    """What one model cost and produced."""
+
+    name: str
+    samples: int
+    build_s: float
+    extract_s: float
+    memory_bytes: int
+    file_bytes: int
+    polygon: shapely.Geometry
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def figures(self) -> dict[str, Any]:
+        return {
+            "samples": int(self.samples),
+            "build_s": float(self.build_s),
+            "extract_s": float(self.extract_s),
+            "memory_bytes": int(self.memory_bytes),
+            "file_bytes": int(self.file_bytes),
+            "polygon_area": float(self.polygon.area),
+            **self.extra,
+        }
+
+
+def _timed(function: Callable[[], Any], repeat: int) -> tuple[Any, float]:
+    """Run ``function`` ``repeat`` times; its last result and the shortest time, seconds."""
+    best = float("inf")
+    result = None
+    for _ in range(max(1, repeat)):
+        start = time.perf_counter()
+        result = function()
+        best = min(best, time.perf_counter() - start)
+    return result, best
+
+
+def _file_size(write: Callable[[str], Any], suffix: str) -> int:
+    fd, name = tempfile.mkstemp(suffix=suffix)
+    os.close(fd)
+    try:
+        write(name)
+        return os.path.getsize(name)
+    finally:
+        os.unlink(name)
+
+
+def tree_bytes(tree: Any) -> int:
+    """Memory of a min/max tree's parameters: the piece coefficients plus one 8-byte
+    reference per node of the tree structure."""
+
+    def nodes(node: Any) -> int:
+        return 1 if isinstance(node, (int, np.integer)) else 1 + sum(nodes(c) for c in node.children)
+
+    return int(tree.coefficients.nbytes + 8 * nodes(tree.root))
+
+
+def _save_model_size(model: Any) -> int:
+    from occtool.io.model import save_model
+
+    return _file_size(lambda name: save_model(model, name), ".json")
+
+
+def _save_grid_size(grid: Any) -> int:
+    # The grid's best case on disk: its log-odds array compressed.
+    def write(name: str) -> None:
+        with open(name, "wb") as handle:
+            np.savez_compressed(handle, log_odds=grid.log_odds, offset=grid.offset, resolution=grid.resolution)
+
+    return _file_size(write, ".npz")
+
+
+def _navigation(inverse_range: Callable[..., Any], navigation: Mapping[str, Any], **extra: Any) -> Any:
+    from occtool.navigation import NavigationWarning, navigation_map
+
+    with warnings.catch_warnings():
+        # An empty polygon (the robot in collision) is a result to report, not to warn about.
+        warnings.simplefilter("ignore", NavigationWarning)
+        return navigation_map(inverse_range, **{**navigation, **extra})
+
+
+def compare_grid(
+    features: Features,
+    *,
+    regressor: OccupancyRegressor,
+    navigation: Mapping[str, Any],
+    resolution: float = 0.05,
+    octomap: bool = False,
+    octomap_scans: int = 10,
+    truth: Any = None,
+    holdout: float = 0.1,
+    seed: int = 0,
+    repeat: int = 1,
+    file_sizes: bool = True,
+    grid_bounds: tuple[Any, Any] | None = None,
+) -> dict[str, Any]:
+    """Compare the parametric model with a dense grid (and OctoMap) on the same features.
+
+    Parameters
+    ----------
+    features
+        Range features of one robot position, sensor-centred robot frame.
+    regressor
+        An unfitted :class:`occtool.fit.OccupancyRegressor` carrying the fit settings, the
+        sensor model and the robot; the grid uses the same sensor model and robot.
+    navigation
+        Keyword arguments of :func:`occtool.navigation.navigation_map` (``robot``,
+        ``threshold``, ``heights``, ``max_range``, ``n_angles``, ...), the same for all.
+    resolution
+        Cell edge of the grids, metres.
+    octomap
+        Also build the OctoMap baseline (needs ``pyoctomap``).
+    octomap_scans
+        Features are inserted into OctoMap as this many scans (consecutive runs in log
+        order). OctoMap updates each cell at most once per scan, so with one scan a single
+        outlier end point marks its cell occupied.
+    truth
+        A :class:`occtool.simulate.Scene` to score the polygons against, or ``None``.
+    holdout
+        Share of the features held out of every model to score occupancy (ROC AUC).
+    seed
+        Seed of the held-out split.
+    repeat
+        Build and extract each model this many times and report the shortest time.
+    file_sizes
+        Also measure the saved files' sizes (writes temporary files).
+    grid_bounds
+        ``(lower, upper)`` corners of the box the dense grid covers, metres (default: the
+        features' extent).
+
+    Returns
+    -------
+    dict
+        The report; see docs/comparison.md for its layout.
+    """
+    from occtool.grid import build_grid
+    from occtool.sensor import SensorModel
+
+    if len(features) < 2:
+        raise InputError(f"comparing needs at least 2 features, got {len(features)}")
+    if not (np.isfinite(resolution) and resolution > 0):
+        raise InputError(f"grid resolution must be a positive number of metres, got {resolution}")
+    if int(octomap_scans) != octomap_scans or octomap_scans < 1:
+        raise InputError(f"OctoMap scans must be a whole number >= 1, got {octomap_scans}")
+    navigation = dict(navigation)
+    robot: Robot = navigation.get("robot") or regressor.robot or Robot()
+    navigation["robot"] = robot
+    sensor = regressor.sensor if regressor.sensor is not None else SensorModel()
+    # Every model sees the same robot and sensor model; the caller's regressor is left as it is.
+    settings = {**regressor.get_params(), "robot": robot, "sensor": sensor}
+    max_range = float(navigation.get("max_range", 1.5))
+    # Rays are read past the max range by the robot radius before the shrink, plus a cell.
+    read_range = max_range + robot.radius + resolution
+    grid_navigation = {**navigation}
+    if grid_navigation.get("slice_spacing") is None:
+        # A grid has no slope bounds to hold between cuts: cut it at every cell layer.
+        grid_navigation["slice_spacing"] = resolution
+
+    train_index, test_index = split_holdout(len(features), holdout, seed)
+    train = features.select(train_index)
+    test = features.select(test_index)
+    occupied_points, free_points = holdout_points(test, np.asarray(sensor.is_floor(test.height, robot), dtype=bool))
+
+    results: dict[str, ModelResult] = {}
+    scores: dict[str, tuple[FloatArray, FloatArray]] = {}
+
+    # --- parametric model
+    model, fit_s = _timed(lambda: type(regressor)(**settings).fit(train), repeat)
+    nav, extract_s = _timed(
+        lambda: _navigation(model.inverse_range, navigation, slope_bounds=model.slope_bounds_), repeat
+    )
+    results["parametric"] = ModelResult(
+        name="parametric",
+        samples=int(model.n_samples_),
+        build_s=fit_s,
+        extract_s=extract_s,
+        memory_bytes=tree_bytes(model.tree_),
+        file_bytes=_save_model_size(model) if file_sizes else 0,
+        polygon=nav.polygon,
+        extra={"pieces": int(model.tree_.n_pieces), "samples_per_feature": model.n_samples_ / max(1, len(train))},
+    )
+    logger.info("parametric: fit %.3f s, extract %.4f s, %d pieces", fit_s, extract_s, model.tree_.n_pieces)
+    scores["parametric"] = tuple(  # type: ignore[assignment]
+        np.asarray(model.predict(*_polar(p)), dtype=np.float64) for p in (occupied_points, free_points)
+    )
+
+    # --- dense grid
+    grid, grid_s = _timed(
+        lambda: build_grid(train, resolution=resolution, robot=robot, sensor=sensor, bounds=grid_bounds), repeat
+    )
+    grid_nav, grid_extract_s = _timed(
+        lambda: _navigation(
+            lambda a, h, level: grid.inverse_range(a, h, level, max_range=read_range), grid_navigation
+        ),
+        repeat,
+    )
+    results["grid"] = ModelResult(
+        name="grid",
+        samples=grid.samples,
+        build_s=grid_s,
+        extract_s=grid_extract_s,
+        memory_bytes=grid.nbytes,
+        file_bytes=_save_grid_size(grid) if file_sizes else 0,
+        polygon=grid_nav.polygon,
+        extra={"cells": int(np.prod(grid.shape)), "observed_cells": grid.observed_cells, "shape": list(grid.shape)},
+    )
+    logger.info("grid: %s cells, built in %.3f s, extract %.4f s", "x".join(map(str, grid.shape)), grid_s, grid_extract_s)
+    scores["grid"] = (grid.occupancy(occupied_points), grid.occupancy(free_points))
+
+    # --- OctoMap
+    if octomap:
+        from occtool.octomap import build_octomap, octomap_updates
+
+        tree, octo_s = _timed(
+            lambda: build_octomap(train, resolution=resolution, robot=robot, scans=int(octomap_scans), sensor=sensor), repeat
+        )
+        octo_nav, octo_extract_s = _timed(
+            lambda: _navigation(
+                lambda a, h, level: tree.inverse_range(a, h, level, max_range=read_range), grid_navigation
+            ),
+            repeat,
+        )
+        results["octomap"] = ModelResult(
+            name="octomap",
+            samples=octomap_updates(train, resolution, int(octomap_scans), robot=robot, sensor=sensor),
+            build_s=octo_s,
+            extract_s=octo_extract_s,
+            memory_bytes=tree.memory_bytes,
+            file_bytes=tree.file_bytes() if file_sizes else 0,
+            polygon=octo_nav.polygon,
+            extra={"leaves": tree.leaf_count, "scans": int(octomap_scans)},
+        )
+        logger.info("octomap: %d leaves, built in %.3f s, extract %.4f s", tree.leaf_count, octo_s, octo_extract_s)
+        scores["octomap"] = (tree.occupancy(occupied_points), tree.occupancy(free_points))
+
+    parametric = results["parametric"]
+    report: dict[str, Any] = {
+        "version": REPORT_VERSION,
+        "features": len(features),
+        "features_used": len(train),
+        "features_held_out": len(test),
+        "robot_radius": float(robot.radius),
+        "settings": {
+            "resolution": float(resolution),
+            "threshold": float(navigation.get("threshold", 0.6)),
+            "heights": [float(h) for h in nav.heights],
+            "slice_heights": [float(h) for h in nav.slice_heights],
+            "max_range": max_range,
+            "n_angles": int(navigation.get("n_angles", 360)),
+            "robot_radius": float(robot.radius),
+            "pieces": int(model.tree_.n_pieces),
+            "octomap_scans": int(octomap_scans) if octomap else None,
+            "holdout": float(holdout),
+            "seed": int(seed),
+            "repeat": int(repeat),
+            "log_odds": "OctoMap defaults: prob_hit 0.7, prob_miss 0.4, clamping 0.1192..0.971",
+        },
+        "footprint_prior": (
+            "the grids mark the robot's footprint cylinder (radius "
+            f"{robot.radius:g} m over its body band) free, as the parametric model's footprint samples do"
+        ),
+        "models": {name: result.figures() for name, result in results.items()},
+        "agreement": {
+            name: {"iou": polygon_iou(parametric.polygon, result.polygon)}
+            for name, result in results.items()
+            if name != "parametric"
+        },
+        "auc": {name: roc_auc(*pair) for name, pair in scores.items()},
+        "auc_points": {"occupied": int(occupied_points.shape[0]), "free": int(free_points.shape[0])},
+        "ratios": {},
+    }
+    for name, result in results.items():
+        if name == "parametric":
+            continue
+        report["ratios"][name] = {
+            "memory": result.memory_bytes / max(1, parametric.memory_bytes),
+            "file": (result.file_bytes / parametric.file_bytes) if parametric.file_bytes else None,
+            "time": (result.build_s + result.extract_s) / max(1e-12, parametric.build_s + parametric.extract_s),
+            "build_time": result.build_s / max(1e-12, parametric.build_s),
+            "extract_time": result.extract_s / max(1e-12, parametric.extract_s),
+        }
+    if truth is not None:
+        from occtool.evaluate import evaluate_navigation
+
+        report["truth"] = {}
+        for name, result in results.items():
+            evaluation = evaluate_navigation(result.polygon, truth, robot_radius=robot.radius, max_range=max_range)
+            report["truth"][name] = {
+                "iou": float(evaluation.iou),
+                "violation": float(evaluation.violation),
+                "coverage": float(evaluation.coverage),
+            }
+    report["polygons"] = {name: json.loads(shapely.to_geojson(result.polygon)) for name, result in results.items()}
+    return report
+
+
+def _polar(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    return (
+        np.arctan2(points[:, 1], points[:, 0]),
+        points[:, 2].copy(),
+        np.sqrt(np.einsum("ij,ij->i", points, points)),
+    )
+
+
+def report_json(report: Mapping[str, Any], *, indent: int | None = 2) -> str:
+    """The report as JSON text (NaN written as null)."""
+
+    def clean(value: Any) -> Any:
+        if isinstance(value, float) and not np.isfinite(value):
+            return None
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v) for v in value]
+        if isinstance(value, np.generic):
+            return clean(value.item())
+        return value
+
+    return json.dumps(clean(dict(report)), indent=indent, allow_nan=False)
