@@ -259,7 +259,15 @@ class OccupancyRegressor:
         rng = np.random.default_rng(self.seed)
         if len(features) == 0:
             raise InputError("no features to fit")
-        samples = sensor.samples(features, robot, rng)
+        # Mismatches a few centimetres apart can pass for a small obstacle; where other
+        # rays in nearly the same direction see through them, they are dropped. Floor
+        # features are not obstacles, and grazing rays see "through" them all the time.
+        if self.focus:
+            mismatch = contradicted_features(features) & ~sensor.is_floor(features.height, robot)
+            usable = features.select(~mismatch)
+        else:
+            usable = features
+        samples = sensor.samples(usable, robot, rng)
         if samples.count("hit") + samples.count("near") + samples.count("floor") == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
 
@@ -870,6 +878,59 @@ def adaptive_support(n_rays: int) -> tuple[int, int]:
     support = 2 * max(int(np.clip(round(per_bin / 30.0), 2, 3)), round(per_bin / 60.0))
     rank = max(2, round(per_bin / 14.0))
     return support, rank
+
+
+#: Pan-angle bins of the line-of-sight test (:func:`contradicted_features`).
+SIGHT_BINS = 120
+#: A ray passes "through" a feature when it crosses the feature's horizontal distance
+#: within this many metres of the feature's height, plus this share of the distance. Tight,
+#: because rays grazing a horizontal surface (a table top seen from above) end on it a
+#: little farther on: 5 cm + 10 % counted those as passing through the nearer part.
+SIGHT_HEIGHT_TOLERANCE = 0.02
+SIGHT_HEIGHT_SHARE = 0.02
+#: Rays per bin tested against each feature at most (an even subsample beyond that), so
+#: the test stays linear in the number of features.
+SIGHT_MAX_RAYS = 256
+
+
+def contradicted_features(features: Features) -> NDArray[np.bool_]:
+    """Features that other rays in nearly the same direction pass through.
+
+    A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
+    range sits in space that other rays of its pan-angle bin cross on their way to
+    something farther. A feature is contradicted when at least two rays of its bin
+    (:data:`SIGHT_BINS`), and at least twice as many as end near it (itself included),
+    pass within :data:`SIGHT_HEIGHT_TOLERANCE` (+ :data:`SIGHT_HEIGHT_SHARE` of the
+    distance) of its height at its horizontal distance
+    and end beyond the focus window (:data:`FOCUS_WINDOW`, :data:`FOCUS_WINDOW_ABS`).
+    Near the robot the height tolerance spans a wide tilt range, so isolated mismatches
+    there, which would box the robot in, are the ones most surely caught.
+    """
+    alpha, h, r = features.polar()
+    contradicted = np.zeros(r.size, dtype=bool)
+    if r.size == 0:
+        return contradicted
+    distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
+    bins = angle_bins(alpha, SIGHT_BINS)
+    order = np.argsort(bins, kind="stable")
+    bounds = np.searchsorted(bins[order], np.arange(SIGHT_BINS + 1))
+    for first, last in zip(bounds[:-1], bounds[1:]):  # a loop over bins; points are vectorised
+        members = order[first:last]
+        if members.size < 3:
+            continue
+        rays = members[:: max(1, members.size // SIGHT_MAX_RAYS)]
+        D, H = distance[members, None], h[members, None]
+        d, z = distance[None, rays], h[None, rays]
+        window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
+        tolerance = SIGHT_HEIGHT_TOLERANCE + SIGHT_HEIGHT_SHARE * D
+        with np.errstate(divide="ignore", invalid="ignore"):
+            height_there = z * D / d
+        passes = (d > D + window) & (np.abs(height_there - H) < tolerance)
+        ends_near = (np.abs(d - D) <= window) & (np.abs(z - H) < tolerance)
+        beyond = passes.sum(axis=1)
+        near = np.maximum(ends_near.sum(axis=1), 1)
+        contradicted[members] = beyond >= np.maximum(2, 2 * near)
+    return contradicted
 
 
 def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int,

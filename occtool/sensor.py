@@ -228,8 +228,12 @@ class SensorModel:
         alpha, h, r = features.polar()
         m = features.evidence
         on_floor = self.is_floor(h, robot)
-        obstacle = ~on_floor if self.floor != "obstacle" else np.ones_like(on_floor)
-        free_only = on_floor if self.floor == "free" else np.zeros_like(on_floor)
+        # A feature inside the robot's own body cylinder is the robot itself (a self-hit)
+        # or a mismatch: no obstacle can stand there. Two such mismatches a few centimetres
+        # apart once made the robot "in collision where it stands" (office, 7k features).
+        on_robot = self.is_on_robot(features, robot)
+        obstacle = (~on_floor if self.floor != "obstacle" else np.ones_like(on_floor)) & ~on_robot
+        free_only = (on_floor if self.floor == "free" else np.zeros_like(on_floor)) & ~on_robot
         rays = obstacle | free_only
 
         parts: list[tuple[FloatArray, ...]] = []
@@ -258,6 +262,11 @@ class SensorModel:
             weight=columns[4].astype(np.float64),
             kind=columns[5].astype(np.int8),
         )
+
+    def is_on_robot(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
+        """Whether features lie inside the robot's body cylinder (radius, floor to top)."""
+        x, y, z = features.points.T
+        return (np.hypot(x, y) < robot.radius) & (z >= robot.floor_h) & (z <= robot.body_band[1])
 
     def is_floor(self, h: ArrayLike, robot: Robot) -> NDArray[np.bool_]:
         """Whether features at sensor-frame heights ``h`` lie below the ground clearance."""

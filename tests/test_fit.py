@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
-from occtool.fit import OccupancyRegressor, box_qp, first_obstacle_distance
+from occtool.fit import OccupancyRegressor, box_qp, contradicted_features, first_obstacle_distance
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 
@@ -199,3 +199,39 @@ def test_overhanging_table_top_cuts_every_height():
         assert horizontal <= 1.0
     behind = np.sqrt(model.inverse_range(np.pi, -0.6, 0.6) ** 2 - 0.36)
     assert behind > 1.3
+
+
+def _wall_with_mismatches() -> tuple[Features, np.ndarray]:
+    """A wall 2 m ahead seen at many tilts, plus two mismatches 0.45 m ahead at mid tilt."""
+    rng = np.random.default_rng(3)
+    pan = rng.uniform(-0.02, 0.02, 400)
+    tilt = rng.uniform(-0.6, 0.3, 400)
+    x = np.full(400, 2.0)
+    wall = np.column_stack([x, x * np.tan(pan), x * np.tan(tilt) / np.cos(pan)])
+    mismatches = np.array([[0.45, 0.003, -0.10], [0.47, 0.006, -0.11]])
+    points = np.vstack([wall, mismatches])
+    is_mismatch = np.r_[np.zeros(400, bool), np.ones(2, bool)]
+    return Features(points, np.full(len(points), 0.9)), is_mismatch
+
+
+def test_mismatches_that_other_rays_see_through_are_contradicted():
+    features, is_mismatch = _wall_with_mismatches()
+    contradicted = contradicted_features(features)
+    assert contradicted[is_mismatch].all()
+    assert contradicted[~is_mismatch].mean() < 0.02
+
+
+def test_a_table_top_seen_from_above_is_not_contradicted():
+    # Rays graze a horizontal top 0.25 m below the sensor from 0.9 m to 1.6 m ahead: each
+    # ends on the top a little beyond its neighbour, which must not read as seeing through.
+    d = np.linspace(0.9, 1.6, 300)
+    pan = np.linspace(-0.02, 0.02, 300)
+    points = np.column_stack([d * np.cos(pan), d * np.sin(pan), np.full(300, -0.25)])
+    assert not contradicted_features(Features(points, np.full(300, 0.9))).any()
+
+
+def test_contradicted_mismatches_leave_the_fit_unchanged():
+    features, is_mismatch = _wall_with_mismatches()
+    with_mismatches = OccupancyRegressor(pieces=8).fit(features)
+    without = OccupancyRegressor(pieces=8).fit(features.select(~is_mismatch))
+    assert with_mismatches.tree_.to_dict() == without.tree_.to_dict()

@@ -86,3 +86,13 @@ def test_dict_round_trip():
     assert SensorModel.from_dict(sensor.to_dict()) == sensor
     with pytest.raises(InputError, match="unknown"):
         SensorModel.from_dict({"depht_error": 0.1})
+
+
+def test_features_inside_the_robot_body_give_no_samples():
+    robot = Robot(radius=0.25, sensor_height=1.0, body_height=1.0)
+    inside = Features(np.array([[0.1, 0.05, -0.5], [0.0, -0.2, -0.9]]), np.array([0.9, 0.9]))
+    outside = Features(np.array([[0.3, 0.0, -0.5]]), np.array([0.9]))
+    model = SensorModel(footprint_samples=0)
+    assert model.is_on_robot(inside, robot).all() and not model.is_on_robot(outside, robot).any()
+    assert len(model.samples(inside, robot)) == 0
+    assert len(model.samples(outside, robot)) == 5
