@@ -265,8 +265,14 @@ class OccupancyRegressor:
         # Mismatches a few centimetres apart can pass for a small obstacle; where other
         # rays in nearly the same direction see through them, they are dropped. Floor
         # features are not obstacles, and grazing rays see "through" them all the time.
+        # The trig basis has no seam, so the angular bins can start anywhere: starting them
+        # at the mean direction of the obstacle features makes the whole fit (the mismatch
+        # test included) turn with the scene: rotating the features rotates the model
+        # exactly, not up to a bin.
+        obstacle = ~sensor.is_floor(features.height, robot) & ~sensor.is_on_robot(features, robot)
+        origin = mean_direction(features.alpha[obstacle]) if self.basis == "trig" else 0.0
         if self.focus:
-            mismatch = contradicted_features(features) & ~sensor.is_floor(features.height, robot)
+            mismatch = contradicted_features(features, origin=origin) & obstacle
             usable = features.select(~mismatch)
         else:
             usable = features
@@ -274,10 +280,6 @@ class OccupancyRegressor:
         if samples.count("hit") + samples.count("near") + samples.count("floor") == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
 
-        # The trig basis has no seam, so the angular bins can start anywhere: starting them
-        # at the mean direction of the hits makes the whole fit turn with the scene
-        # (rotating the features rotates the model exactly, not up to a bin).
-        origin = mean_direction(samples) if self.basis == "trig" else 0.0
         turned = Samples(wrap_angle(samples.alpha - origin), samples.h, samples.r, samples.m, samples.weight,
                          samples.kind)
         if self.focus:
@@ -893,7 +895,7 @@ SIGHT_HEIGHT_SHARE = 0.02
 SIGHT_MAX_RAYS = 256
 
 
-def contradicted_features(features: Features) -> NDArray[np.bool_]:
+def contradicted_features(features: Features, origin: float = 0.0) -> NDArray[np.bool_]:
     """Features that other rays in nearly the same direction pass through.
 
     A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
@@ -904,14 +906,15 @@ def contradicted_features(features: Features) -> NDArray[np.bool_]:
     distance) of its height at its horizontal distance
     and end beyond the focus window (:data:`FOCUS_WINDOW`, :data:`FOCUS_WINDOW_ABS`).
     Near the robot the height tolerance spans a wide tilt range, so isolated mismatches
-    there, which would box the robot in, are the ones most surely caught.
+    there, which would box the robot in, are the ones most surely caught. The bins start
+    at the pan angle ``origin``.
     """
     alpha, h, r = features.polar()
     contradicted = np.zeros(r.size, dtype=bool)
     if r.size == 0:
         return contradicted
     distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
-    bins = angle_bins(alpha, SIGHT_BINS)
+    bins = angle_bins(alpha - origin, SIGHT_BINS)
     order = np.argsort(bins, kind="stable")
     bounds = np.searchsorted(bins[order], np.arange(SIGHT_BINS + 1))
     for first, last in zip(bounds[:-1], bounds[1:]):  # a loop over bins; points are vectorised
@@ -1040,13 +1043,12 @@ def wrap_angle(alpha: FloatArray) -> FloatArray:
     return np.mod(np.asarray(alpha) + np.pi, 2.0 * np.pi) - np.pi
 
 
-def mean_direction(samples: Samples) -> float:
-    """The direction of the mean unit vector of the hit samples (0 if there are none)."""
-    hit = samples.kind == SAMPLE_KINDS["hit"]
-    if not hit.any():
+def mean_direction(alpha: FloatArray) -> float:
+    """The direction of the mean unit vector of pan angles ``alpha`` (0 if there are none)."""
+    if alpha.size == 0:
         return 0.0
-    x, y = float(np.cos(samples.alpha[hit]).sum()), float(np.sin(samples.alpha[hit]).sum())
-    return math.atan2(y, x) if math.hypot(x, y) > 1e-9 * hit.sum() else 0.0
+    x, y = float(np.cos(alpha).sum()), float(np.sin(alpha).sum())
+    return math.atan2(y, x) if math.hypot(x, y) > 1e-9 * alpha.size else 0.0
 
 
 def angle_bins(alpha: FloatArray, n_bins: int) -> NDArray[np.intp]:
