@@ -613,8 +613,12 @@ class _Fitter:
         # Between two bins the obstacle may be as near as in either of them.
         left = np.where(bins > first, np.minimum(D_bins, profile[np.mod(bins - 1, n_bins)]), D_bins)
         right = np.where(bins < end - 1, np.minimum(D_bins, profile[np.mod(bins + 1, n_bins)]), D_bins)
-        edges = np.concatenate([bins, bins + 1]) * width - np.pi
-        D_edges = np.concatenate([left, right])
+        # The right edge of one bin is the left edge of the next, with the same bound:
+        # keep each edge once (the nearer bound), halving the programmes' rows.
+        edge_index, first_of = np.unique(np.concatenate([bins, bins + 1]), return_inverse=True)
+        D_edges = np.full(edge_index.size, np.inf)
+        np.minimum.at(D_edges, first_of, np.concatenate([left, right]))
+        edges = edge_index * width - np.pi
         # From the floor up: the map's lowest cut may lie a little under the clearance.
         low, high = self.robot.floor_h, self.robot.body_band[1]
         heights = np.linspace(low, max(high, 0.0), PROFILE_HEIGHTS)
