@@ -111,7 +111,7 @@ def design_matrix(basis: str, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> F
 
 def _evaluate(node: Node, values: FloatArray) -> FloatArray:
     if isinstance(node, int):
-        return values[:, node]
+        return values[node]
     reduce = np.minimum if node.op == "min" else np.maximum
     out = _evaluate(node.children[0], values)
     for child in node.children[1:]:
@@ -121,7 +121,7 @@ def _evaluate(node: Node, values: FloatArray) -> FloatArray:
 
 def _evaluate_active(node: Node, values: FloatArray) -> tuple[FloatArray, NDArray[np.intp]]:
     if isinstance(node, int):
-        return values[:, node], np.full(values.shape[0], node, dtype=np.intp)
+        return values[node], np.full(values.shape[1], node, dtype=np.intp)
     out, active = _evaluate_active(node.children[0], values)
     for child in node.children[1:]:
         value, child_active = _evaluate_active(child, values)
@@ -159,16 +159,21 @@ class _PieceTree:
         return int(self.coefficients.shape[0])
 
     def _values(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> tuple[FloatArray, tuple[int, ...]]:
+        """Every piece's value at every point: ``(L, n)``, one contiguous row per piece."""
         alpha, h, x = (np.asarray(v, dtype=np.float64) for v in (alpha, h, x))
         shape = np.broadcast_shapes(alpha.shape, h.shape, x.shape)
-        # Each term is formed on its own (un-broadcast) input and the terms are summed by
-        # broadcasting: a sweep of N angles x H heights computes N cosines and H products,
-        # not N*H of each, and no matrix product (a multi-threaded BLAS made these small
-        # products several times slower on a busy 2-core machine).
-        values: FloatArray = self.coefficients[:, -1]
-        for column, weights in zip([*angle_terms(self.basis, alpha), h, x], self.coefficients[:, :-1].T):
-            values = values + column[..., None] * weights
-        values = np.broadcast_to(values, (*shape, self.n_pieces)).reshape(-1, self.n_pieces)
+        lead = (self.n_pieces,) + (1,) * len(shape)
+        # Each term is formed on its own (un-broadcast) input, smallest first, so a sweep of
+        # N angles x H heights computes N cosines and H products and only the last sum is
+        # full size; no matrix product (a multi-threaded BLAS made these small products
+        # several times slower on a busy 2-core machine). Rows per piece keep the MIN/MAX
+        # reductions on contiguous memory.
+        terms = sorted(zip([*angle_terms(self.basis, alpha), h, x], self.coefficients[:, :-1].T),
+                       key=lambda term: term[0].size)
+        values: FloatArray = self.coefficients[:, -1].reshape(lead)
+        for column, weights in terms:
+            values = values + weights.reshape(lead) * column
+        values = np.broadcast_to(values, (self.n_pieces, *shape)).reshape(self.n_pieces, -1)
         return values, shape
 
     def _eval(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> FloatArray:
