@@ -272,7 +272,10 @@ class OccupancyRegressor:
         obstacle = ~sensor.is_floor(features.height, robot) & ~sensor.is_on_robot(features, robot)
         origin = mean_direction(features.alpha[obstacle]) if self.basis == "trig" else 0.0
         if self.focus:
-            mismatch = contradicted_features(features, origin=origin) & obstacle
+            # Only features the focus keeps can mislead the fit: test those alone.
+            horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
+            candidates = obstacle & (horizontal <= self.focus_range)
+            mismatch = contradicted_features(features, origin=origin, candidates=candidates)
             usable = features.select(~mismatch)
         else:
             usable = features
@@ -794,6 +797,14 @@ class _Fitter:
     def alternate(self, W: FloatArray, members: list[list[int]]) -> tuple[MinMaxTree, list[float]]:
         X, m = self.X, self.m
         n = X.shape[0]
+        root = Op("max", tuple(Op("min", tuple(g)) if len(g) > 1 else g[0] for g in members))
+        if len(members) == 1:
+            root = root.children[0]
+        if not self.p.max_sweeps:
+            # No sweeps (the default): only the loss is wanted, from the tree's own
+            # evaluation (rows per piece), not the (samples x pieces) matrix the sweeps need.
+            tree = MinMaxTree(self.basis, W, root)
+            return tree, [self.total_loss(tree.predict(self.samples.alpha, self.samples.h, self.samples.r))]
         V = X @ W.T
         G = np.column_stack([V[:, g].min(axis=1) for g in members])
         F = G.max(axis=1)
@@ -838,9 +849,6 @@ class _Fitter:
                 self.p.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
             if before - loss <= self.p.tol * max(before, 1e-12):
                 break
-        root = Op("max", tuple(Op("min", tuple(g)) if len(g) > 1 else g[0] for g in members))
-        if n_groups == 1:
-            root = root.children[0]
         return MinMaxTree(self.basis, W, root), history
 
 
@@ -896,10 +904,11 @@ SIGHT_HEIGHT_TOLERANCE = 0.02
 SIGHT_HEIGHT_SHARE = 0.02
 #: Rays per bin tested against each feature at most (an even subsample beyond that), so
 #: the test stays linear in the number of features.
-SIGHT_MAX_RAYS = 256
+SIGHT_MAX_RAYS = 128
 
 
-def contradicted_features(features: Features, origin: float = 0.0) -> NDArray[np.bool_]:
+def contradicted_features(features: Features, origin: float = 0.0,
+                          candidates: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
     """Features that other rays in nearly the same direction pass through.
 
     A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
@@ -911,7 +920,8 @@ def contradicted_features(features: Features, origin: float = 0.0) -> NDArray[np
     and end beyond the focus window (:data:`FOCUS_WINDOW`, :data:`FOCUS_WINDOW_ABS`).
     Near the robot the height tolerance spans a wide tilt range, so isolated mismatches
     there, which would box the robot in, are the ones most surely caught. The bins start
-    at the pan angle ``origin``.
+    at the pan angle ``origin``; only the ``candidates`` (default: all) are tested, every
+    feature counts as a ray.
     """
     alpha, h, r = features.polar()
     contradicted = np.zeros(r.size, dtype=bool)
@@ -926,6 +936,8 @@ def contradicted_features(features: Features, origin: float = 0.0) -> NDArray[np
         if members.size < 3:
             continue
         rays = members[:: max(1, members.size // SIGHT_MAX_RAYS)]
+        if candidates is not None:
+            members = members[candidates[members]]
         D, H = distance[members, None], h[members, None]
         d, z = distance[None, rays], h[None, rays]
         window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS

