@@ -61,49 +61,6 @@ def load_inverse_function(path: str) -> tuple[Any, dict[str, float] | None, Any]
     return inverse_range, (dict(bounds) if isinstance(bounds, dict) else None), robot
 
 
-def read_model_set(path: str) -> tuple[Any, list[dict[str, Any]]]:
-    """The folder and entries of a model set (``occtool fit -o DIR/``): ``DIR`` or ``DIR/index.json``.
-
-    Returns
-    -------
-    folder, entries
-        Each entry has ``position``, ``file`` and ``pose`` (a dict or ``None``).
-
-    Raises
-    ------
-    InputError
-        If the index is missing or malformed; the message names the file.
-    """
-    import json
-    from pathlib import Path
-
-    from occtool.errors import InputError
-
-    index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
-    if not index.is_file():
-        raise InputError(
-            f"{path}: a folder without index.json is not a model set (write one with `occtool fit -o DIR/`)"
-        )
-    try:
-        data = json.loads(index.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{index}: not valid JSON ({exc})") from None
-    is_index = isinstance(data, dict) and data.get("format") == "occtool-model-set"
-    if not (is_index and isinstance(data.get("models"), list)):
-        raise InputError(f"{index}: not an occtool model-set index")
-    entries = []
-    for number, entry in enumerate(data["models"], start=1):
-        named = isinstance(entry, dict) and isinstance(entry.get("file"), str)
-        if not (named and isinstance(entry.get("position"), int)):
-            raise InputError(f"{index}: model entry {number} needs an integer 'position' and a 'file'")
-        if entry.get("pose") is not None and not isinstance(entry["pose"], dict):
-            raise InputError(f"{index}: model entry {number}'s 'pose' is not an object")
-        entries.append(entry)
-    if not entries:
-        raise InputError(f"{index}: the model set lists no models")
-    return index.parent, entries
-
-
 def _is_model_set(path: str) -> bool:
     from pathlib import Path
 
@@ -169,6 +126,7 @@ def extract(
     from occtool.errors import InputError
     from occtool.features import Pose
     from occtool.io.geojson import write_navigation, write_navigation_set
+    from occtool.io.model import read_model_set
     from occtool.navigation import NavigationWarning, navigation_map
 
     logger = logging.getLogger("occtool.extract")

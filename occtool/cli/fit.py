@@ -35,8 +35,7 @@ def fit(log_path: str, output: str | None, overwrite: bool, position: int | None
 
     from occtool import __version__
     from occtool.cli.options import fit_from_kwargs, read_log_from_kwargs
-    from occtool.io._atomic import atomic_write
-    from occtool.io.model import save_model
+    from occtool.io.model import save_model, save_model_set_index
 
     logger = logging.getLogger("occtool.fit")
     template = fit_from_kwargs(kwargs, seed=seed)
@@ -83,12 +82,7 @@ def fit(log_path: str, output: str | None, overwrite: bool, position: int | None
             item.index, model.n_features_, model.n_samples_, model.tree_.n_pieces, model.rmse_, model.fit_seconds_,
         )
     if to_folder:
-        import json
-
-        with atomic_write(Path(output) / "index.json", "w") as handle:
-            json.dump({"format": "occtool-model-set", "format_version": 1, "source": str(log_path),
-                       "frame": "base_link", "poses_frame": "map", "models": index}, handle, indent=1)
-            handle.write("\n")
+        save_model_set_index(output, index, source=str(log_path))
 
 
 def _fit_one(template, features, logger):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from pathlib import Path
 from typing import Any
 
 from occtool.errors import InputError, ModelFormatError
@@ -26,6 +27,8 @@ from occtool.tree import InverseTree, MinMaxTree
 
 MODEL_FORMAT = "occtool-model"
 INVERSE_FORMAT = "occtool-inverse"
+#: The index of a model set: one model per robot position (``occtool fit LOG -o DIR/``).
+MODEL_SET_FORMAT = "occtool-model-set"
 #: The newest format version this occtool writes and reads.
 FORMAT_VERSION = 1
 
@@ -265,7 +268,57 @@ def read_any(path: str | os.PathLike[str]) -> tuple[str, Any] | None:
     return None
 
 
+def save_model_set_index(folder: str | os.PathLike[str], entries: list[dict[str, Any]], *, source: str) -> None:
+    """Write ``folder/index.json`` for a model set (one model file per robot position).
+
+    Each entry has ``position``, ``file``, ``pose`` (a dict in the world frame, or
+    ``None``), ``stamp`` and ``features``; :func:`read_model_set` reads it back.
+    """
+    with atomic_write(Path(folder) / "index.json", "w") as handle:
+        json.dump({"format": MODEL_SET_FORMAT, "format_version": 1, "source": source,
+                   "frame": "base_link", "poses_frame": "map", "models": entries}, handle, indent=1)
+        handle.write("\n")
+
+
+def read_model_set(path: str) -> tuple[Any, list[dict[str, Any]]]:
+    """The folder and entries of a model set (``occtool fit -o DIR/``): ``DIR`` or ``DIR/index.json``.
+
+    Returns
+    -------
+    folder, entries
+        Each entry has ``position``, ``file`` and ``pose`` (a dict or ``None``).
+
+    Raises
+    ------
+    InputError
+        If the index is missing or malformed; the message names the file.
+    """
+    index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
+    if not index.is_file():
+        raise InputError(
+            f"{path}: a folder without index.json is not a model set (write one with `occtool fit -o DIR/`)"
+        )
+    try:
+        data = json.loads(index.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{index}: not valid JSON ({exc})") from None
+    is_index = isinstance(data, dict) and data.get("format") == MODEL_SET_FORMAT
+    if not (is_index and isinstance(data.get("models"), list)):
+        raise InputError(f"{index}: not an occtool model-set index")
+    entries = []
+    for number, entry in enumerate(data["models"], start=1):
+        named = isinstance(entry, dict) and isinstance(entry.get("file"), str)
+        if not (named and isinstance(entry.get("position"), int)):
+            raise InputError(f"{index}: model entry {number} needs an integer 'position' and a 'file'")
+        if entry.get("pose") is not None and not isinstance(entry["pose"], dict):
+            raise InputError(f"{index}: model entry {number}'s 'pose' is not an object")
+        entries.append(entry)
+    if not entries:
+        raise InputError(f"{index}: the model set lists no models")
+    return index.parent, entries
+
+
 __all__ = [
-    "FORMAT_VERSION", "INVERSE_FORMAT", "MODEL_FORMAT", "inverse_to_dict", "load_inverse", "load_model",
+    "FORMAT_VERSION", "INVERSE_FORMAT", "MODEL_FORMAT", "MODEL_SET_FORMAT", "read_model_set", "save_model_set_index", "inverse_to_dict", "load_inverse", "load_model",
     "model_to_dict", "model_from_dict", "read_any", "save_inverse", "save_model",
 ]
