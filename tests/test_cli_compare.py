@@ -122,3 +122,16 @@ def test_the_octomap_scan(shared_data: Path, tmp_path: Path) -> None:
     assert report["models"]["grid"]["memory_bytes"] > 1e6
     assert report["models"]["parametric"]["memory_bytes"] < 2e3
     assert report["ratios"]["octomap"]["memory"] > 100
+
+
+def test_no_overwrite_refuses_an_existing_report(tmp_path, fixtures_dir):
+    from click.testing import CliRunner
+
+    from occtool.cli.main import cli
+
+    report = tmp_path / "report.json"
+    report.write_text("{}")
+    result = CliRunner().invoke(cli, ["compare-grid", str(fixtures_dir / "office" / "features.csv"),
+                                      "--resolution", "0.2", "--json", str(report), "--no-overwrite"])
+    assert result.exit_code == 1 and "exists already" in result.output
+    assert report.read_text() == "{}"

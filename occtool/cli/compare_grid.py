@@ -7,7 +7,15 @@ from typing import Any
 
 import click
 
-from occtool.cli.options import config_option, extract_options, fit_options, log_options, seed_option
+from occtool.cli.options import (
+    config_option,
+    extract_options,
+    fit_options,
+    log_options,
+    overwrite_option,
+    refuse_existing,
+    seed_option,
+)
 
 
 def _unique_params(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -51,6 +59,7 @@ def _holdout(ctx: click.Context | None, param: click.Parameter | None, value: fl
               help="Write the report as JSON to this file ('-': standard output, instead of the table).")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Draw the navigation polygons to this image (needs the plot extra).")
+@overwrite_option
 @_unique_params
 @fit_options
 @extract_options
@@ -68,6 +77,7 @@ def compare_grid(
     position: int | None,
     json_path: str | None,
     plot_path: str | None,
+    overwrite: bool,
     seed: int,
     **kwargs: Any,
 ) -> None:
@@ -82,6 +92,7 @@ def compare_grid(
     """
     import logging
 
+    refuse_existing(overwrite, json_path, plot_path)
     from occtool.cli.options import extract_from_kwargs, fit_from_kwargs, read_log_from_kwargs
     from occtool.compare import compare_grid as run_comparison
     from occtool.compare import report_json
