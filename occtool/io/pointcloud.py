@@ -40,6 +40,16 @@ _PLY_TYPES = {
 }
 
 
+
+def _points_and_evidence(values: dict[str, np.ndarray], evidence_field: str, constant: float, word: str,
+                         notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """x, y, z as an (N, 3) array and the named evidence column, or the constant (noted)."""
+    points = np.column_stack([values["x"], values["y"], values["z"]])
+    if evidence_field in values:
+        return points, values[evidence_field]
+    notes.append(f"no '{evidence_field}' {word}: constant evidence {constant} (--evidence)")
+    return points, np.full(points.shape[0], constant)
+
 def _open_binary(path: str | os.PathLike[str]) -> io.BufferedIOBase:
     import bz2
     import gzip
@@ -252,12 +262,7 @@ def _read_pcd(path: str | os.PathLike[str], name: str, evidence_field: str, cons
             )
         else:
             raise InputError(f"{name}: unknown PCD DATA mode {mode!r}")
-    points = np.column_stack([values["x"], values["y"], values["z"]])
-    if evidence_field in values:
-        evidence = values[evidence_field]
-    else:
-        evidence = np.full(points.shape[0], constant)
-        notes.append(f"no '{evidence_field}' field: constant evidence {constant} (--evidence)")
+    points, evidence = _points_and_evidence(values, evidence_field, constant, "field", notes)
     pose = None
     tx, ty, tz, qw, qx, qy, qz = (viewpoint + [0.0] * 7)[:7]
     if (tx, ty, tz) != (0.0, 0.0, 0.0) or (qx, qy, qz) != (0.0, 0.0, 0.0):
@@ -337,12 +342,7 @@ def _read_ply(path: str | os.PathLike[str], name: str, evidence_field: str, cons
             values = {w: records[w].astype(np.float64) for w in wanted}
         else:
             raise InputError(f"{name}: unknown PLY format {fmt!r}")
-    points = np.column_stack([values["x"], values["y"], values["z"]])
-    if evidence_field in values:
-        evidence = values[evidence_field]
-    else:
-        evidence = np.full(points.shape[0], constant)
-        notes.append(f"no '{evidence_field}' property: constant evidence {constant} (--evidence)")
+    points, evidence = _points_and_evidence(values, evidence_field, constant, "property", notes)
     points, evidence = _checked(points, evidence, name, skip_invalid, counts)
     return [Scan(points, evidence, None, None, name)], notes
 
