@@ -255,12 +255,12 @@ class SensorModel:
 
         columns = [np.concatenate([np.broadcast_to(p[i], p[0].shape) for p in parts]) for i in range(6)]
         return Samples(
-            alpha=columns[0].astype(np.float64),
-            h=columns[1].astype(np.float64),
-            r=columns[2].astype(np.float64),
-            m=columns[3].astype(np.float64),
-            weight=columns[4].astype(np.float64),
-            kind=columns[5].astype(np.int8),
+            alpha=columns[0].astype(np.float64, copy=False),
+            h=columns[1].astype(np.float64, copy=False),
+            r=columns[2].astype(np.float64, copy=False),
+            m=columns[3].astype(np.float64, copy=False),
+            weight=columns[4].astype(np.float64, copy=False),
+            kind=columns[5].astype(np.int8, copy=False),
         )
 
     def is_on_robot(self, features: Features, robot: Robot) -> NDArray[np.bool_]:

@@ -9,7 +9,13 @@ from hypothesis import strategies as st
 
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
-from occtool.fit import OccupancyRegressor, box_qp, contradicted_features, first_obstacle_distance
+from occtool.fit import (
+    OccupancyRegressor,
+    box_qp,
+    contradicted_features,
+    first_obstacle_distance,
+    sorted_within_bins,
+)
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 
@@ -238,3 +244,13 @@ def test_close_mismatches_do_not_box_the_robot_in():
     model = OccupancyRegressor(pieces=16).fit(Features.concatenate([room, Features(points, np.full(3, 0.9))]))
     r = model.inverse_range(np.linspace(-0.1, 0.1, 21), -0.1, 0.6)
     assert np.sqrt(r**2 - 0.01).min() > 1.2
+
+
+@given(st.lists(st.tuples(st.integers(0, 11), st.floats(0, 50)), max_size=200))
+def test_sorted_within_bins_matches_a_two_key_sort(pairs):
+    bins = np.array([b for b, _ in pairs], dtype=np.intp)
+    values = np.array([v for _, v in pairs], dtype=np.float64)
+    grouped, bounds = sorted_within_bins(bins, values, 12)
+    order = np.lexsort((values, bins))
+    np.testing.assert_array_equal(grouped, values[order])
+    np.testing.assert_array_equal(np.diff(bounds), np.bincount(bins, minlength=12))
