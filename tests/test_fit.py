@@ -14,6 +14,7 @@ from occtool.fit import (
     box_qp,
     contradicted_features,
     first_obstacle_distance,
+    frontier_samples,
     sorted_within_bins,
 )
 from occtool.robot import Robot
@@ -244,6 +245,48 @@ def test_close_mismatches_do_not_box_the_robot_in():
     model = OccupancyRegressor(pieces=16).fit(Features.concatenate([room, Features(points, np.full(3, 0.9))]))
     r = model.inverse_range(np.linspace(-0.1, 0.1, 21), -0.1, 0.6)
     assert np.sqrt(r**2 - 0.01).min() > 1.2
+
+
+def _floor_rays(ends: np.ndarray, per_bin: int = 20) -> Features:
+    """Floor features on 120 pan-angle bins (3 degrees each), ending at ``ends[bin]`` metres."""
+    bins = np.repeat(np.arange(120), per_bin)
+    alpha = -np.pi + (bins + np.tile(np.linspace(0.1, 0.9, per_bin), 120)) * (2 * np.pi / 120)
+    # Rays spread over the last 40 % of each bin's reach.
+    distance = ends[bins] * np.tile(np.linspace(0.6, 1.0, per_bin), 120)
+    points = np.column_stack([distance * np.cos(alpha), distance * np.sin(alpha),
+                              np.full(alpha.size, -ROBOT.sensor_height)])
+    return Features(points, np.full(alpha.size, 0.9))
+
+
+def _frontier_bins(features: Features) -> set[int]:
+    samples = SensorModel().samples(features, ROBOT)
+    frontier = frontier_samples(samples, ROBOT, focus_range=2.5)
+    return set(np.floor((frontier.alpha + np.pi) / (2 * np.pi / 120)).astype(int).tolist())
+
+
+def test_a_gap_between_sparse_rays_is_not_a_frontier_but_an_edge_is():
+    ends = np.full(120, 3.0)
+    ends[30] = 1.0  # one bin whose few rays happen to end short: a sampling gap
+    ends[80:90] = 1.0  # ten bins that see no farther: an unseen stretch (a white wall)
+    closed = _frontier_bins(_floor_rays(ends))
+    assert 30 not in closed
+    assert set(range(80, 90)) <= closed
+    assert closed == set(range(80, 90))
+
+
+def test_office_doorway_stays_open_with_sparse_features():
+    # At 2k features a 3-degree bin in the doorway once held only floor features ending
+    # at 1.7 m; its frontier closed the whole doorway (seeds 0 and 2).
+    from occtool.navigation import navigation_map
+    from occtool.simulate import simulate_scene
+
+    bounds = sorted(np.arctan2([1.2, 1.2], [-0.3, 0.7]))  # the doorway's jambs
+    for seed in (0, 2):
+        features, _ = simulate_scene("office", n_features=2000, seed=seed)
+        model = OccupancyRegressor(seed=seed).fit(features)
+        nav = navigation_map(model.inverse_range, robot=ROBOT, slope_bounds=model.slope_bounds_)
+        angles = np.arctan2(nav.exploration_points[:, 1], nav.exploration_points[:, 0])
+        assert ((angles >= bounds[0]) & (angles <= bounds[1])).sum() >= 1, seed
 
 
 @given(st.lists(st.tuples(st.integers(0, 11), st.floats(0, 50)), max_size=200))
