@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
+from occtool.linear_program import solve_lp
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
 from occtool.tree import BASES, InverseTree, MinMaxTree, Op, design_matrix
@@ -63,9 +64,6 @@ SEGMENT_OVERLAP = 0.0
 NAVIGATION_REACH_SHARE = 0.9
 #: Where obstacles allow, centre crossings stay this far (m) outside the robot's radius.
 BODY_CLEARANCE = 0.1
-#: The centre programmes have 4-5 unknowns and a thousand-odd rows: HiGHS's presolve
-#: cost more than it saved (dual simplex without it: 0.11 s per 9k-feature fit, 0.16 s with).
-LP_OPTIONS = {"presolve": False}
 #: A centre's crossing stays above this share of the segment's nearest crossing.
 FLAT_SHARE = 0.97
 #: Pan-angle bins of the range profile that places the segments and centre pieces: the
@@ -620,8 +618,6 @@ class _Fitter:
         The slope ``c`` through the crossing comes from a robust least-squares fit to the
         segment's samples, so the sensor model decides how sharp the crossing is.
         """
-        from scipy.optimize import linprog
-
         n_bins = profile.shape[0]
         width = 2.0 * np.pi / n_bins
         # The crossing must stay in front of the obstacles over the segment's own bins only:
@@ -664,13 +660,16 @@ class _Fitter:
         # Half the pan-weight budget is left to the side pieces that switch the group off.
         bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
         bound_h = self.p.b_max / c
+        # The offset is free.
         if self.k_angle == 1:
-            bounds = [(None, None), (-bound_angle, bound_angle), (-bound_h, bound_h)]
+            lower = np.array([-np.inf, -bound_angle, -bound_h])
+            upper = np.array([np.inf, bound_angle, bound_h])
         else:
             # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
             # weight <= 0): far from its segment a group then recedes, and its sides can
             # switch it off.
-            bounds = [(None, None), (-bound_angle, 0.0), (-bound_angle, bound_angle), (-bound_h, bound_h)]
+            lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
+            upper = np.array([np.inf, 0.0, bound_angle, bound_h])
         centres = []
         heights_of_rows = H.ravel()
         for j in range(count):
@@ -701,13 +700,12 @@ class _Fitter:
             # a flat crossing would keep: a tilt that gains far away must not cost near by.
             # Each floor is dropped again if it makes the programme infeasible.
             floors = [np.maximum(keep_off, floor_flat)[chosen], keep_off[chosen], None]
-            for lower in floors:
-                if lower is None:
-                    result = linprog(objective, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs-ds", options=LP_OPTIONS)
+            for floor in floors:
+                if floor is None:
+                    result = solve_lp(objective, A_ub, b_ub, lower, upper)
                 else:
-                    result = linprog(objective, A_ub=np.vstack([A_ub, -rows[chosen]]),
-                                     b_ub=np.concatenate([b_ub, -np.minimum(lower, cap[chosen])]),
-                                     bounds=bounds, method="highs-ds", options=LP_OPTIONS)
+                    result = solve_lp(objective, np.vstack([A_ub, -rows[chosen]]),
+                                      np.concatenate([b_ub, -np.minimum(floor, cap[chosen])]), lower, upper)
                 if result.status == 0:
                     break
             if result.status == 0:
