@@ -316,12 +316,32 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
                 octomap_scans=1,
                 seed=0,
             )
+            # The same, with the grids reading unobserved space as occupied (a careful
+            # planner's reading; docs/comparison.md "Unobserved space"). Only the grids'
+            # polygons change: their agreement and areas are kept.
+            closed = compare_grid(
+                features,
+                regressor=OccupancyRegressor(robot=robot, seed=0),
+                navigation={"robot": robot},
+                resolution=RESOLUTION,
+                octomap=True,
+                octomap_scans=1,
+                seed=0,
+                file_sizes=False,
+                unknown="occupied",
+            )
         except OcctoolError as exc:
             notes.append(f"{relative}: {exc}")
             continue
-        rows.append(comparison_row(report, data=relative, label=label, features=len(features),
-                                   evidence=float(np.median(features.evidence)),
-                                   sensor_height=robot.sensor_height))
+        row = comparison_row(report, data=relative, label=label, features=len(features),
+                             evidence=float(np.median(features.evidence)),
+                             sensor_height=robot.sensor_height)
+        row["unknown_occupied"] = {
+            "agreement": closed["agreement"],
+            "polygon_area": {name: figures["polygon_area"] for name, figures in closed["models"].items()},
+            "observed_band": closed["settings"]["observed_band"],
+        }
+        rows.append(row)
     return rows, notes
 
 
@@ -584,9 +604,12 @@ def render(results: dict[str, Any], plot_name: str | None, json_name: str) -> st
               "one scan it is. The 3D scan with the scanner 8 cm above the floor (where its floor lies) and a 0.5 m body, "
               "the 2D lasers with the laser 0.3 m above the floor and a 0.4 m body (the scan plane inside the body's "
               "height band). Grids over the data's extent; unobserved grid cells keep the 0.5 prior, below the 0.6 "
-              "threshold, so grids read unseen space as free where the parametric model closes it.", "",
-              "| data | features | fit s | grid build s | OctoMap build s | memory (param / grid / OctoMap) | grid/param memory | IoU param-grid | IoU param-OctoMap | AUC (param / grid / OctoMap) |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+              "threshold, so by default grids read unseen space as free where the parametric model closes it. "
+              "The *unseen occupied* columns read it as a careful planner does (`--unknown occupied`): a grid's rays "
+              "also end at the first column with no observed cell across the body band (docs/comparison.md, "
+              "\"Unobserved space\").", "",
+              "| data | features | fit s | grid build s | OctoMap build s | memory (param / grid / OctoMap) | grid/param memory | IoU param-grid | IoU param-OctoMap | IoU param-grid, unseen occupied | IoU param-OctoMap, unseen occupied | AUC (param / grid / OctoMap) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["real_data"]:
         m = r["models"]
         present = [n for n in ("parametric", "grid", "octomap") if n in m]
@@ -594,7 +617,10 @@ def render(results: dict[str, Any], plot_name: str | None, json_name: str) -> st
             f"| {r['label']} | {r['features']:,} | {_s(m['parametric']['build_s'])} | {_s(m['grid']['build_s'])} | "
             f"{_s(m['octomap']['build_s']) if 'octomap' in m else '-'} | {' / '.join(_mb(m[n]['memory_bytes']) for n in present)} | "
             f"{r['ratios']['grid']['memory']:,.0f}x | {_f(r['agreement']['grid']['iou'])} | "
-            f"{_f(r['agreement'].get('octomap', {}).get('iou'))} | {' / '.join(_f(r['auc'].get(n)) for n in present)} |"
+            f"{_f(r['agreement'].get('octomap', {}).get('iou'))} | "
+            f"{_f(r.get('unknown_occupied', {}).get('agreement', {}).get('grid', {}).get('iou'))} | "
+            f"{_f(r.get('unknown_occupied', {}).get('agreement', {}).get('octomap', {}).get('iou'))} | "
+            f"{' / '.join(_f(r['auc'].get(n)) for n in present)} |"
         )
     lines += [f"- {note}" for note in results["notes"].get("real_data", [])]
     reading = results.get("reading")

@@ -7,13 +7,20 @@ same settings, and reports what each costs (samples, time, memory) and how each 
 of occupancy on held-out features). The report is a plain dict, the layout of
 ``occtool compare-grid --json`` (see docs/comparison.md).
 
-Baselines:
+Baselines, each a :class:`Baseline` (a name, a build function, its samples and figures)
+whose built map offers the :class:`OccupancyMap` protocol (``inverse_range``,
+``occupancy``, ``memory_bytes``, ``file_bytes``); every baseline goes through the same
+build, extraction and scoring:
 
-* ``grid``: the dense 3D grid of :mod:`occtool.grid`, fed with the same sensor model;
-* ``octomap``: OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`), optional.
+* ``grid`` (:data:`GRID`): the dense 3D grid of :mod:`occtool.grid`, fed with the same
+  sensor model;
+* ``octomap`` (:data:`OCTOMAP`): OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`),
+  optional.
 
 Both get the parametric model's prior on the robot's footprint (it is free), since the
-robot's own sensor never sees the columns under it.
+robot's own sensor never sees the columns under it. Their navigation polygons read
+unobserved space as free (the default) or, with ``unknown="occupied"``, as a careful
+planner does: closed where no cell of the column was observed in the robot's body band.
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ import time
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import shapely
@@ -45,6 +52,18 @@ FloatArray = NDArray[np.float64]
 FREE_FRACTIONS = (0.25, 0.5, 0.75)
 
 REPORT_VERSION = 1
+
+#: The report's ``unknown_space`` line for each reading of unobserved space.
+UNKNOWN_SPACE_NOTES = {
+    "free": (
+        "unobserved grid cells keep the prior 0.5, free for thresholds above 0.5: "
+        "the grids read unseen space as free"
+    ),
+    "occupied": (
+        "the grids' rays also end at the first cell whose column has no observed cell between heights "
+        "{low:g} and {high:g} m (the body band): the grids read unseen space as occupied"
+    ),
+}
 
 logger = logging.getLogger("occtool.compare")
 
@@ -176,15 +195,6 @@ def _save_model_size(model: Any) -> int:
     return _file_size(lambda name: save_model(model, name), ".json")
 
 
-def _save_grid_size(grid: Any) -> int:
-    # The grid's best case on disk: its log-odds array compressed.
-    def write(name: str) -> None:
-        with open(name, "wb") as handle:
-            np.savez_compressed(handle, log_odds=grid.log_odds, offset=grid.offset, resolution=grid.resolution)
-
-    return _file_size(write, ".npz")
-
-
 def _navigation(inverse_range: Callable[..., Any], navigation: Mapping[str, Any], **extra: Any) -> Any:
     from occtool.navigation import NavigationWarning, navigation_map
 
@@ -192,6 +202,175 @@ def _navigation(inverse_range: Callable[..., Any], navigation: Mapping[str, Any]
         # An empty polygon (the robot in collision) is a result to report, not to warn about.
         warnings.simplefilter("ignore", NavigationWarning)
         return navigation_map(inverse_range, **{**navigation, **extra})
+
+
+# --- baselines -------------------------------------------------------------------------------
+
+
+class OccupancyMap(Protocol):
+    """What the comparison asks of a built baseline.
+
+    :class:`occtool.grid.OccupancyGrid` and :class:`occtool.octomap.OctoMapModel` offer it.
+    """
+
+    @property
+    def memory_bytes(self) -> int:
+        """Memory of the map, bytes."""
+        ...
+
+    def file_bytes(self) -> int:
+        """Size of the map saved to a file, bytes."""
+        ...
+
+    def occupancy(self, points: FloatArray) -> FloatArray:
+        """Occupancy probability at ``(N, 3)`` points; 0.5 where the map knows nothing."""
+        ...
+
+    def inverse_range(
+        self,
+        alpha: Any,
+        h: Any,
+        level: float,
+        max_range: float | None = None,
+        *,
+        unknown: str = "free",
+        band: tuple[float, float] | None = None,
+    ) -> FloatArray:
+        """As :meth:`occtool.grid.OccupancyGrid.inverse_range`."""
+        ...
+
+
+@dataclass(frozen=True)
+class BuildInputs:
+    """What every baseline is built from: the training features and the shared settings."""
+
+    features: Features
+    resolution: float
+    robot: Robot
+    sensor: Any
+    grid_bounds: tuple[Any, Any] | None = None
+    octomap_scans: int = 10
+
+
+def _no_figures(built: Any, inputs: BuildInputs) -> dict[str, Any]:
+    return {}
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """An occupancy map the parametric model is compared with.
+
+    Attributes
+    ----------
+    name
+        Its key in the report (``models``, ``agreement``, ``ratios``, ``auc``, ...).
+    build
+        Builds the map from the inputs; timed as the baseline's build time.
+    samples
+        The samples (cell updates) the built map fused, for the report.
+    figures
+        Figures of its own for its ``models`` entry, after the common ones.
+    """
+
+    name: str
+    build: Callable[[BuildInputs], OccupancyMap]
+    samples: Callable[[Any, BuildInputs], int]
+    figures: Callable[[Any, BuildInputs], dict[str, Any]] = _no_figures
+
+
+def _build_grid(inputs: BuildInputs) -> OccupancyMap:
+    from occtool.grid import build_grid
+
+    return build_grid(
+        inputs.features, resolution=inputs.resolution, robot=inputs.robot, sensor=inputs.sensor, bounds=inputs.grid_bounds
+    )
+
+
+def _build_octomap(inputs: BuildInputs) -> OccupancyMap:
+    from occtool.octomap import build_octomap
+
+    return build_octomap(
+        inputs.features, resolution=inputs.resolution, robot=inputs.robot, scans=inputs.octomap_scans, sensor=inputs.sensor
+    )
+
+
+def _octomap_samples(tree: Any, inputs: BuildInputs) -> int:
+    from occtool.octomap import octomap_updates
+
+    return octomap_updates(inputs.features, inputs.resolution, inputs.octomap_scans, robot=inputs.robot, sensor=inputs.sensor)
+
+
+#: The dense 3D log-odds grid of :mod:`occtool.grid`.
+GRID = Baseline(
+    "grid",
+    build=_build_grid,
+    samples=lambda grid, inputs: grid.samples,
+    figures=lambda grid, inputs: {
+        "cells": int(np.prod(grid.shape)),
+        "observed_cells": grid.observed_cells,
+        "shape": list(grid.shape),
+    },
+)
+
+#: OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`); its samples are recounted cell updates.
+OCTOMAP = Baseline(
+    "octomap",
+    build=_build_octomap,
+    samples=_octomap_samples,
+    figures=lambda tree, inputs: {"leaves": tree.leaf_count, "scans": int(inputs.octomap_scans)},
+)
+
+
+def observation_band(robot: Robot, heights: Any = None) -> tuple[float, float]:
+    """Heights whose cells make a grid column observed with ``unknown="occupied"``.
+
+    The robot's body band, widened to any navigation heights asked for outside it: what
+    the sensor saw at one height of the band stands for the whole column there
+    (docs/comparison.md, "Unobserved space").
+    """
+    low, high = robot.body_band
+    if heights is not None:
+        requested = np.asarray(heights, dtype=np.float64).ravel()
+        if requested.size and np.isfinite(requested).all():
+            low, high = min(low, float(requested.min())), max(high, float(requested.max()))
+    return float(low), float(high)
+
+
+def _run_baseline(
+    baseline: Baseline,
+    inputs: BuildInputs,
+    navigation: Mapping[str, Any],
+    *,
+    read_range: float,
+    unknown: str,
+    band: tuple[float, float],
+    repeat: int,
+    file_sizes: bool,
+    test_points: tuple[FloatArray, FloatArray],
+) -> tuple[ModelResult, tuple[FloatArray, FloatArray]]:
+    """Build one baseline, extract its navigation polygon and score its occupancy."""
+    built, build_s = _timed(lambda: baseline.build(inputs), repeat)
+
+    def inverse_range(alpha: Any, h: Any, level: float) -> FloatArray:
+        return built.inverse_range(alpha, h, level, max_range=read_range, unknown=unknown, band=band)
+
+    nav, extract_s = _timed(lambda: _navigation(inverse_range, navigation), repeat)
+    result = ModelResult(
+        name=baseline.name,
+        samples=int(baseline.samples(built, inputs)),
+        build_s=build_s,
+        extract_s=extract_s,
+        memory_bytes=int(built.memory_bytes),
+        file_bytes=int(built.file_bytes()) if file_sizes else 0,
+        polygon=nav.polygon,
+        extra=baseline.figures(built, inputs),
+    )
+    logger.info(
+        "%s: built in %.3f s, extract %.4f s (%s)",
+        baseline.name, build_s, extract_s, ", ".join(f"{key} {value}" for key, value in result.extra.items()),
+    )
+    occupied_points, free_points = test_points
+    return result, (built.occupancy(occupied_points), built.occupancy(free_points))
 
 
 def compare_grid(
@@ -208,6 +387,7 @@ def compare_grid(
     repeat: int = 1,
     file_sizes: bool = True,
     grid_bounds: tuple[Any, Any] | None = None,
+    unknown: str = "free",
 ) -> dict[str, Any]:
     """Compare the parametric model with a dense grid (and OctoMap) on the same features.
 
@@ -242,13 +422,17 @@ def compare_grid(
     grid_bounds
         ``(lower, upper)`` corners of the box the dense grid covers, metres (default: the
         features' extent).
+    unknown
+        How the grids' navigation polygons read unobserved space: ``"free"`` (its prior
+        0.5, below the threshold) or ``"occupied"`` (a ray also ends at the first cell
+        whose column has no observed cell in the :func:`observation_band`).
 
     Returns
     -------
     dict
         The report; see docs/comparison.md for its layout.
     """
-    from occtool.grid import build_grid
+    from occtool.grid import check_unknown
     from occtool.sensor import SensorModel
 
     if len(features) < 2:
@@ -257,6 +441,7 @@ def compare_grid(
         raise InputError(f"grid resolution must be a positive number of metres, got {resolution}")
     if int(octomap_scans) != octomap_scans or octomap_scans < 1:
         raise InputError(f"OctoMap scans must be a whole number >= 1, got {octomap_scans}")
+    check_unknown(unknown)
     navigation = dict(navigation)
     robot: Robot = navigation.get("robot") or regressor.robot or Robot()
     navigation["robot"] = robot
@@ -266,6 +451,7 @@ def compare_grid(
     max_range = float(navigation.get("max_range", 1.5))
     # Rays are read past the max range by the robot radius before the shrink, plus a cell.
     read_range = max_range + robot.radius + resolution
+    band = observation_band(robot, navigation.get("heights"))
     grid_navigation = {**navigation}
     if grid_navigation.get("slice_spacing") is None:
         # A grid has no slope bounds to hold between cuts: cut it at every cell layer.
@@ -299,54 +485,27 @@ def compare_grid(
         np.asarray(model.predict(*_polar(p)), dtype=np.float64) for p in (occupied_points, free_points)
     )
 
-    # --- dense grid
-    grid, grid_s = _timed(
-        lambda: build_grid(train, resolution=resolution, robot=robot, sensor=sensor, bounds=grid_bounds), repeat
+    # --- the baselines, alike
+    inputs = BuildInputs(
+        features=train,
+        resolution=float(resolution),
+        robot=robot,
+        sensor=sensor,
+        grid_bounds=grid_bounds,
+        octomap_scans=int(octomap_scans),
     )
-    grid_nav, grid_extract_s = _timed(
-        lambda: _navigation(
-            lambda a, h, level: grid.inverse_range(a, h, level, max_range=read_range), grid_navigation
-        ),
-        repeat,
-    )
-    results["grid"] = ModelResult(
-        name="grid",
-        samples=grid.samples,
-        build_s=grid_s,
-        extract_s=grid_extract_s,
-        memory_bytes=grid.nbytes,
-        file_bytes=_save_grid_size(grid) if file_sizes else 0,
-        polygon=grid_nav.polygon,
-        extra={"cells": int(np.prod(grid.shape)), "observed_cells": grid.observed_cells, "shape": list(grid.shape)},
-    )
-    logger.info("grid: %s cells, built in %.3f s, extract %.4f s", "x".join(map(str, grid.shape)), grid_s, grid_extract_s)
-    scores["grid"] = (grid.occupancy(occupied_points), grid.occupancy(free_points))
-
-    # --- OctoMap
-    if octomap:
-        from occtool.octomap import build_octomap, octomap_updates
-
-        tree, octo_s = _timed(
-            lambda: build_octomap(train, resolution=resolution, robot=robot, scans=int(octomap_scans), sensor=sensor), repeat
+    for baseline in [GRID, OCTOMAP] if octomap else [GRID]:
+        results[baseline.name], scores[baseline.name] = _run_baseline(
+            baseline,
+            inputs,
+            grid_navigation,
+            read_range=read_range,
+            unknown=unknown,
+            band=band,
+            repeat=repeat,
+            file_sizes=file_sizes,
+            test_points=(occupied_points, free_points),
         )
-        octo_nav, octo_extract_s = _timed(
-            lambda: _navigation(
-                lambda a, h, level: tree.inverse_range(a, h, level, max_range=read_range), grid_navigation
-            ),
-            repeat,
-        )
-        results["octomap"] = ModelResult(
-            name="octomap",
-            samples=octomap_updates(train, resolution, int(octomap_scans), robot=robot, sensor=sensor),
-            build_s=octo_s,
-            extract_s=octo_extract_s,
-            memory_bytes=tree.memory_bytes,
-            file_bytes=tree.file_bytes() if file_sizes else 0,
-            polygon=octo_nav.polygon,
-            extra={"leaves": tree.leaf_count, "scans": int(octomap_scans)},
-        )
-        logger.info("octomap: %d leaves, built in %.3f s, extract %.4f s", tree.leaf_count, octo_s, octo_extract_s)
-        scores["octomap"] = (tree.occupancy(occupied_points), tree.occupancy(free_points))
 
     parametric = results["parametric"]
     report: dict[str, Any] = {
@@ -369,11 +528,14 @@ def compare_grid(
             "seed": int(seed),
             "repeat": int(repeat),
             "log_odds": "OctoMap defaults: prob_hit 0.7, prob_miss 0.4, clamping 0.1192..0.971",
+            "unknown": unknown,
+            "observed_band": [band[0], band[1]],
         },
         "footprint_prior": (
             "the grids mark the robot's footprint cylinder (radius "
             f"{robot.radius:g} m over its body band) free, as the parametric model's footprint samples do"
         ),
+        "unknown_space": UNKNOWN_SPACE_NOTES[unknown].format(low=band[0], high=band[1]),
         "models": {name: result.figures() for name, result in results.items()},
         "agreement": {
             name: {"iou": polygon_iou(parametric.polygon, result.polygon)}

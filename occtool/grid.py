@@ -23,10 +23,24 @@ as the parametric model: free, at the lower clamping threshold.
 inverted: along a horizontal ray at height ``h``, the distance from the sensor to the
 first cell whose occupancy reaches the level. The same navigation extraction then
 applies to both.
+
+Unobserved space (cells no sample reached, log-odds 0, probability 0.5) is read one of
+two ways (:data:`UNKNOWN_SPACE`, ``inverse_range(..., unknown=...)``):
+
+* ``"free"`` (the default): at its prior probability 0.5, so it is free for every level
+  above 0.5 and blocking at or below;
+* ``"occupied"``: as a careful planner reads it, the ray also ends where it enters a
+  cell whose *column* is unobserved, a column counting as observed when any of its cells
+  between the heights of a band (the robot's body band, in the comparison) received a
+  sample (:meth:`OccupancyGrid.observed_columns`). Per column rather than per cell,
+  because a planar laser observes only its own plane: per cell every other height of the
+  body would be unknown and the navigation polygon would collapse (docs/comparison.md).
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +59,92 @@ MAX_GRID_BYTES = 4 * 1024**3
 
 # Rays are traversed in chunks so that the segment arrays of one chunk stay near this size.
 _SEGMENTS_PER_CHUNK = 2_000_000
+
+#: The readings of unobserved space ``inverse_range`` offers (see the module docstring).
+UNKNOWN_SPACE = ("free", "occupied")
+
+
+def check_unknown(unknown: str) -> str:
+    """``unknown`` if it is one of :data:`UNKNOWN_SPACE`; an :class:`InputError` otherwise."""
+    if unknown not in UNKNOWN_SPACE:
+        raise InputError(f"unobserved space must be read as 'free' or 'occupied', got {unknown!r}")
+    return unknown
+
+
+def footprint_columns_reached(columns: ArrayLike, radius: float, resolution: float) -> NDArray[np.bool_]:
+    """Which ``(N, 2)`` global column indices come within half a cell of the disk of ``radius``
+    around the sensor axis (their nearest point lies closer than ``radius + resolution / 2``)."""
+    ij = np.asarray(columns, dtype=np.int64)
+    # Nearest point of cell [i, i + 1) * resolution to 0, per axis.
+    nearest = np.maximum(np.maximum(ij * resolution, -(ij + 1) * resolution), 0.0)
+    return np.hypot(nearest[:, 0], nearest[:, 1]) < radius + 0.5 * resolution
+
+
+def band_layers(band: tuple[float, float], resolution: float) -> tuple[int, int]:
+    """First and last global lattice layer (z index) of the cells a height band touches.
+
+    ``band`` is ``(low, high)`` in sensor-frame metres; the layers are those whose cells
+    overlap it, ``floor(low / resolution)`` to ``floor(high / resolution)``, as for the
+    footprint prior.
+    """
+    low, high = (float(v) for v in band)
+    if not (np.isfinite(low) and np.isfinite(high) and low <= high):
+        raise InputError(f"the observation band must be two finite heights, low <= high, got {band}")
+    return int(np.floor(low / resolution)), int(np.floor(high / resolution))
+
+
+def first_unobserved(
+    observed: NDArray[np.bool_],
+    offset: ArrayLike,
+    angles: ArrayLike,
+    max_range: float,
+    resolution: float,
+    footprint: float = 0.0,
+) -> FloatArray:
+    """Horizontal distance along rays from the sensor axis to the first unobserved column.
+
+    Parameters
+    ----------
+    observed
+        ``(nx, ny)`` boolean mask of the observed columns; columns outside it are unobserved.
+    offset
+        Global lattice index ``(i, j)`` of ``observed[0, 0]``.
+    angles
+        Pan angles of the rays, radians.
+    max_range
+        Length of the rays, metres.
+    resolution
+        Cell edge, metres.
+    footprint
+        Radius of the robot's footprint, metres (0: none). The robot stands on it, so
+        every column that comes within half a cell of its disk counts as observed
+        (:func:`footprint_columns_reached`): the cells the prior sets free only
+        approximate the disk, and those it clips must not put the robot in collision.
+
+    Returns
+    -------
+    numpy.ndarray
+        The distance where each ray enters its first unobserved column (the same 2D walk
+        as :meth:`OccupancyGrid.inverse_range`), ``inf`` if there is none within ``max_range``.
+    """
+    angles = np.asarray(angles, dtype=np.float64).reshape(-1)
+    offset = np.asarray(offset, dtype=np.int64).reshape(-1)[:2]
+    columns = np.asarray(observed.shape[:2])
+    distance = np.full(angles.shape[0], np.inf)
+    cells_per_ray = 2 * int(max_range / resolution) + 2
+    for lo, hi in _chunks(angles.shape[0], max(1, _SEGMENTS_PER_CHUNK // cells_per_ray)):
+        ends = np.column_stack([max_range * np.cos(angles[lo:hi]), max_range * np.sin(angles[lo:hi]), np.zeros(hi - lo)])
+        seg = traverse(np.zeros(3), ends, resolution)
+        ij = seg.cell[:, :2] - offset
+        inside = ((ij >= 0) & (ij < columns)).all(axis=1)
+        ij = np.clip(ij, 0, columns - 1)
+        unseen = ~(inside & observed[ij[:, 0], ij[:, 1]])
+        if footprint > 0:
+            unseen &= ~footprint_columns_reached(seg.cell[:, :2], footprint, resolution)
+        entry = np.where(unseen, seg.t_enter, np.inf)
+        starts = np.flatnonzero(np.r_[True, seg.ray[1:] != seg.ray[:-1]])
+        distance[lo + seg.ray[starts]] = np.minimum.reduceat(entry, starts) * max_range
+    return distance
 
 
 def logit(p: ArrayLike) -> FloatArray:
@@ -216,6 +316,9 @@ class OccupancyGrid:
         Number of (ray, cell) samples fused into the grid.
     params
         The log-odds parameters used.
+    footprint
+        Radius of the robot footprint the prior set free, metres (0: no prior); with
+        ``unknown="occupied"`` the robot's disk counts as observed (:func:`first_unobserved`).
     """
 
     log_odds: NDArray[np.float32]
@@ -223,6 +326,7 @@ class OccupancyGrid:
     offset: IntArray
     samples: int = 0
     params: LogOddsParams = OCTOMAP_DEFAULTS
+    footprint: float = 0.0
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -232,6 +336,23 @@ class OccupancyGrid:
     def nbytes(self) -> int:
         """Memory of the grid's arrays, bytes."""
         return int(self.log_odds.nbytes + self.offset.nbytes)
+
+    @property
+    def memory_bytes(self) -> int:
+        """Memory of the grid, bytes: its :attr:`nbytes` (the name OctoMap's model uses)."""
+        return self.nbytes
+
+    def file_bytes(self) -> int:
+        """Size of the grid on disk in its best case, bytes: the log-odds array (with offset
+        and resolution) compressed by ``numpy.savez_compressed``."""
+        fd, name = tempfile.mkstemp(suffix=".npz")
+        os.close(fd)
+        try:
+            with open(name, "wb") as handle:
+                np.savez_compressed(handle, log_odds=self.log_odds, offset=self.offset, resolution=self.resolution)
+            return os.path.getsize(name)
+        finally:
+            os.unlink(name)
 
     @property
     def lower(self) -> FloatArray:
@@ -247,6 +368,32 @@ class OccupancyGrid:
     def observed_cells(self) -> int:
         """Number of cells that received at least one sample."""
         return int(np.count_nonzero(self.log_odds))
+
+    def observed_columns(self, band: tuple[float, float] | None = None) -> NDArray[np.bool_]:
+        """Which columns of the grid hold an observed cell between a band's heights.
+
+        A cell is observed when it received a sample (or the footprint prior): its
+        log-odds are not 0, as :attr:`observed_cells` counts them.
+
+        Parameters
+        ----------
+        band
+            ``(low, high)`` sensor-frame heights, metres; the layers whose cells overlap it
+            count (:func:`band_layers`). Default: every layer of the grid.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``(nx, ny)`` booleans, indexed as the grid's first two axes.
+        """
+        if band is None:
+            layers = self.log_odds
+        else:
+            k_lo, k_hi = band_layers(band, self.resolution)
+            lo = min(max(k_lo - int(self.offset[2]), 0), self.shape[2])
+            hi = min(max(k_hi - int(self.offset[2]) + 1, 0), self.shape[2])
+            layers = self.log_odds[:, :, lo:hi]
+        return (layers != 0).any(axis=2)
 
     def cell_of(self, points: ArrayLike) -> tuple[IntArray, NDArray[np.bool_]]:
         """Array indices of the cells holding ``(N, 3)`` points, and which lie in the grid."""
@@ -268,7 +415,16 @@ class OccupancyGrid:
         level = self.params.occupancy_thres if level is None else level
         return self.log_odds >= np.float32(logit(level))
 
-    def inverse_range(self, alpha: ArrayLike, h: ArrayLike, level: float, max_range: float | None = None) -> FloatArray:
+    def inverse_range(
+        self,
+        alpha: ArrayLike,
+        h: ArrayLike,
+        level: float,
+        max_range: float | None = None,
+        *,
+        unknown: str = "free",
+        band: tuple[float, float] | None = None,
+    ) -> FloatArray:
         """Distance from the sensor to the first cell at or above ``level`` along horizontal rays.
 
         The ray at pan angle ``alpha`` and sensor-frame height ``h`` runs from ``(0, 0, h)``
@@ -287,6 +443,15 @@ class OccupancyGrid:
             Occupancy level in (0, 1).
         max_range
             Horizontal distance to search up to, metres.
+        unknown
+            ``"free"``: unobserved cells are read at their prior 0.5, as above.
+            ``"occupied"``: the ray also ends where it enters a column with no observed
+            cell between the ``band``'s heights (:meth:`observed_columns`; outside the
+            grid nothing is observed), at every height ``h``. The robot's footprint
+            (:attr:`footprint`) counts as observed: it stands there.
+        band
+            ``(low, high)`` sensor-frame heights whose cells make a column observed, with
+            ``unknown="occupied"``; default every layer of the grid.
 
         Returns
         -------
@@ -302,6 +467,7 @@ class OccupancyGrid:
             max_range = float(np.hypot(corners[:, 0].max(), corners[:, 1].max())) + self.resolution
         if not (np.isfinite(max_range) and max_range > 0):
             raise InputError(f"max range must be a finite number > 0, got {max_range}")
+        check_unknown(unknown)
         blocked_beyond = level <= 0.5
         threshold = np.float32(logit(level))
         # Every horizontal ray at one pan angle crosses the same columns whatever its
@@ -328,6 +494,11 @@ class OccupancyGrid:
             # Segments come in ray order: the earliest hit of each ray is a minimum over its run.
             starts = np.flatnonzero(np.r_[True, seg.ray[1:] != seg.ray[:-1]])
             distance[lo + seg.ray[starts]] = np.minimum.reduceat(entry, starts, axis=0) * max_range
+        if unknown == "occupied":
+            unseen = first_unobserved(
+                self.observed_columns(band), self.offset[:2], angles, max_range, self.resolution, self.footprint
+            )
+            distance = np.minimum(distance, unseen[:, None])
         horizontal = distance[angle_of, height_of]
         return np.sqrt(horizontal**2 + hh**2).reshape(shape)
 
@@ -522,5 +693,6 @@ def build_grid(
         offset=offset.astype(np.int64),
         samples=samples,
         params=params,
+        footprint=float(robot.radius) if footprint_prior else 0.0,
     )
 

@@ -6,7 +6,10 @@ cell holding its end point one hit update (OctoMap has no per-point evidence, so
 evidence values are not used). Floor features follow the sensor model's floor handling,
 as for the dense grid. The robot's footprint gets the same free prior as the
 parametric model and the dense grid. :meth:`OctoMapModel.inverse_range` casts horizontal
-rays with OctoMap's own ``castRay`` so the same navigation extraction applies.
+rays with OctoMap's own ``castRay`` so the same navigation extraction applies; it reads
+unobserved space (no node in the tree: ``search`` finds none) as free or, with
+``unknown="occupied"``, as the dense grid does (:mod:`occtool.grid`): the ray also ends at
+the first column with no node between the band's heights.
 """
 
 from __future__ import annotations
@@ -21,7 +24,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, MissingDependencyError
 from occtool.features import Features
-from occtool.grid import OCTOMAP_DEFAULTS, LogOddsParams, floor_reach, footprint_cells, logit, ray_plan, traverse
+from occtool.grid import (
+    OCTOMAP_DEFAULTS,
+    LogOddsParams,
+    band_layers,
+    check_unknown,
+    first_unobserved,
+    floor_reach,
+    footprint_cells,
+    logit,
+    ray_plan,
+    traverse,
+)
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 
@@ -55,10 +69,14 @@ class OctoMapModel:
         The ``pyoctomap.OcTree``.
     resolution
         Leaf edge length, metres.
+    footprint
+        Radius of the robot footprint the prior set free, metres (0: no prior); with
+        ``unknown="occupied"`` the robot's disk counts as observed.
     """
 
     tree: Any
     resolution: float
+    footprint: float = 0.0
 
     @property
     def memory_bytes(self) -> int:
@@ -98,16 +116,74 @@ class OctoMapModel:
                 out[i] = node.getOccupancy()
         return out
 
+    def observed_columns(
+        self, band: tuple[float, float] | None = None, reach: float | None = None
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
+        """Which columns hold a node of the tree (an observed cell) between a band's heights.
+
+        Parameters
+        ----------
+        band
+            ``(low, high)`` sensor-frame heights, metres; the layers whose cells overlap it
+            count (:func:`occtool.grid.band_layers`). Default: the tree's height extent.
+        reach
+            Half the edge of the square around the sensor axis to look in, metres
+            (default: the tree's horizontal extent).
+
+        Returns
+        -------
+        observed, offset
+            ``(nx, ny)`` booleans and the lattice index ``(i, j)`` of ``observed[0, 0]``
+            (OctoMap's keys less its centre key: cell ``i`` spans ``[i, i + 1) * resolution``).
+        """
+        res = self.resolution
+        tree_min, tree_max = np.asarray(self.tree.getMetricMin()), np.asarray(self.tree.getMetricMax())
+        if band is None:
+            band = (float(tree_min[2]), float(tree_max[2]))
+        k_lo, k_hi = band_layers(band, res)
+        if reach is None:
+            reach = float(np.abs(np.concatenate([tree_min[:2], tree_max[:2]])).max()) + res
+        n = int(np.ceil(reach / res)) + 1
+        offset = np.array([-n, -n], dtype=np.int64)
+        observed = np.zeros((2 * n, 2 * n), dtype=bool)
+        # Just inside the corner cells: OctoMap turns the box into keys by flooring.
+        eps = 1e-6 * res
+        lower = np.array([-n * res + eps, -n * res + eps, k_lo * res + eps])
+        upper = np.array([n * res - eps, n * res - eps, (k_hi + 1) * res - eps])
+        leaves = [(*leaf.getCoordinate(), leaf.getSize()) for leaf in self.tree.begin_leafs_bbx(lower, upper)]
+        if not leaves:
+            return observed, offset
+        table = np.asarray(leaves, dtype=np.float64).reshape(-1, 4)
+        half = 0.5 * table[:, 3:]
+        # A leaf is a cube of 2^d cells (d > 0 where OctoMap pruned): the cells it spans.
+        first = np.rint((table[:, :3] - half) / res).astype(np.int64)
+        last = np.rint((table[:, :3] + half) / res).astype(np.int64) - 1
+        keep = (last[:, 2] >= k_lo) & (first[:, 2] <= k_hi)
+        first, last = first[keep, :2] - offset, last[keep, :2] - offset + 1
+        single = ((last - first) == 1).all(axis=1)
+        inside = single & ((first >= 0) & (first < observed.shape)).all(axis=1)
+        observed[first[inside, 0], first[inside, 1]] = True
+        for (i0, j0), (i1, j1) in zip(np.maximum(first[~single], 0), np.minimum(last[~single], observed.shape)):
+            observed[i0:i1, j0:j1] = True
+        return observed, offset
+
     def inverse_range(
-        self, alpha: ArrayLike, h: ArrayLike, level: float, max_range: float | None = None
+        self,
+        alpha: ArrayLike,
+        h: ArrayLike,
+        level: float,
+        max_range: float | None = None,
+        *,
+        unknown: str = "free",
+        band: tuple[float, float] | None = None,
     ) -> FloatArray:
         """Distance from the sensor to the first cell at or above ``level`` along horizontal rays.
 
         Same contract as :meth:`occtool.grid.OccupancyGrid.inverse_range`: the 3D distance
         ``r`` to where the ray at ``(alpha, h)`` enters the first occupied leaf, ``inf`` when
         there is none within ``max_range`` (horizontal; by default the farthest corner of
-        the tree's extent). Unknown space counts as free (OctoMap's ``castRay`` ignoring
-        unknown cells), as the grid does for levels above 0.5.
+        the tree's extent). With ``unknown="free"`` unknown space counts as free (OctoMap's
+        ``castRay`` ignoring unknown cells), as the grid does for levels above 0.5.
 
         Parameters
         ----------
@@ -117,6 +193,14 @@ class OctoMapModel:
             Occupancy level in (0, 1).
         max_range
             Horizontal distance to search up to, metres.
+        unknown
+            ``"free"`` or ``"occupied"``: the ray also ends where it enters a column with no
+            node of the tree between the ``band``'s heights (:meth:`observed_columns`), at
+            every height ``h``, as for the dense grid; the robot's :attr:`footprint` counts
+            as observed.
+        band
+            ``(low, high)`` sensor-frame heights whose nodes make a column observed, with
+            ``unknown="occupied"``; default the tree's height extent.
 
         Returns
         -------
@@ -128,6 +212,7 @@ class OctoMapModel:
             max_range = float(np.hypot(corners[:, 0].max(), corners[:, 1].max())) + self.resolution
         if not (np.isfinite(max_range) and max_range > 0):
             raise InputError(f"max range must be a finite number > 0, got {max_range}")
+        check_unknown(unknown)
         alpha_b, h_b = np.broadcast_arrays(np.asarray(alpha, dtype=np.float64), np.asarray(h, dtype=np.float64))
         shape = alpha_b.shape
         a = alpha_b.reshape(-1)
@@ -146,6 +231,11 @@ class OctoMapModel:
                     distance[i] = _entry_distance(direction[:2], end[:2], half)
         finally:
             tree.setOccupancyThres(saved)
+        if unknown == "occupied":
+            observed, offset = self.observed_columns(band, reach=float(max_range) + self.resolution)
+            angles, angle_of = np.unique(a, return_inverse=True)
+            unseen = first_unobserved(observed, offset, angles, float(max_range), self.resolution, self.footprint)
+            distance = np.minimum(distance, unseen[angle_of.reshape(-1)])
         return np.sqrt(distance**2 + hh**2).reshape(shape)
 
 
@@ -228,7 +318,7 @@ def build_octomap(
         free = float(logit(params.clamping_thres_min)) * 10.0
         tree.updateNodes(centres, free, lazy_eval=True)
         tree.updateInnerOccupancy()
-    return OctoMapModel(tree=tree, resolution=float(resolution))
+    return OctoMapModel(tree=tree, resolution=float(resolution), footprint=float(robot.radius) if footprint_prior else 0.0)
 
 
 def _insertions(

@@ -135,3 +135,33 @@ def test_no_overwrite_refuses_an_existing_report(tmp_path, fixtures_dir):
                                       "--resolution", "0.2", "--json", str(report), "--no-overwrite"])
     assert result.exit_code == 1 and "exists already" in result.output
     assert report.read_text() == "{}"
+
+
+def test_unknown_option_round_trips_in_the_json(small_log: Path, tmp_path: Path) -> None:
+    common = ("compare-grid", str(small_log), "--resolution", "0.2", "-L", "6", "--angles", "90", "--octomap")
+    default = json.loads(_run(*common, "--json", "-").stdout)
+    assert default["settings"]["unknown"] == "free"
+    result = _run(*common, "--unknown", "occupied", "--json", "-")
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["settings"]["unknown"] == "occupied"
+    # The body band (robot defaults: 0.05 to 1 m above the floor, sensor at 1 m).
+    assert report["settings"]["observed_band"] == pytest.approx([-0.95, 0.0])
+    assert "occupied" in report["unknown_space"]
+    # Only the grids' reading changes.
+    assert report["polygons"]["parametric"] == default["polygons"]["parametric"]
+    # The table says how unseen space was read; a config file sets it too.
+    config = tmp_path / "compare.toml"
+    config.write_text('unknown = "occupied"\n', encoding="utf-8")
+    table = _run(*common, "--config", str(config))
+    assert table.exit_code == 0, table.output
+    assert "unobserved space as occupied" in " ".join(table.output.split())
+
+
+def test_bad_unknown_value_is_a_clear_error(small_log: Path, tmp_path: Path) -> None:
+    target = tmp_path / "report.json"
+    result = CliRunner().invoke(cli, ["compare-grid", str(small_log), "--unknown", "maybe", "--json", str(target)])
+    assert result.exit_code == 2
+    output = " ".join(result.output.split())
+    assert "Error: Invalid value for '--unknown'" in output and "'free', 'occupied'" in output
+    assert "Traceback" not in output and not target.exists()

@@ -192,3 +192,67 @@ def test_bad_settings_are_input_errors() -> None:
         compare_grid(features, regressor=OccupancyRegressor(pieces=2), navigation={}, resolution=0.0)
     with pytest.raises(InputError, match="scans"):
         compare_grid(features, regressor=OccupancyRegressor(pieces=2), navigation={}, octomap=True, octomap_scans=0)
+
+
+# ------------------------------------------------------------------ unobserved space
+
+
+def _planar_scan(radius: float = 1.2, gap: tuple[float, float] = (40.0, 80.0)) -> Features:
+    """A planar 240-degree laser scan of a round wall, with no returns over ``gap`` degrees."""
+    degrees = np.arange(-120.0, 120.0, 0.5)
+    degrees = degrees[(degrees < gap[0]) | (degrees > gap[1])]
+    alpha = np.radians(degrees)
+    return Features.from_xyz(radius * np.cos(alpha), radius * np.sin(alpha), np.zeros_like(alpha), 0.9)
+
+
+def test_unknown_space_is_recorded(round_room_report: dict) -> None:
+    settings = round_room_report["settings"]
+    assert settings["unknown"] == "free"
+    assert settings["observed_band"] == list(Robot().body_band)
+    assert "free" in round_room_report["unknown_space"]
+
+
+def test_unknown_occupied_closes_what_the_laser_did_not_see() -> None:
+    robot = Robot(sensor_height=0.3, body_height=0.4)
+    features = _planar_scan()
+    reports = {
+        unknown: compare_grid(
+            features,
+            regressor=OccupancyRegressor(pieces=8, robot=robot),
+            navigation={"robot": robot, "n_angles": 180},
+            resolution=0.05,
+            octomap=True,
+            octomap_scans=1,
+            file_sizes=False,
+            unknown=unknown,
+        )
+        for unknown in ("free", "occupied")
+    }
+    assert reports["occupied"]["settings"]["unknown"] == "occupied"
+    assert reports["occupied"]["settings"]["observed_band"] == pytest.approx(list(robot.body_band))
+    assert "occupied" in reports["occupied"]["unknown_space"]
+    in_gap = shapely.Point(0.8 * np.cos(np.radians(60)), 0.8 * np.sin(np.radians(60)))
+    # In the widest seen sector (-120 to 40 degrees), where the robot drives out.
+    ahead = shapely.Point(0.6 * np.cos(np.radians(-40)), 0.6 * np.sin(np.radians(-40)))
+    for name in ("grid", "octomap"):
+        free = shapely.geometry.shape(reports["free"]["polygons"][name])
+        closed = shapely.geometry.shape(reports["occupied"]["polygons"][name])
+        # Free: the polygon runs to the max range behind the laser, and into the gap.
+        assert free.bounds[0] < -1.0
+        assert free.contains(in_gap) and free.contains(ahead)
+        # Occupied: the robot is not in collision and what was seen stays open; the unseen
+        # rear (beyond 120 degrees) and the gap are closed.
+        assert closed.contains(ahead)
+        assert closed.bounds[0] > -0.3
+        assert not closed.intersects(in_gap)
+        assert closed.area < 0.5 * free.area
+        # The parametric model closes unseen directions too: the grids now agree with it better.
+        assert reports["occupied"]["agreement"][name]["iou"] > reports["free"]["agreement"][name]["iou"]
+    # Only the grids' polygons change.
+    assert reports["occupied"]["polygons"]["parametric"] == reports["free"]["polygons"]["parametric"]
+    assert reports["occupied"]["auc"] == reports["free"]["auc"]
+
+
+def test_bad_unknown_is_an_input_error() -> None:
+    with pytest.raises(InputError, match="'free' or 'occupied'"):
+        compare_grid(_round_room(n=100), regressor=OccupancyRegressor(pieces=2), navigation={}, unknown="unknown")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given
@@ -12,6 +14,7 @@ from occtool.features import Features
 from occtool.grid import (
     OCTOMAP_DEFAULTS,
     LogOddsParams,
+    OccupancyGrid,
     build_grid,
     footprint_cells,
     logit,
@@ -258,3 +261,76 @@ def test_inverse_range_matches_a_ray_walk_in_3d(seed: int, level: float) -> None
             marched = grid.occupancy(points) >= level
             if marched.any():
                 assert found <= d[np.argmax(marched)] + step
+
+
+# ------------------------------------------------------------------ unobserved space
+
+
+def _planar_scan_grid() -> OccupancyGrid:
+    """A hand-made 0.1 m grid over x in [-0.2, 1.8), y in [-0.2, 0.2), z in [-0.3, 0.3).
+
+    Only the laser's layer (z in [0, 0.1)) is observed, free, but for a gap no beam
+    crossed at x in [0.8, 1.0) and a wall hit at x in [1.5, 1.6); the other layers are
+    unobserved (log-odds 0), as a planar laser leaves them.
+    """
+    log_odds = np.zeros((20, 4, 6), dtype=np.float32)
+    plane = 3  # global layer 0, with the offset -3
+    log_odds[:, :, plane] = MISS
+    log_odds[10:12, :, plane] = 0.0  # global columns i = 8, 9
+    log_odds[17, :, plane] = HIT  # global column i = 15
+    return OccupancyGrid(log_odds=log_odds, resolution=0.1, offset=np.array([-2, -2, -3]))
+
+
+def _horizontal(r: np.ndarray, h: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.maximum(r**2 - h**2, 0.0))
+
+
+HEIGHTS = np.array([[0.05], [-0.15], [0.25]])  # the laser's layer, and two unobserved ones
+
+
+def test_unknown_free_passes_the_gap_and_occupied_stops_at_it() -> None:
+    grid = _planar_scan_grid()
+    free = _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5), HEIGHTS)
+    # Free: the gap's prior 0.5 is below the level; the wall blocks in its own layer only.
+    assert free[0, 0] == pytest.approx(1.5)
+    assert np.isinf(free[1:]).all()
+    assert np.array_equal(free, _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="free"), HEIGHTS))
+    # Occupied: the gap's columns were observed at no height: every height stops there.
+    occupied = _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied"), HEIGHTS)
+    np.testing.assert_allclose(occupied, 0.8)
+    # Behind the laser the grid ends at x = -0.2; outside it nothing was observed.
+    assert np.isinf(grid.inverse_range(np.pi, 0.05, 0.6, max_range=2.5))
+    assert _horizontal(grid.inverse_range(np.pi, 0.05, 0.6, max_range=2.5, unknown="occupied"), 0.05) == pytest.approx(0.2)
+
+
+def test_a_column_observed_at_one_height_of_the_band_counts_at_all() -> None:
+    grid = _planar_scan_grid()
+    grid.log_odds[10:12, :, 3] = MISS  # the gap seen after all
+    occupied = _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied"), HEIGHTS)
+    # In the laser's layer the wall; elsewhere the wall's column is observed (free at its
+    # prior there) and the rays run on to the end of the grid, where observation stops.
+    np.testing.assert_allclose(occupied[:, 0], [1.5, 1.8, 1.8])
+    # A band without the laser's layer observes nothing: the rays stop at once...
+    band = (-0.3, -0.05)
+    assert not grid.observed_columns(band).any()
+    assert grid.observed_columns((0.0, 0.0)).sum() == 20 * 4
+    np.testing.assert_allclose(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied", band=band), np.abs(HEIGHTS))
+    # ...but for the robot's footprint, which it stands on: columns within half a cell of
+    # its disk count as observed (the first beyond 0.22 + 0.05 m starts at 0.3 m).
+    standing = replace(grid, footprint=0.22)
+    r = standing.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied", band=band)
+    np.testing.assert_allclose(_horizontal(r, HEIGHTS), 0.3)
+
+
+def test_built_grids_carry_their_footprint_prior() -> None:
+    robot = Robot(radius=0.3)
+    assert build_grid(_wall(n=50), resolution=0.1, robot=robot).footprint == 0.3
+    assert build_grid(_wall(n=50), resolution=0.1, robot=robot, footprint_prior=False).footprint == 0.0
+
+
+def test_unknown_must_be_free_or_occupied() -> None:
+    grid = _planar_scan_grid()
+    with pytest.raises(InputError, match="'free' or 'occupied'"):
+        grid.inverse_range(0.0, 0.0, 0.6, unknown="unknown")
+    with pytest.raises(InputError, match="band"):
+        grid.inverse_range(0.0, 0.0, 0.6, unknown="occupied", band=(0.2, -0.2))

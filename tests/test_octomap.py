@@ -15,7 +15,7 @@ from occtool.robot import Robot
 
 pyoctomap = pytest.importorskip("pyoctomap")
 
-from occtool.octomap import build_octomap, octomap_available, octomap_updates  # noqa: E402
+from occtool.octomap import OctoMapModel, build_octomap, octomap_available, octomap_updates  # noqa: E402
 
 
 def _wall(x: float = 2.03, n: int = 3000, seed: int = 0) -> Features:
@@ -106,3 +106,77 @@ def test_default_search_range_covers_the_tree() -> None:
     assert r[1] == np.inf
     with pytest.raises(InputError, match="max range"):
         tree.inverse_range(0.0, 0.0, 0.6, max_range=np.inf)
+
+
+# ------------------------------------------------------------------ unobserved space
+
+
+def _planar_scan_tree() -> OctoMapModel:
+    """The layout of tests/test_grid.py's hand-made grid, node by node: the laser's layer
+    (z in [0, 0.1)) free from x = -0.2 to 1.8 and y = -0.2 to 0.2, no node at x in
+    [0.8, 1.0) (the gap), a hit at x in [1.5, 1.6). One 2x2x2 block at x in [1.2, 1.4),
+    y in [0, 0.2), z in [0, 0.2) is all free, so OctoMap prunes it into one 0.2 m leaf."""
+    tree = pyoctomap.OcTree(0.1)
+    miss, hit = float(logit(0.4)), float(logit(0.7))
+
+    def put(i: int, j: int, k: int, value: float) -> None:
+        tree.updateNode(np.array([(i + 0.5) * 0.1, (j + 0.5) * 0.1, (k + 0.5) * 0.1]), value, False)
+
+    for i in range(-2, 18):
+        for j in range(-2, 2):
+            if i not in (8, 9):
+                put(i, j, 0, hit if i == 15 else miss)
+    for i in (12, 13):
+        for j in (0, 1):
+            put(i, j, 1, miss)
+    return OctoMapModel(tree=tree, resolution=0.1)
+
+
+def test_unknown_free_passes_the_gap_and_occupied_stops_at_it() -> None:
+    model = _planar_scan_tree()
+    sizes = {round(leaf.getSize(), 6) for leaf in model.tree.begin_leafs()}
+    assert sizes == {0.1, 0.2}  # the pruned block is one leaf
+    heights = np.array([[0.05], [-0.15], [0.25]])
+    free = np.sqrt(model.inverse_range(0.0, heights, 0.6, max_range=2.5) ** 2 - heights**2)
+    assert free[0, 0] == pytest.approx(1.5)
+    assert np.isinf(free[1:]).all()
+    occupied = model.inverse_range(0.0, heights, 0.6, max_range=2.5, unknown="occupied")
+    np.testing.assert_allclose(np.sqrt(occupied**2 - heights**2), 0.8)
+    # The pruned leaf's four columns are observed; the band must reach the laser's layer.
+    observed, offset = model.observed_columns(reach=2.0)
+    assert observed[12 - offset[0] : 14 - offset[0], 0 - offset[1] : 2 - offset[1]].all()
+    assert observed.sum() == 18 * 4
+    assert not model.observed_columns((-0.3, -0.05), reach=2.0)[0].any()
+    # Behind the laser: the last node is at x = -0.2.
+    behind = model.inverse_range(np.pi, 0.05, 0.6, max_range=2.5, unknown="occupied")
+    assert np.sqrt(behind**2 - 0.05**2) == pytest.approx(0.2)
+    with pytest.raises(InputError, match="'free' or 'occupied'"):
+        model.inverse_range(0.0, 0.0, 0.6, unknown="closed")
+
+
+def test_unknown_occupied_agrees_with_the_grid_on_a_planar_scan() -> None:
+    # A planar laser over 120 degrees with no return from 10 to 30 degrees, a wall at x = 1.03.
+    robot = Robot(radius=0.1, sensor_height=0.3, body_height=0.4)
+    degrees = np.arange(-60.0, 60.5, 0.5)
+    alpha = np.radians(degrees[(degrees < 10) | (degrees > 30)])
+    r = 1.03 / np.cos(alpha)
+    features = Features.from_xyz(r * np.cos(alpha), r * np.sin(alpha), np.zeros_like(alpha), 1.0)
+    tree = build_octomap(features, resolution=0.05, robot=robot)
+    grid = build_grid(features, resolution=0.05, robot=robot)
+    assert tree.footprint == grid.footprint == 0.1
+    angles = np.radians(np.arange(-180.0, 180.0, 7.0))[None, :]
+    heights = np.array([[-0.2], [0.01], [0.08]])
+    for unknown in ("free", "occupied"):
+        r_tree = tree.inverse_range(angles, heights, 0.6, max_range=2.0, unknown=unknown, band=robot.body_band)
+        r_grid = grid.inverse_range(angles, heights, 0.6, max_range=2.0, unknown=unknown, band=robot.body_band)
+        np.testing.assert_allclose(r_tree, r_grid, atol=1e-9)
+    # Occupied: behind the laser the rays end past the robot's footprint, in the first
+    # column beyond half a cell of its disk; in the gap short of the wall; free: they run on.
+    horizontal = np.sqrt(r_tree**2 - heights**2)
+    behind = np.abs(angles[0]) > np.radians(100)
+    known = 0.1 + 0.05 / 2
+    assert (horizontal[:, behind] >= known - 1e-9).all()
+    assert (horizontal[:, behind] <= known + 0.05 * np.sqrt(2) + 1e-9).all()
+    gap = np.radians(20.0)
+    assert np.sqrt(tree.inverse_range(gap, 0.01, 0.6, max_range=2.0, unknown="occupied") ** 2 - 1e-4) < 0.5
+    assert np.isinf(tree.inverse_range(gap, 0.01, 0.6, max_range=2.0))

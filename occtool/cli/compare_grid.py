@@ -47,6 +47,10 @@ def _holdout(ctx: click.Context | None, param: click.Parameter | None, value: fl
               help="Also build an OctoMap (needs the extra: pip install 'occtool[octomap]').")
 @click.option("--octomap-scans", type=click.IntRange(min=1), default=10, show_default=True,
               help="Insert the features into OctoMap as this many scans (it updates a cell once per scan).")
+@click.option("--unknown", type=click.Choice(["free", "occupied"]), default="free", show_default=True,
+              help="Read unobserved space in the grids' navigation polygons as free (its prior 0.5, below the "
+                   "threshold), or occupied as a careful planner does: rays end at the first cell whose column "
+                   "has no observed cell across the robot's body.")
 @click.option("--truth", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Scene truth (truth.json from `occtool simulate`) to score the polygons against.")
 @click.option("--holdout", type=float, default=0.1, show_default=True, callback=_holdout,
@@ -71,6 +75,7 @@ def compare_grid(
     resolution: float,
     use_octomap: bool,
     octomap_scans: int,
+    unknown: str,
     truth: str | None,
     holdout: float,
     repeat: int,
@@ -86,7 +91,8 @@ def compare_grid(
     Every model is built from the same features (less the --holdout share) with the same
     sensor model; from each the navigation polygon is extracted with the same threshold,
     heights, robot radius and max range. The grids get the parametric model's prior that
-    the robot's footprint is free. Reported: samples, build and extraction time, memory,
+    the robot's footprint is free. Unobserved space reads as free in the grids' polygons
+    unless --unknown occupied is given. Reported: samples, build and extraction time, memory,
     agreement with the parametric polygon, ROC AUC of occupancy on held-out features,
     and with --truth IoU and safety violation against the scene.
     """
@@ -129,6 +135,7 @@ def compare_grid(
         holdout=holdout,
         seed=seed,
         repeat=repeat,
+        unknown=unknown,
     )
     report["input"] = str(log_path)
     if json_path is not None:
@@ -157,7 +164,14 @@ def report_table(report: dict[str, Any]) -> Any:
             f"grids at {settings['resolution']:g} m, threshold {settings['threshold']:g}, "
             f"max range {settings['max_range']:g} m"
         ),
-        caption="The grids get the parametric model's free prior on the robot's footprint.",
+        caption=(
+            "The grids get the parametric model's free prior on the robot's footprint; "
+            + (
+                "they read unobserved space as occupied (columns unseen across the body band)."
+                if settings.get("unknown") == "occupied"
+                else "they read unobserved space as free."
+            )
+        ),
     )
     table.add_column("")
     for name in names:
