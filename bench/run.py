@@ -129,6 +129,11 @@ def comparison_row(report: dict[str, Any], **extra: Any) -> dict[str, Any]:
     return row
 
 
+def empty_map_notes(report: dict[str, Any], where: str) -> list[str]:
+    """Why a model's navigation polygon came out empty, from the report's warnings."""
+    return [f"{where}, {name}: {note}" for name, figures in report["models"].items() for note in figures["warnings"]]
+
+
 # ----------------------------------------------------------------------------- sections
 
 
@@ -161,6 +166,7 @@ def feature_sweep(counts: tuple[int, ...], budget: Budget) -> tuple[list[dict[st
         elapsed = time.perf_counter() - start
         per_feature = elapsed / n / (3.0 if n <= 10_000 else 1.0)
         reports[n] = report
+        notes += empty_map_notes(report, f"{n:,} features")
         rows.append(comparison_row(report, sweep="features", features=n, scale_fixed=1))
     return rows, notes, reports
 
@@ -196,6 +202,7 @@ def scale_sweep(scales: tuple[int, ...], budget: Budget) -> tuple[list[dict[str,
             file_sizes=False,
             grid_bounds=room_bounds(scene, robot, margin=2 * RESOLUTION),
         )
+        notes += empty_map_notes(report, f"scale {scale}x")
         rows.append(comparison_row(report, sweep="scale", scale=scale, features_fixed=SCALE_FEATURES))
     return rows, notes
 
@@ -341,6 +348,8 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
             "polygon_area": {name: figures["polygon_area"] for name, figures in closed["models"].items()},
             "observed_band": closed["settings"]["observed_band"],
         }
+        notes += empty_map_notes(report, label)
+        notes += empty_map_notes(closed, f"{label} (unseen occupied)")
         rows.append(row)
     return rows, notes
 

@@ -145,6 +145,8 @@ class ModelResult:
     file_bytes: int
     polygon: shapely.Geometry
     extra: dict[str, Any] = field(default_factory=dict)
+    #: Why the navigation map is degenerate (an empty polygon: the robot in collision), if it is.
+    warnings: list[str] = field(default_factory=list)
 
     def figures(self) -> dict[str, Any]:
         return {
@@ -155,6 +157,7 @@ class ModelResult:
             "file_bytes": int(self.file_bytes),
             "polygon_area": float(self.polygon.area),
             **self.extra,
+            "warnings": list(self.warnings),
         }
 
 
@@ -196,12 +199,16 @@ def _save_model_size(model: Any) -> int:
 
 
 def _navigation(inverse_range: Callable[..., Any], navigation: Mapping[str, Any], **extra: Any) -> Any:
+    """The navigation map, with the messages of its NavigationWarnings under ``notes``."""
     from occtool.navigation import NavigationWarning, navigation_map
 
-    with warnings.catch_warnings():
-        # An empty polygon (the robot in collision) is a result to report, not to warn about.
-        warnings.simplefilter("ignore", NavigationWarning)
-        return navigation_map(inverse_range, **{**navigation, **extra})
+    with warnings.catch_warnings(record=True) as caught:
+        # An empty polygon (the robot in collision) is a result to report, not to warn about:
+        # the report says why under the model's "warnings".
+        warnings.simplefilter("always", NavigationWarning)
+        nav = navigation_map(inverse_range, **{**navigation, **extra})
+    notes = list(dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, NavigationWarning)))
+    return nav, notes
 
 
 # --- baselines -------------------------------------------------------------------------------
@@ -354,7 +361,7 @@ def _run_baseline(
     def inverse_range(alpha: Any, h: Any, level: float) -> FloatArray:
         return built.inverse_range(alpha, h, level, max_range=read_range, unknown=unknown, band=band)
 
-    nav, extract_s = _timed(lambda: _navigation(inverse_range, navigation), repeat)
+    (nav, notes), extract_s = _timed(lambda: _navigation(inverse_range, navigation), repeat)
     result = ModelResult(
         name=baseline.name,
         samples=int(baseline.samples(built, inputs)),
@@ -364,6 +371,7 @@ def _run_baseline(
         file_bytes=int(built.file_bytes()) if file_sizes else 0,
         polygon=nav.polygon,
         extra=baseline.figures(built, inputs),
+        warnings=notes,
     )
     logger.info(
         "%s: built in %.3f s, extract %.4f s (%s)",
@@ -467,7 +475,7 @@ def compare_grid(
 
     # --- parametric model
     model, fit_s = _timed(lambda: type(regressor)(**settings).fit(train), repeat)
-    nav, extract_s = _timed(
+    (nav, notes), extract_s = _timed(
         lambda: _navigation(model.inverse_range, navigation, slope_bounds=model.slope_bounds_), repeat
     )
     results["parametric"] = ModelResult(
@@ -479,6 +487,7 @@ def compare_grid(
         file_bytes=_save_model_size(model) if file_sizes else 0,
         polygon=nav.polygon,
         extra={"pieces": int(model.tree_.n_pieces), "samples_per_feature": model.n_samples_ / max(1, len(train))},
+        warnings=notes,
     )
     logger.info("parametric: fit %.3f s, extract %.4f s, %d pieces", fit_s, extract_s, model.tree_.n_pieces)
     scores["parametric"] = tuple(  # type: ignore[assignment]

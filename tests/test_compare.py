@@ -256,3 +256,23 @@ def test_unknown_occupied_closes_what_the_laser_did_not_see() -> None:
 def test_bad_unknown_is_an_input_error() -> None:
     with pytest.raises(InputError, match="'free' or 'occupied'"):
         compare_grid(_round_room(n=100), regressor=OccupancyRegressor(pieces=2), navigation={}, unknown="unknown")
+
+
+def test_an_empty_polygon_says_why(round_room_report: dict) -> None:
+    # The round room leaves every model room to move: no warnings.
+    assert all(figures["warnings"] == [] for figures in round_room_report["models"].values())
+    # A wall 0.3 m away all round: the 10 cm cells of the grid that hold it reach inside
+    # the 0.25 m robot's radius, so the grid's robot is in collision where it stands.
+    rng = np.random.default_rng(1)
+    alpha = rng.uniform(-np.pi, np.pi, 3000)
+    wall = Features.from_xyz(0.3 * np.cos(alpha), 0.3 * np.sin(alpha), rng.uniform(-0.9, 0.0, 3000), 0.9)
+    report = compare_grid(
+        wall,
+        regressor=OccupancyRegressor(pieces=8),
+        navigation={"robot": Robot(), "max_range": 1.5, "n_angles": 180},
+        resolution=0.1,
+    )
+    assert report["models"]["grid"]["polygon_area"] == 0.0
+    for name, figures in report["models"].items():
+        in_collision = any("in collision where it stands" in note for note in figures["warnings"])
+        assert in_collision == (figures["polygon_area"] == 0.0), name
