@@ -116,11 +116,12 @@ def split_holdout(n: int, holdout: float, seed: int) -> tuple[NDArray[np.intp], 
     return np.sort(order[n_out:]), np.sort(order[:n_out])
 
 
-def holdout_points(features: Features, is_floor: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+def holdout_points(features: Features, free_ray: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
     """Test points from held-out features: their end points and points along their rays.
 
-    Floor features are left out of the occupied points (every model here reads the floor
-    as free space, as the sensor model says); their rays still give free points.
+    Free rays (floor features, which every model here reads as free space, and features
+    with evidence 0) are left out of the occupied points; their rays still give free
+    points.
 
     Returns
     -------
@@ -128,7 +129,7 @@ def holdout_points(features: Features, is_floor: NDArray[np.bool_]) -> tuple[Flo
         ``(K, 3)`` and ``(M, 3)`` points in the sensor frame.
     """
     points = features.points
-    occupied = points[~is_floor]
+    occupied = points[~free_ray]
     free = np.concatenate([points * f for f in FREE_FRACTIONS]) if len(points) else np.zeros((0, 3))
     return occupied, free
 
@@ -468,7 +469,7 @@ def compare_grid(
     train_index, test_index = split_holdout(len(features), holdout, seed)
     train = features.select(train_index)
     test = features.select(test_index)
-    occupied_points, free_points = holdout_points(test, np.asarray(sensor.is_floor(test.height, robot), dtype=bool))
+    occupied_points, free_points = holdout_points(test, np.asarray(sensor.is_floor(test.height, robot), dtype=bool) | (test.evidence == 0))
 
     results: dict[str, ModelResult] = {}
     scores: dict[str, tuple[FloatArray, FloatArray]] = {}

@@ -268,7 +268,7 @@ class OccupancyRegressor:
         # at the mean direction of the obstacle features makes the whole fit (the mismatch
         # test included) turn with the scene: rotating the features rotates the model
         # exactly, not up to a bin.
-        obstacle = ~sensor.is_floor(features.height, robot) & ~sensor.is_on_robot(features, robot)
+        obstacle = sensor.is_obstacle(features, robot) & ~sensor.is_floor(features.height, robot)
         origin = mean_direction(features.alpha[obstacle]) if self.basis == "trig" else 0.0
         if self.focus:
             # Only features the focus keeps can mislead the fit: test those alone.

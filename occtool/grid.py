@@ -545,16 +545,17 @@ def ray_plan(features: Features, robot: Robot, sensor: SensorModel | None) -> tu
 
     The sensor model treats floor features as it does for the parametric fit: ``"free"`` keeps only the free space in front of them (up to the
     last near sample), ``"drop"`` ignores them, ``"obstacle"`` uses them like any other.
+    Features with evidence 0 (a beam that returned nothing) are free rays in every mode.
     """
     n = len(features)
     use = np.ones(n, dtype=bool)
     full = np.ones(n, dtype=bool)
-    if sensor is not None and sensor.floor != "obstacle":
+    if sensor is not None:
         on_floor = np.asarray(sensor.is_floor(features.height, robot), dtype=bool)
+        free_ray = np.asarray(sensor.is_free_ray(features, robot, on_floor=on_floor), dtype=bool)
         if sensor.floor == "drop":
-            use &= ~on_floor
-        else:
-            full &= ~on_floor
+            use &= ~on_floor | free_ray
+        full &= ~free_ray
     return use, full
 
 

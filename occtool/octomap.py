@@ -3,7 +3,8 @@
 The features are inserted as point clouds from the sensor origin, as OctoMap's
 ``insertPointCloud`` does for a scan: every cell a ray crosses gets one miss update, the
 cell holding its end point one hit update (OctoMap has no per-point evidence, so the
-evidence values are not used). Floor features follow the sensor model's floor handling,
+evidence values are not used, except that a feature with evidence 0 is a free ray). Floor
+features and free rays follow the sensor model's handling (:func:`occtool.grid.ray_plan`),
 as for the dense grid. The robot's footprint gets the same free prior as the
 parametric model and the dense grid. :meth:`OctoMapModel.inverse_range` casts horizontal
 rays with OctoMap's own ``castRay`` so the same navigation extraction applies; it reads
@@ -330,7 +331,8 @@ def _insertions(
     use, full = ray_plan(features, robot, sensor)
     points = features.points
     hits = points[use & full]
-    inserts = [(part, -1.0) for part in np.array_split(hits, min(int(scans), len(hits))) if len(part)]
+    # Only free rays (all floor, or beams that returned nothing): nothing to split.
+    inserts = [(part, -1.0) for part in np.array_split(hits, min(int(scans), len(hits))) if len(part)] if len(hits) else []
     floor = points[use & ~full]
     if len(floor):
         r = np.sqrt(np.einsum("ij,ij->i", floor, floor))

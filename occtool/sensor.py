@@ -15,6 +15,10 @@ Three further kinds of sample are occtool's own choices (see ``docs/method.md``)
 * *floor* features (lower than the robot's ground clearance) are not obstacles: they keep
   their free near and robot samples but lose their hit samples (``floor="free"``); they can
   also be dropped altogether (``"drop"``) or treated as obstacles (``"obstacle"``);
+* features with evidence exactly 0 are *free rays* whatever the floor handling: a laser
+  beam that returned nothing within its range, written at that range, says its ray is free
+  and nothing about an obstacle. Like floor features they keep only their near and robot
+  samples (all of value 0), kind ``"floor"`` (free-ray samples);
 * *footprint* samples with value 0 fill the robot's own body, which the sensor cannot see
   (the blind cone under its lowest tilt), so the fit cannot place an obstacle there;
 * optional *background* samples with value 0 spread over the space with a small weight,
@@ -96,7 +100,8 @@ class SensorModel:
     floor
         How floor features (lower than the robot's ground clearance) are used: ``"free"``
         keeps only their free-space samples, ``"drop"`` ignores them, ``"obstacle"`` treats
-        them like any other feature (the floor then shrinks the navigation area).
+        them like any other feature (the floor then shrinks the navigation area). Features
+        with evidence 0 are free rays in every mode (:meth:`is_free_ray`).
     footprint_samples
         Number of zero-value samples filling the robot's body cylinder (0: none).
     footprint_weight
@@ -232,8 +237,8 @@ class SensorModel:
         # or a mismatch: no obstacle can stand there. Two such mismatches a few centimetres
         # apart once made the robot "in collision where it stands" (office, 7k features).
         on_robot = self.is_on_robot(features, robot)
-        obstacle = (~on_floor if self.floor != "obstacle" else np.ones_like(on_floor)) & ~on_robot
-        free_only = (on_floor if self.floor == "free" else np.zeros_like(on_floor)) & ~on_robot
+        free_only = self.is_free_ray(features, robot, on_floor=on_floor) & ~on_robot
+        obstacle = ~(on_floor & (self.floor == "drop")) & ~free_only & ~on_robot
         rays = obstacle | free_only
 
         parts: list[tuple[FloatArray, ...]] = []
@@ -242,8 +247,7 @@ class SensorModel:
         for scale in (1.0 - e, 1.0 + e):
             parts.append((a_obs, h_obs * scale, r_obs * scale, m_obs, np.ones_like(m_obs), SAMPLE_KINDS["hit"]))
         a_ray, h_ray, r_ray, m_ray = alpha[rays], h[rays], r[rays], m[rays]
-        floor_ray = on_floor[rays] & (self.floor == "free")
-        near_kind = np.where(floor_ray, SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"])
+        near_kind = np.where(free_only[rays], SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"])
         for position, value in zip(self.near_positions, self.near_values):
             parts.append((a_ray, h_ray * position, r_ray * position, m_ray * value, np.ones_like(m_ray), near_kind))
         zeros = np.zeros_like(m_ray)
@@ -267,6 +271,20 @@ class SensorModel:
         """Whether features lie inside the robot's body cylinder (radius, floor to top)."""
         x, y, z = features.points.T
         return (np.hypot(x, y) < robot.radius) & (z >= robot.floor_h) & (z <= robot.body_band[1])
+
+    def is_free_ray(self, features: Features, robot: Robot,
+                    on_floor: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
+        """Features that only say their ray is free: evidence 0, and floor features with
+        ``floor="free"``. They give free-space samples and no hit."""
+        if on_floor is None:
+            on_floor = self.is_floor(features.height, robot)
+        return (features.evidence == 0) | (on_floor & (self.floor == "free"))
+
+    def is_obstacle(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
+        """Features that give hit samples: not free rays, not dropped floor, not self-hits."""
+        on_floor = self.is_floor(features.height, robot)
+        dropped = on_floor & (self.floor == "drop")
+        return ~dropped & ~self.is_free_ray(features, robot, on_floor=on_floor) & ~self.is_on_robot(features, robot)
 
     def is_floor(self, h: ArrayLike, robot: Robot) -> NDArray[np.bool_]:
         """Whether features at sensor-frame heights ``h`` lie below the ground clearance."""

@@ -297,3 +297,23 @@ def test_sorted_within_bins_matches_a_two_key_sort(pairs):
     order = np.lexsort((values, bins))
     np.testing.assert_array_equal(grouped, values[order])
     np.testing.assert_array_equal(np.diff(bounds), np.bincount(bins, minlength=12))
+
+
+def test_beams_that_returned_nothing_open_their_directions():
+    # A 180-degree laser 0.3 m above the floor: a wall on the right half, nothing within
+    # range on the left, where the beams are written at 5 m with evidence 0 (free rays).
+    robot = Robot(sensor_height=0.3, body_height=0.4)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, 361)
+    wall = angles < 0
+    r = np.where(wall, 1.2 / np.maximum(np.cos(angles + np.pi / 4), 0.3), 5.0)
+    points = np.column_stack([r * np.cos(angles), r * np.sin(angles), np.zeros_like(r)])
+    evidence = np.where(wall, 0.9, 0.0)
+    with_free_rays = OccupancyRegressor(robot=robot).fit(Features(points, evidence))
+    without = OccupancyRegressor(robot=robot).fit(Features(points[wall], evidence[wall]))
+    left = np.linspace(0.3, 1.3, 11)
+    assert with_free_rays.inverse_range(left, 0.0, 0.6).min() > 2.5
+    # Without them the left half is unseen, and the frontier closes it by the robot.
+    assert without.inverse_range(left, 0.0, 0.6).max() < 0.6
+    # The wall stays in front of where it is, either way.
+    for model in (with_free_rays, without):
+        assert model.inverse_range(np.array([-0.8]), 0.0, 0.6)[0] <= 1.2 / np.cos(-0.8 + np.pi / 4)

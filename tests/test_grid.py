@@ -334,3 +334,14 @@ def test_unknown_must_be_free_or_occupied() -> None:
         grid.inverse_range(0.0, 0.0, 0.6, unknown="unknown")
     with pytest.raises(InputError, match="band"):
         grid.inverse_range(0.0, 0.0, 0.6, unknown="occupied", band=(0.2, -0.2))
+
+
+def test_an_evidence_zero_feature_only_clears_its_ray() -> None:
+    # A laser beam that returned nothing, written at 3 m with evidence 0: free along the
+    # ray, and no hit at its end, in every floor mode of the sensor model.
+    beam = Features.from_xyz([3.03], [0.02], [-0.47], 0.0)
+    for floor in ("free", "drop", "obstacle"):
+        grid = build_grid(beam, resolution=0.1, sensor=SensorModel(floor=floor), footprint_prior=False)
+        assert grid.occupancy([[3.03, 0.02, -0.47]])[0] <= 0.5, floor
+        assert grid.occupancy([[1.52, 0.01, -0.235]])[0] < 0.5, floor
+        assert grid.samples > 0, floor

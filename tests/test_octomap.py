@@ -180,3 +180,12 @@ def test_unknown_occupied_agrees_with_the_grid_on_a_planar_scan() -> None:
     gap = np.radians(20.0)
     assert np.sqrt(tree.inverse_range(gap, 0.01, 0.6, max_range=2.0, unknown="occupied") ** 2 - 1e-4) < 0.5
     assert np.isinf(tree.inverse_range(gap, 0.01, 0.6, max_range=2.0))
+
+
+def test_an_evidence_zero_feature_only_clears_its_ray() -> None:
+    from occtool.sensor import SensorModel
+
+    beam = Features.from_xyz([3.03], [0.02], [-0.47], 0.0)
+    tree = build_octomap(beam, resolution=0.1, footprint_prior=False, sensor=SensorModel())
+    assert tree.occupancy([[3.03, 0.02, -0.47]])[0] <= 0.5
+    assert tree.occupancy([[1.52, 0.01, -0.235]])[0] == pytest.approx(0.4, rel=1e-5)

@@ -96,3 +96,22 @@ def test_features_inside_the_robot_body_give_no_samples():
     assert model.is_on_robot(inside, robot).all() and not model.is_on_robot(outside, robot).any()
     assert len(model.samples(inside, robot)) == 0
     assert len(model.samples(outside, robot)) == 5
+
+
+def test_evidence_zero_features_are_free_rays_in_every_floor_mode():
+    from occtool.sensor import SAMPLE_KINDS
+
+    robot = Robot()
+    # A wall feature 2 m ahead with evidence 0.9 and a no-return beam written at 3 m.
+    features = Features(np.array([[2.0, 0.0, -0.5], [0.0, 3.0, -0.5]]), np.array([0.9, 0.0]))
+    for floor in ("free", "drop", "obstacle"):
+        model = SensorModel(floor=floor, footprint_samples=0)
+        samples = model.samples(features, robot)
+        hits = samples.kind == SAMPLE_KINDS["hit"]
+        # Only the wall gives hits; the free ray gives free-ray samples, all of value 0.
+        assert np.allclose(samples.alpha[hits], 0.0)
+        free = samples.kind == SAMPLE_KINDS["floor"]
+        assert free.sum() == 2 and np.allclose(samples.alpha[free], np.pi / 2)
+        assert np.all(samples.m[samples.alpha == np.pi / 2] == 0.0)
+        assert model.is_obstacle(features, robot).tolist() == [True, False]
+        assert model.is_free_ray(features, robot).tolist() == [False, True]
