@@ -1120,29 +1120,47 @@ def segment_near_runs(profile: FloatArray, far: NDArray[np.bool_], n_segments: i
     """
     n = profile.shape[0]
     y = profile.astype(np.float64)
-    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-    length = j - i
+    far = np.asarray(far, dtype=bool)
     sums = np.concatenate([[0.0], np.cumsum(y)])
-    # run_min[i, j] = min(y[i:j]): a running minimum along each row of y[j - 1], started at i.
-    run_min = np.minimum.accumulate(np.where(j > i, y[np.maximum(j - 1, 0)], np.inf), axis=1)
-    area = sums[j] - sums[i] - np.where(length >= 1, run_min, 0.0) * length
-    cost = np.where((length >= 1) & (length <= max_length), np.maximum(area, 0.0) + 1e-9 * length**2, np.inf)
-    far_count = np.concatenate([[0], np.cumsum(far)])
-    skip = np.where((length >= 1) & (far_count[j] - far_count[i] == length), 0.0, np.inf)
-    columns = np.arange(n + 1)
+    # Runs by their end j (0..n) and length l, longest first, so that the first least
+    # cost found is the one with the earliest start, as a scan over starts would find.
+    longest = max(1, min(int(max_length), n))
+    lengths = np.arange(longest, 0, -1)
+    ends = np.arange(n + 1)
+    starts = ends[:, None] - lengths[None, :]
+    valid = starts >= 0
+    starts = np.maximum(starts, 0)
+    # min(y[j - l:j]) for l = 1..longest: a running minimum back from each end.
+    back = np.where(valid[:, ::-1], y[np.maximum(ends[:, None] - lengths[None, ::-1], 0)], np.inf)
+    run_min = np.minimum.accumulate(back, axis=1)[:, ::-1]
+    area = sums[ends][:, None] - sums[starts] - run_min * lengths
+    cost = np.where(valid, np.maximum(area, 0.0) + 1e-9 * lengths**2, np.inf)
+    # Far runs [a, b): from any cut in [a, b) a skip reaches any later cut up to b.
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], far.astype(np.int8), [0]])))
+    far_runs = list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    leading = far_runs[0][1] if far_runs and far_runs[0][0] == 0 else 0
     # best[g][j]: least cost covering bins [0, j) with g runs; a skip may follow a run.
     best = np.full(n + 1, np.inf)
-    best[0] = 0.0
-    best = np.minimum(best, (best[:, None] + skip).min(axis=0))
+    best[: leading + 1] = 0.0
     layers = [best]
-    run_from, skip_from = [None], [np.argmin(best[:, None] + skip, axis=0)]
+    # Layer 0 has no runs to trace back.
+    run_from = [np.zeros(0, dtype=np.intp)]
+    skip_from = [np.zeros(0, dtype=np.intp)]
+    rows = np.arange(n + 1)
     for _ in range(n_segments):
-        total = layers[-1][:, None] + cost
-        from_run = np.argmin(total, axis=0)
-        after_run = total[from_run, columns]
-        skipped = after_run[:, None] + skip
-        from_skip = np.argmin(skipped, axis=0)
-        after_skip = skipped[from_skip, columns]
+        total = layers[-1][starts] + cost
+        pick = np.argmin(total, axis=1)
+        after_run = total[rows, pick]
+        from_run = rows - lengths[pick]
+        after_skip = np.full(n + 1, np.inf)
+        from_skip = np.zeros(n + 1, dtype=np.intp)
+        for a, b in far_runs:  # a loop over far runs, not bins
+            values = after_run[a:b]
+            running = np.minimum.accumulate(values)
+            better = values < np.concatenate([[np.inf], running[:-1]])
+            first = np.maximum.accumulate(np.where(better, np.arange(b - a), 0))
+            after_skip[a + 1: b + 1] = running
+            from_skip[a + 1: b + 1] = a + first
         use_skip = after_skip < after_run
         layers.append(np.where(use_skip, after_skip, after_run))
         run_from.append(from_run)

@@ -15,6 +15,7 @@ from occtool.fit import (
     contradicted_features,
     first_obstacle_distance,
     frontier_samples,
+    segment_near_runs,
     sorted_within_bins,
 )
 from occtool.robot import Robot
@@ -317,3 +318,77 @@ def test_beams_that_returned_nothing_open_their_directions():
     # The wall stays in front of where it is, either way.
     for model in (with_free_rays, without):
         assert model.inverse_range(np.array([-0.8]), 0.0, 0.6)[0] <= 1.2 / np.cos(-0.8 + np.pi / 4)
+
+
+def dense_segment_near_runs(profile, far, n_segments, max_length):
+    """The segmentation DP over the full (cuts x cuts) cost matrix: the reference.
+
+    Dynamic programming over cut positions: a run costs the area between the profile
+    and the run's nearest value (what a conservative piece gives away), a stretch of far
+    bins may be skipped for free. Returns ``(first, end)`` pairs, ``end`` exclusive.
+    """
+    n = profile.shape[0]
+    y = profile.astype(np.float64)
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    length = j - i
+    sums = np.concatenate([[0.0], np.cumsum(y)])
+    # run_min[i, j] = min(y[i:j]): a running minimum along each row of y[j - 1], started at i.
+    run_min = np.minimum.accumulate(np.where(j > i, y[np.maximum(j - 1, 0)], np.inf), axis=1)
+    area = sums[j] - sums[i] - np.where(length >= 1, run_min, 0.0) * length
+    cost = np.where((length >= 1) & (length <= max_length), np.maximum(area, 0.0) + 1e-9 * length**2, np.inf)
+    far_count = np.concatenate([[0], np.cumsum(far)])
+    skip = np.where((length >= 1) & (far_count[j] - far_count[i] == length), 0.0, np.inf)
+    columns = np.arange(n + 1)
+    # best[g][j]: least cost covering bins [0, j) with g runs; a skip may follow a run.
+    best = np.full(n + 1, np.inf)
+    best[0] = 0.0
+    best = np.minimum(best, (best[:, None] + skip).min(axis=0))
+    layers = [best]
+    run_from, skip_from = [None], [np.argmin(best[:, None] + skip, axis=0)]
+    for _ in range(n_segments):
+        total = layers[-1][:, None] + cost
+        from_run = np.argmin(total, axis=0)
+        after_run = total[from_run, columns]
+        skipped = after_run[:, None] + skip
+        from_skip = np.argmin(skipped, axis=0)
+        after_skip = skipped[from_skip, columns]
+        use_skip = after_skip < after_run
+        layers.append(np.where(use_skip, after_skip, after_run))
+        run_from.append(from_run)
+        skip_from.append(np.where(use_skip, from_skip, -1))
+    finals = [layer[n] for layer in layers]
+    g = int(np.argmin(finals))
+    if not np.isfinite(finals[g]) or g == 0:
+        return [(0, n)]
+    segments = []
+    position = n
+    while g > 0:
+        source = int(skip_from[g][position])
+        if source >= 0:
+            position = source
+        start = int(run_from[g][position])
+        segments.append((start, position))
+        position = start
+        g -= 1
+    return segments[::-1]
+
+
+def segment_cost(profile: FloatArray, first: int, end: int) -> float:
+    """Squared error of the best line through a (circular) run of the profile."""
+    y = profile[np.mod(np.arange(first, end), profile.shape[0])]
+    if y.size < 3:
+        return 0.0
+    x = np.arange(y.size, dtype=np.float64)
+    coefficients = np.polyfit(x, y, 1)
+    return float(np.sum((np.polyval(coefficients, x) - y) ** 2))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(3, 120), st.integers(1, 9), st.integers(1, 130), st.integers(0, 2**32 - 1))
+def test_banded_segmentation_equals_the_dense_dynamic_programme(n, n_segments, max_length, seed):
+    rng = np.random.default_rng(seed)
+    # Few distinct values: ties everywhere, where the two must still choose alike.
+    profile = np.minimum(rng.choice([0.8, 1.2, 1.5, 2.25, 3.0], n), 2.25)
+    far = profile >= 2.25
+    assert segment_near_runs(profile, far, n_segments, max_length) == \
+        dense_segment_near_runs(profile, far, n_segments, max_length)
