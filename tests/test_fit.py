@@ -392,3 +392,23 @@ def test_banded_segmentation_equals_the_dense_dynamic_programme(n, n_segments, m
     far = profile >= 2.25
     assert segment_near_runs(profile, far, n_segments, max_length) == \
         dense_segment_near_runs(profile, far, n_segments, max_length)
+
+
+def test_near_mismatches_need_more_support_than_a_near_box_has():
+    # Corridor, 2k features, seed 5: two mismatches 0.32-0.34 m away in one pan bin, 26 cm
+    # apart in height, passed for an obstacle and boxed the robot in (empty map).
+    from occtool.navigation import navigation_map
+    from occtool.simulate import Scene, box, simulate_scene
+
+    features, _ = simulate_scene("corridor", n_features=2000, seed=5)
+    model = OccupancyRegressor(seed=5).fit(features)
+    nav = navigation_map(model.inverse_range, robot=ROBOT, slope_bounds=model.slope_bounds_)
+    assert nav.polygon.area > 1.0
+    # A real box 0.45 m ahead, seen by the same sparse camera, still stops the map.
+    scene = Scene((box("crate", 0.45, -0.3, 0.9, 0.3, 0.0, 0.6), box("wall", 2.5, -3, 2.6, 3, 0.0, 2.5)))
+    features, _ = simulate_scene(scene, n_features=2000, seed=1)
+    model = OccupancyRegressor(seed=1).fit(features)
+    alpha, h = np.linspace(-0.3, 0.3, 7), np.linspace(-0.95, -0.45, 3)[:, None]
+    ahead = np.sqrt(model.inverse_range(alpha, h, 0.6) ** 2 - h**2)
+    assert np.all(ahead <= 0.45 / np.cos(alpha))  # in front of the crate's face
+    assert ahead.min() > 0.35  # and not far in front of it
