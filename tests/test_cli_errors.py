@@ -244,6 +244,41 @@ def test_topic_on_a_csv_is_an_error(inputs, out):
     assert_nothing_written(out)
 
 
+# --- bad --no-return-range ------------------------------------------------------------------
+
+CARMEN = FIXTURES / "logs" / "tiny.carmen.log"
+# Every command taking the log options (info reads a log without them).
+LOG_OPTION_COMMANDS = {
+    **{name: make for name, make in LOG_COMMANDS.items() if name != "info"},
+    "compare-grid": lambda log, out, inputs: ["compare-grid", log, "--json", out / "report.json"],
+}
+BAD_NO_RETURN_RANGE = {
+    "0": "must be a finite number of metres > 0, got 0",
+    "-1": "must be a finite number of metres > 0, got -1",
+    "nan": "must be a finite number of metres > 0, got nan",
+    "inf": "must be a finite number of metres > 0, got inf",
+    "-inf": "must be a finite number of metres > 0, got -inf",
+    "far": "'far' is not a valid float",
+}
+
+
+@pytest.mark.parametrize("command", sorted(LOG_OPTION_COMMANDS))
+@pytest.mark.parametrize("value", sorted(BAD_NO_RETURN_RANGE))
+def test_bad_no_return_range(value, command, inputs, out):
+    result = run(*LOG_OPTION_COMMANDS[command](CARMEN, out, inputs), f"--no-return-range={value}")
+    output = assert_fails(result, "--no-return-range", BAD_NO_RETURN_RANGE[value], exit_code=2)
+    assert len([line for line in result.output.splitlines() if "Error" in line]) == 1, output
+    assert_nothing_written(out)
+
+
+def test_bad_no_return_range_in_a_config_file(out, tmp_path):
+    config = tmp_path / "log.toml"
+    config.write_text("[log]\nno-return-range = -2.0\n")
+    result = run("convert", CARMEN, "-o", out / "log.csv", "--config", config)
+    assert_fails(result, "--no-return-range", "must be a finite number of metres > 0", exit_code=2)
+    assert_nothing_written(out)
+
+
 # --- broken model files ----------------------------------------------------------------------
 
 

@@ -84,3 +84,103 @@ def test_real_intel_lab_log(shared_data):
     grouped = read_log(path)
     assert 1 < len(grouped.positions) <= 910
     assert sum(len(p.features) for p in grouped.positions) == total
+
+
+# --- no-return readings kept as free rays (--no-return-range) --------------------------------
+
+
+def _beams(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
+
+
+@pytest.mark.parametrize("reach, expected", [(5.0, 5.0), (100.0, 50.0)])
+def test_no_return_readings_become_free_rays_at_the_range_or_the_max_range(fixtures_dir, reach, expected):
+    path = fixtures_dir / "logs" / "tiny.carmen.log"
+    plain = read_log(path, group_by="message")
+    log = read_log(path, group_by="message", no_return_range=reach)
+    assert [len(p.features) for p in plain.positions] == [3, 1, 4]
+    assert [len(p.features) for p in log.positions] == [4, 4, 4]
+    # The 50.0 readings (the file's no-return sentinel) of each scan, by beam: -90, -45, 0, 45 degrees.
+    beam_angles = np.radians([-90.0, -45.0, 0.0, 45.0])
+    no_return = [np.array([2]), np.array([1, 2, 3]), np.array([], dtype=int)]
+    for before, after, missing in zip(plain.positions, log.positions, no_return):
+        free = after.features.evidence == 0.0
+        assert free.sum() == missing.size
+        # The returns are unchanged, evidence and all.
+        np.testing.assert_array_equal(after.features.points[~free], before.features.points)
+        np.testing.assert_array_equal(after.features.evidence[~free], before.features.evidence)
+        # Free rays lie on the no-return beams (one position per scan: each in its own frame).
+        alpha, r = _beams(after.features.points[free])
+        np.testing.assert_allclose(alpha, beam_angles[missing], atol=1e-12)
+        np.testing.assert_allclose(r, expected, rtol=1e-12)
+        assert (after.features.points[free, 2] == 0.0).all()
+    assert any(f"kept 4 of 12 readings with no return (readings >= 50 m) as free rays at {expected:g} m "
+               "with evidence 0" in note for note in log.notes)
+    assert not any("dropped" in note for note in log.notes)
+
+
+def test_without_the_option_no_return_readings_are_dropped_as_before(fixtures_dir):
+    path = fixtures_dir / "logs" / "tiny.carmen.log"
+    default, explicit = read_log(path), read_log(path, no_return_range=None)
+    assert default.notes == explicit.notes
+    assert any("dropped 4 of 12 readings as no return" in note for note in default.notes)
+    for a, b in zip(default.positions, explicit.positions):
+        np.testing.assert_array_equal(a.features.points, b.features.points)
+        assert (a.features.evidence == 0.9).all()
+
+
+def test_robotlaser1_free_rays_stop_at_the_lines_max_range(tmp_path):
+    # 7 beams from -0.75 rad in 0.25 rad steps; the line's max range is 8 m, the file's
+    # no-return sentinel 80 m (repeated); +inf is no return too; 0, -1 and NaN are no readings.
+    readings = "1.0 80.0 inf 0.0 -1.0 nan 80.0"
+    line = (f"ROBOTLASER1 0 -0.75 1.5 0.25 8.0 0.01 0 7 {readings} 0 0.0 0.0 0.0 0.0 0.0 0.0 "
+            "0 0 0 0 0 7.0 host 7.0")
+    path = tmp_path / "robot.log"
+    path.write_text(line + "\n")
+    angles = -0.75 + 0.25 * np.arange(7)
+    plain = read_log(path)
+    np.testing.assert_allclose(plain.single().features.points, [[np.cos(angles[0]), np.sin(angles[0]), 0.0]])
+    assert any("dropped 6 of 7 readings as no return (readings >= 80 m)" in note for note in plain.notes)
+    for reach, expected in ((20.0, 8.0), (3.0, 3.0)):
+        log = read_log(path, no_return_range=reach)
+        features = log.single().features
+        np.testing.assert_array_equal(features.evidence, [0.9, 0.0, 0.0, 0.0])
+        alpha, r = _beams(features.points)
+        np.testing.assert_allclose(alpha, angles[[0, 1, 2, 6]], atol=1e-12)
+        np.testing.assert_allclose(r, [1.0, expected, expected, expected], rtol=1e-12)
+        assert any(f"kept 3 of 7 readings with no return (readings >= 80 m) as free rays at {expected:g} m" in note
+                   for note in log.notes)
+        assert any("dropped 3 of 7 readings <= 0 or NaN" in note for note in log.notes)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "far"])
+def test_a_bad_no_return_range_is_an_error(fixtures_dir, bad):
+    with pytest.raises(InputError, match="no-return range must be a finite number of metres > 0"):
+        read_log(fixtures_dir / "logs" / "tiny.carmen.log", no_return_range=bad)
+
+
+def test_point_formats_ignore_the_no_return_range(fixtures_dir):
+    path = fixtures_dir / "office" / "features.csv"
+    plain, with_option = read_log(path).single(), read_log(path, no_return_range=5.0).single()
+    np.testing.assert_array_equal(plain.features.points, with_option.features.points)
+    np.testing.assert_array_equal(plain.features.evidence, with_option.features.evidence)
+
+
+def test_real_intel_first_scan_gains_its_no_return_beams(shared_data):
+    path = shared_data / "intel_lab" / "intel-corrected.log.gz"
+    with gzip.open(path, "rt") as handle:
+        first = next(line for line in handle if line.startswith("FLASER")).split()
+    ranges = np.array(first[2:182], dtype=float)
+    sentinel = ranges == 81.83
+    assert sentinel.sum() == 15  # the first scan has 15 no-return beams
+    plain = read_log(path, group_by="message").positions[0].features
+    log = read_log(path, group_by="message", no_return_range=4.0)
+    features = log.positions[0].features
+    free = features.evidence == 0.0
+    assert len(plain) == 165 and len(features) == 180 and free.sum() == 15
+    np.testing.assert_array_equal(features.points[~free], plain.points)
+    alpha, r = _beams(features.points[free])
+    np.testing.assert_allclose(alpha, (-np.pi / 2 + np.pi / 180 * np.arange(180))[sentinel], atol=1e-9)
+    np.testing.assert_allclose(r, 4.0)
+    assert any("kept 4172 of 163800 readings with no return (readings >= 81.83 m) as free rays at 4 m" in note
+               for note in log.notes)

@@ -396,3 +396,94 @@ def test_real_ccny_laserscan_recording(shared_data):
     per_message = read_log(path, group_by="message")
     assert len(per_message.positions) == 360
     assert sum(len(p.features) for p in per_message.positions) == len(features)
+
+
+# --- no-return beams kept as free rays (--no-return-range) -----------------------------------
+
+
+def _beams(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1])
+
+
+# REP 117: +inf is no return, -inf too close, NaN erroneous; 12 > range_max (10) is no return,
+# 0.05 < range_min (0.1) invalid; 10 (= range_max) is a return.
+REP117_RANGES = [1.0, np.inf, -np.inf, np.nan, 12.0, 0.05, 2.0, 10.0]
+
+
+@pytest.mark.parametrize("reach, expected", [(5.0, 5.0), (50.0, 10.0)])
+def test_laserscan_keeps_exactly_the_inf_and_above_range_max_beams_as_free_rays(tmp_path, reach, expected):
+    path = write_ros2(tmp_path / "scan.mcap", [("/scan", "sensor_msgs/msg/LaserScan",
+                                                 laserscan(2.0, "base_link", REP117_RANGES), 2.0)])
+    angles = -1.0 + 0.5 * np.arange(len(REP117_RANGES))
+    plain = read_log(path)
+    np.testing.assert_allclose(plain.single().features.range, [1.0, 2.0, 10.0], rtol=1e-6)
+    assert any("dropped 2 of 8 laser beam(s) with no return (+inf or above range_max)" in n for n in plain.notes)
+    assert any("dropped 3 of 8 invalid laser beam(s)" in n for n in plain.notes)
+
+    log = read_log(path, no_return_range=reach)
+    features = log.single().features
+    alpha, r = _beams(features.points)
+    # Beam order: 1.0, +inf, 12.0 (> range_max), 2.0, 10.0.
+    np.testing.assert_allclose(alpha, angles[[0, 1, 4, 6, 7]], atol=1e-6)
+    np.testing.assert_allclose(r, [1.0, expected, expected, 2.0, 10.0], rtol=1e-6)
+    np.testing.assert_array_equal(features.evidence, [0.9, 0.0, 0.0, 0.9, 0.9])
+    assert (features.points[:, 2] == 0.0).all()
+    assert any(f"kept 2 of 8 laser beam(s) with no return (+inf or above range_max) as free rays at {expected:g} m "
+               "with evidence 0" in n for n in log.notes)
+    assert any("dropped 3 of 8 invalid laser beam(s)" in n for n in log.notes)
+
+
+def test_laserscan_free_rays_with_intensities_and_a_mounting(tmp_path):
+    # The laser is turned 90 degrees left on base_link: free rays turn with the returns.
+    tf_static = {"transforms": [transform(0.0, "base_link", "laser", (0.2, 0.0, 0.3), np.pi / 2)]}
+    scan = laserscan(1.0, "laser", [1.0, np.inf, 3.0], angle_min=0.0, increment=0.5, intensities=[50, 7, 200])
+    path = write_ros2(tmp_path / "scan.mcap", [("/tf_static", "tf2_msgs/msg/TFMessage", tf_static, 0.0),
+                                                ("/scan", "sensor_msgs/msg/LaserScan", scan, 1.0)])
+    features = read_log(path, use_intensities=True, no_return_range=4.0).single().features
+    # Intensities are scaled by the returns' largest; the free ray has evidence 0 whatever its intensity.
+    np.testing.assert_allclose(features.evidence, [0.25, 0.0, 1.0])
+    alpha, r = _beams(features.points)
+    np.testing.assert_allclose(alpha, np.pi / 2 + np.array([0.0, 0.5, 1.0]), atol=1e-6)
+    np.testing.assert_allclose(r, [1.0, 4.0, 3.0], rtol=1e-6)
+
+
+def test_foxglove_laserscan_inf_beams_are_free_rays(tmp_path):
+    scan = {"timestamp": {"sec": 1, "nsec": 0}, "frame_id": "base_link", "start_angle": 0.0,
+            "end_angle": float(np.pi / 2), "ranges": [1.0, float("inf"), float("nan"), 2.0], "intensities": []}
+    # Python's json writes +inf as Infinity, which the JSON decoder reads back.
+    path = write_json_channel(tmp_path / "scan.mcap", "/scan", "foxglove.LaserScan", [scan])
+    assert len(read_log(path).single().features) == 2
+    features = read_log(path, no_return_range=3.0).single().features
+    np.testing.assert_allclose(features.points, [[1.0, 0.0, 0.0], [3.0 * np.cos(np.pi / 6), 1.5, 0.0], [0.0, 2.0, 0.0]],
+                               atol=1e-12)
+    np.testing.assert_array_equal(features.evidence, [0.9, 0.0, 0.9])
+
+
+def test_point_clouds_and_occtools_channel_ignore_the_no_return_range(tmp_path):
+    columns = {"x": np.array([1.0, np.nan]), "y": np.array([0.0, 0.0]), "z": np.array([0.0, 0.0])}
+    path = write_ros2(tmp_path / "cloud.mcap", [("/points", "sensor_msgs/msg/PointCloud2",
+                                                  pointcloud2(1.0, "base_link", columns, dict.fromkeys(columns, "f4")), 1.0)])
+    for source in (path, tmp_path / "own.mcap"):
+        if source.name == "own.mcap":
+            write_mcap(read_log(path), source)
+        plain, option = read_log(source).single().features, read_log(source, no_return_range=5.0).single().features
+        np.testing.assert_array_equal(option.points, plain.points)
+        np.testing.assert_array_equal(option.evidence, plain.evidence)
+
+
+def test_free_rays_round_trip_through_occtools_channel(tmp_path):
+    path = write_ros2(tmp_path / "scan.mcap", [("/scan", "sensor_msgs/msg/LaserScan",
+                                                 laserscan(2.0, "base_link", REP117_RANGES), 2.0)])
+    log = read_log(path, no_return_range=5.0)
+    write_mcap(log, tmp_path / "own.mcap")
+    back = read_log(tmp_path / "own.mcap").single().features
+    np.testing.assert_array_equal(back.points, log.single().features.points)
+    np.testing.assert_array_equal(back.evidence, [0.9, 0.0, 0.0, 0.9, 0.9])
+
+
+@pytest.mark.parametrize("bad", [0.0, -2.0, float("nan"), float("-inf")])
+def test_a_bad_no_return_range_is_an_error_for_mcap(tmp_path, bad):
+    path = write_ros2(tmp_path / "scan.mcap", [("/scan", "sensor_msgs/msg/LaserScan",
+                                                 laserscan(2.0, "base_link", [1.0]), 2.0)])
+    with pytest.raises(InputError, match="no-return range"):
+        read_log(path, no_return_range=bad)

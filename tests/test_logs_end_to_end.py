@@ -113,6 +113,48 @@ def test_csv_keeps_the_stamps_of_a_log(shared_data, tmp_path):
     assert [p.pose for p in back.positions] == [p.pose for p in log.positions]
 
 
+# ------------------------------------------------------- no-return beams as free rays
+def test_convert_keeps_the_no_return_beams_as_evidence_0_rows(runner, shared_data, tmp_path):
+    log = intel_head(shared_data, tmp_path)
+    with open(log) as handle:
+        scans = [np.array(line.split()[2:182], dtype=float) for line in handle if line.startswith("FLASER")]
+    no_return = sum(int((ranges == 81.83).sum()) for ranges in scans)
+    assert len(scans) == 16 and no_return == 213
+
+    result = run(runner, "convert", log, "--group-by", "message", "-o", tmp_path / "plain.csv")
+    assert f"dropped {no_return} of 2880 readings as no return (readings >= 81.83 m)" in messages(result)
+    plain = read_log(tmp_path / "plain.csv")
+    assert not any((p.features.evidence == 0).any() for p in plain.positions)
+
+    result = run(runner, "convert", log, "--group-by", "message", "--no-return-range", 5, "-o", tmp_path / "free.csv")
+    assert (f"kept {no_return} of 2880 readings with no return (readings >= 81.83 m) as free rays at 5 m "
+            "with evidence 0 (--no-return-range 5)") in messages(result)
+    free = read_log(tmp_path / "free.csv")
+    assert len(free.positions) == len(plain.positions) == 16
+    for before, after, ranges in zip(plain.positions, free.positions, scans):
+        zero = after.features.evidence == 0
+        assert zero.sum() == (ranges == 81.83).sum() and len(after.features) == len(before.features) + zero.sum()
+        np.testing.assert_allclose(after.features.range[zero], 5.0)
+        np.testing.assert_array_equal(after.features.points[~zero], before.features.points)
+
+
+def test_free_rays_fit_the_same_from_the_log_and_its_conversions(runner, shared_data, tmp_path):
+    log = intel_head(shared_data, tmp_path)
+    options = ("--position-tolerance", "1,7", "--no-return-range", 3)
+    run(runner, "convert", log, *options, "-o", tmp_path / "intel.csv")
+    run(runner, "convert", tmp_path / "intel.csv", "-o", tmp_path / "intel.mcap")
+    fitted = {}
+    for name, source, extra in [("carmen", log, options), ("csv", tmp_path / "intel.csv", ()),
+                                ("mcap", tmp_path / "intel.mcap", ())]:
+        run(runner, "fit", source, *extra, "--position", 2, "--pieces", 8, "-o", tmp_path / f"{name}.json")
+        fitted[name] = without_run(tmp_path / f"{name}.json")
+    assert fitted["csv"] == fitted["carmen"] == fitted["mcap"]
+    # The position's features include its free rays.
+    position = read_log(log, position_tolerance=(1, 7), no_return_range=3).positions[2]
+    assert (position.features.evidence == 0).sum() > 0
+    assert fitted["carmen"]["training"]["n_features"] == len(position.features)
+
+
 # --------------------------------------------------------------------------- info
 def test_info_lists_the_mcap_channels(runner, shared_data, tmp_path):
     result = run(runner, "info", shared_data / CCNY)

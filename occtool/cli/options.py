@@ -116,7 +116,7 @@ if TYPE_CHECKING:
 
 LOG_OPTION_NAMES = (
     "format", "topics", "evidence_field", "evidence", "use_intensities", "sensor_frame", "base_frame",
-    "position_tolerance", "group_by", "skip_invalid",
+    "position_tolerance", "group_by", "skip_invalid", "no_return_range",
 )
 
 
@@ -132,6 +132,14 @@ def _unit_interval(ctx: click.Context | None, param: click.Parameter | None, val
         return None
     if not 0.0 <= float(value) <= 1.0:
         raise click.BadParameter(f"must lie in [0, 1], got {value}")
+    return float(value)
+
+
+def _no_return_range(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
+    if value is None:
+        return None
+    if not 0.0 < float(value) < float("inf"):
+        raise click.BadParameter(f"must be a finite number of metres > 0, got {value}")
     return float(value)
 
 
@@ -169,6 +177,13 @@ log_options = _compose(
     click.option(
         "--skip-invalid", is_flag=True, default=False,
         help="Drop invalid rows/points (NaN, evidence outside [0, 1], unparsable) and report how many.",
+    ),
+    click.option(
+        "--no-return-range", type=float, default=None, callback=_no_return_range, metavar="METRES",
+        help="Laser scans (CARMEN, LaserScan): keep each beam that returned nothing within range as a "
+             "free ray, a feature with evidence 0 at min(METRES, the beam's max range), saying its ray is "
+             "free and nothing about an obstacle (default: such beams are dropped; ignored for point clouds "
+             "and CSV).",
     ),
 )
 

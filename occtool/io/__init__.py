@@ -36,7 +36,7 @@ from occtool.errors import InputError
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
 
-__all__ = ["FORMATS", "detect_format", "read_log", "describe_log", "write_csv", "write_mcap"]
+__all__ = ["FORMATS", "check_no_return_range", "detect_format", "read_log", "describe_log", "write_csv", "write_mcap"]
 
 FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -108,6 +108,25 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     )
 
 
+def check_no_return_range(value: float | None) -> float | None:
+    """Validate ``no_return_range``: ``None``, or a finite number of metres > 0.
+
+    Raises
+    ------
+    InputError
+        For zero, a negative number, NaN, infinity or a value that is not a number.
+    """
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}") from None
+    if not (number > 0.0 and number < float("inf")):
+        raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}")
+    return number
+
+
 def _numeric_fields(line: str) -> int:
     count = 0
     for item in line.split():
@@ -132,6 +151,7 @@ def read_log(
     position_tolerance: Sequence[float] = (0.25, 0.26),
     group_by: str = "position",
     skip_invalid: bool = False,
+    no_return_range: float | None = None,
 ) -> RangeLog:
     """Read a range log into positions of features.
 
@@ -162,6 +182,13 @@ def read_log(
     skip_invalid
         Drop invalid rows/points (NaN, evidence outside [0, 1], at the origin, a line
         that does not parse) and report the count in ``notes`` instead of failing.
+    no_return_range
+        Laser scans (CARMEN, ``sensor_msgs/msg/LaserScan``, ``foxglove.LaserScan``):
+        ``None`` drops beams that returned nothing within the laser's range (noted);
+        a number R of metres > 0 keeps each as a *free ray*, a feature along its beam
+        at ``min(R, the beam's max range)`` with evidence 0 (free up to there, nothing
+        about an obstacle). Other data (point clouds, CSV) has no such beams and
+        ignores it.
 
     Returns
     -------
@@ -194,10 +221,11 @@ def read_log(
         raise InputError(f"unknown format {format!r}: expected one of {', '.join(FORMATS)}")
     if topics and fmt != "mcap":
         raise InputError(f"--topic applies to MCAP logs only, and {path} is {fmt}")
+    no_return_range = check_no_return_range(no_return_range)
     options = dict(
         topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
         sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-        skip_invalid=skip_invalid,
+        skip_invalid=skip_invalid, no_return_range=no_return_range,
     )
     try:
         return _read_format(path, fmt, options)
@@ -221,6 +249,7 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: dict[str, Any]
     tolerance = options["position_tolerance"]
     group_by = options["group_by"]
     skip_invalid = options["skip_invalid"]
+    no_return_range = options["no_return_range"]
     constant = DEFAULT_CONSTANT_EVIDENCE if evidence is None else float(evidence)
     if fmt == "csv":
         from occtool.io.csv import read_csv
@@ -235,13 +264,14 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: dict[str, Any]
         return read_mcap(
             path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
             sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid,
+            skip_invalid=skip_invalid, no_return_range=no_return_range,
         )
     if fmt == "carmen":
         from occtool.io.carmen import read_carmen
 
         return read_carmen(
-            path, evidence=constant, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid
+            path, evidence=constant, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid,
+            no_return_range=no_return_range,
         )
     from occtool.io.pointcloud import read_pointcloud
 
@@ -251,14 +281,16 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: dict[str, Any]
     )
 
 
-def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False) -> Any:
+def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
+                 no_return_range: float | None = None) -> Any:
     """A rich renderable describing a range log, for ``occtool info LOG``.
 
     For MCAP: the channels (topic, schema, encoding, message count) and whether
     occtool can read each, from the summary section (the file is not scanned). For
     other formats: the format, size and counts of features and positions; an invalid
     row is an :class:`InputError` naming it, as for every command that reads the log,
-    unless ``skip_invalid`` (then the skipped rows are counted in a note).
+    unless ``skip_invalid`` (then the skipped rows are counted in a note);
+    ``no_return_range`` is as for :func:`read_log`.
     """
     from rich.console import Group
     from rich.table import Table
@@ -290,7 +322,7 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False) ->
         for key, value in extra.items():
             header.add_row(key, value)
         return Group(header, table)
-    log = read_log(target, format=fmt, skip_invalid=skip_invalid)
+    log = read_log(target, format=fmt, skip_invalid=skip_invalid, no_return_range=no_return_range)
     header.add_row("positions", f"{len(log.positions):,}")
     header.add_row("features", f"{sum(len(p.features) for p in log.positions):,}")
     header.add_row("poses", "yes" if log.has_poses else "no")

@@ -18,10 +18,13 @@ for even ``N`` (180 or 360 beams covering -90..+89(.5) degrees) and
 becomes a point in the scan plane (``z = 0``) of the laser pose, with constant
 evidence.
 
-Max-range readings mean "no return" and are dropped, not taken as obstacles: a
-reading at or above ``max_range`` when it is given, otherwise at or above the largest
-reading of the file when that value repeats (a sentinel such as 81.83 m: at least 10
-times, or twice and in 1% of the readings), and readings <= 0.
+Max-range readings mean "no return", not obstacles: a reading at or above
+``max_range`` when it is given, otherwise at or above the largest reading of the file
+when that value repeats (a sentinel such as 81.83 m: at least 10 times, or twice and in
+1% of the readings), and +inf. They are dropped with readings <= 0 and NaN, or with
+``no_return_range`` R kept as *free rays*: a feature along the beam at ``min(R, max
+range)`` with evidence 0, which says the ray is free up to there and nothing about an
+obstacle.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
+from occtool.io import check_no_return_range
 from occtool.io.csv import open_text
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
 
@@ -54,8 +58,10 @@ class _Problem(Exception):
     pass
 
 
-def _parse_laser(fields: list[str]) -> tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None]:
-    """Ranges, beam angles, laser pose and stamp of one laser record."""
+def _parse_laser(
+    fields: list[str],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None, float | None]:
+    """Ranges, beam angles, laser pose, stamp and the record's own max range (ROBOTLASER1) of one laser line."""
     kind = fields[0]
     try:
         if kind in ("FLASER", "RLASER"):
@@ -70,8 +76,12 @@ def _parse_laser(fields: list[str]) -> tuple[NDArray[np.float64], NDArray[np.flo
             if kind == "RLASER":
                 angles = angles + np.pi
             stamp_index = 2 + count + 6
+            line_max = None
         else:  # ROBOTLASER1
             start, _fov, resolution = float(fields[2]), float(fields[3]), float(fields[4])
+            line_max = float(fields[5])
+            if not (np.isfinite(line_max) and line_max > 0.0):
+                line_max = None  # no usable max range on the line
             count = int(fields[8])
             ranges = np.array(fields[9 : 9 + count], dtype=np.float64)
             remissions = int(fields[9 + count])
@@ -88,7 +98,7 @@ def _parse_laser(fields: list[str]) -> tuple[NDArray[np.float64], NDArray[np.flo
         raise _Problem(f"{kind} record has a field that is not a number ({exc})") from None
     if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(theta)):
         raise _Problem(f"{kind} pose is not finite")
-    return ranges, angles, Pose(x, y, 0.0, theta), stamp
+    return ranges, angles, Pose(x, y, 0.0, theta), stamp, line_max
 
 
 def read_carmen(
@@ -99,6 +109,7 @@ def read_carmen(
     position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
     group_by: str = "position",
     skip_invalid: bool = False,
+    no_return_range: float | None = None,
 ) -> RangeLog:
     """Read the laser scans of a CARMEN log into positions of features.
 
@@ -114,6 +125,13 @@ def read_carmen(
     position_tolerance, group_by, skip_invalid
         As for :func:`occtool.io.read_log`; ``skip_invalid`` skips laser lines that do
         not parse.
+    no_return_range
+        ``None`` (default): no-return readings are dropped. A positive number R: each
+        no-return reading becomes a *free ray*, a feature along its beam at
+        ``min(R, max range)`` (the line's own max range for ``ROBOTLASER1``, else
+        ``max_range`` or the file's sentinel) with evidence 0: its ray is free up to
+        there, and it says nothing about an obstacle. Readings <= 0 or NaN are dropped
+        either way.
 
     Raises
     ------
@@ -123,7 +141,8 @@ def read_carmen(
     name = str(path)
     if not 0.0 <= evidence <= 1.0:
         raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
-    raw: list[tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None, int]] = []
+    no_return_range = check_no_return_range(no_return_range)
+    raw: list[tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None, float | None, int]] = []
     skipped_lines = 0
     unknown: set[str] = set()
     try:
@@ -137,13 +156,13 @@ def read_carmen(
                         unknown.add(fields[0][:20])
                     continue
                 try:
-                    ranges, angles, pose, stamp = _parse_laser(fields)
+                    ranges, angles, pose, stamp, line_max = _parse_laser(fields)
                 except _Problem as problem:
                     if not skip_invalid:
                         raise InputError(f"{name}, line {line_number}: {problem}") from None
                     skipped_lines += 1
                     continue
-                raw.append((ranges, angles, pose, stamp, line_number))
+                raw.append((ranges, angles, pose, stamp, line_max, line_number))
     except (OSError, EOFError) as exc:
         if isinstance(exc, FileNotFoundError):
             raise
@@ -162,17 +181,47 @@ def read_carmen(
             limit = top
     scans = []
     no_return = 0
-    for ranges, angles, pose, stamp, line_number in raw:
-        valid = np.isfinite(ranges) & (ranges > 0.0)
-        if limit is not None:
-            valid &= ranges < limit
-        no_return += int(ranges.size - valid.sum())
-        r, a = ranges[valid], angles[valid]
+    invalid = 0
+    free_ranges: list[NDArray[np.float64]] = []
+    for ranges, angles, pose, stamp, line_max, line_number in raw:
+        with np.errstate(invalid="ignore"):
+            # +inf is a no-return reading too (as in ROS's REP 117); NaN, -inf and <= 0 are not readings.
+            missing = np.isposinf(ranges) | (ranges >= limit if limit is not None else False)
+            valid = np.isfinite(ranges) & (ranges > 0.0) & ~missing
+        if no_return_range is None:
+            no_return += int(ranges.size - valid.sum())
+            r, a = ranges[valid], angles[valid]
+            values = np.full(r.size, evidence)
+        else:
+            no_return += int(missing.sum())
+            invalid += int(ranges.size - valid.sum() - missing.sum())
+            # A free ray out to min(R, the beam's max range): the line's own (ROBOTLASER1),
+            # else the file's limit; the features stay in beam order.
+            reach = min(no_return_range, line_max if line_max is not None else np.inf,
+                        limit if limit is not None else np.inf)
+            kept = valid | missing
+            r = np.where(missing, reach, ranges)[kept]
+            a = angles[kept]
+            values = np.where(missing, 0.0, evidence)[kept]
+            free_ranges.append(np.full(int(missing.sum()), reach))
         points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
-        scans.append(Scan(points, np.full(r.size, evidence), pose, stamp, f"{name}:{line_number}"))
-    if no_return:
-        where = f" (readings >= {limit:g} m)" if limit is not None else ""
-        notes.append(f"dropped {no_return} of {all_ranges.size} readings as no return{where}")
+        scans.append(Scan(points, values, pose, stamp, f"{name}:{line_number}"))
+    where = f" (readings >= {limit:g} m)" if limit is not None else ""
+    if no_return_range is None:
+        if no_return:
+            notes.append(f"dropped {no_return} of {all_ranges.size} readings as no return{where}")
+    else:
+        if no_return:
+            where = where or " (infinite readings)"
+            reach = np.concatenate(free_ranges)
+            low, high = float(reach.min()), float(reach.max())
+            at = f"{low:g} m" if low == high else f"{low:g} to {high:g} m"
+            notes.append(
+                f"kept {no_return} of {all_ranges.size} readings with no return{where} as free rays "
+                f"at {at} with evidence 0 (--no-return-range {no_return_range:g})"
+            )
+        if invalid:
+            notes.append(f"dropped {invalid} of {all_ranges.size} readings <= 0 or NaN")
     notes.append(f"constant evidence {evidence} for laser readings (--evidence)")
     if skipped_lines:
         notes.append(f"skipped {skipped_lines} laser line(s) that do not parse")

@@ -6,8 +6,12 @@ Supported range channels (schema name, message encoding):
   ``fields``/``point_step``/``row_step``, evidence from a named field or a constant;
   points with a NaN coordinate are dropped.
 * ``sensor_msgs/msg/LaserScan`` (ROS 2, CDR): each valid beam (finite and within
-  ``[range_min, range_max]``) is a point in the scan plane, ``z = 0``.
-* ``foxglove.PointCloud`` and ``foxglove.LaserScan``, JSON or protobuf.
+  ``[range_min, range_max]``) is a point in the scan plane, ``z = 0``. Following REP 117,
+  a beam at +inf or above ``range_max`` returned nothing within range: it is dropped, or
+  with ``no_return_range`` R kept as a *free ray*, a feature at ``min(R, range_max)``
+  with evidence 0; -inf, NaN and ranges below ``range_min`` are invalid and dropped.
+* ``foxglove.PointCloud`` and ``foxglove.LaserScan``, JSON or protobuf (a foxglove scan
+  has no range limits: +inf is its no-return value, kept at R as a free ray).
 * ``occtool.RangeFeatures`` (JSON): occtool's own channel, one message per position.
 
 Poses come from ``/tf`` (``tf2_msgs/msg/TFMessage`` or ``foxglove.FrameTransform(s)``,
@@ -286,13 +290,21 @@ class _Decoded:
 
 
 class _Options:
-    def __init__(self, evidence_field: str, evidence: float | None, use_intensities: bool, skip_invalid: bool):
+    def __init__(self, evidence_field: str, evidence: float | None, use_intensities: bool, skip_invalid: bool,
+                 no_return_range: float | None = None):
         self.evidence_field = evidence_field
         self.evidence = evidence
         self.use_intensities = use_intensities
         self.skip_invalid = skip_invalid
+        self.no_return_range = no_return_range
         self.constant_for: set[str] = set()
         self.skipped_invalid = 0
+        # Laser beams: all of them, the no-return ones (dropped, or kept as free rays out to
+        # the ranges in free_reach) and the invalid ones (NaN, -inf, below range_min).
+        self.beams = 0
+        self.no_return = 0
+        self.invalid_beams = 0
+        self.free_reach: set[float] = set()
 
 
 def _structured_points(
@@ -384,13 +396,40 @@ def _scan_evidence(intensities: Any, count: int, valid: NDArray[np.bool_], optio
     return np.full(int(valid.sum()), DEFAULT_CONSTANT_EVIDENCE if options.evidence is None else options.evidence)
 
 
+def _scan_points(
+    ranges: NDArray[np.float64], angles: NDArray[np.float64], valid: NDArray[np.bool_], missing: NDArray[np.bool_],
+    reach: float, evidence: NDArray[np.float64], options: _Options,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Points and evidence of a laser scan's valid beams (``evidence`` is theirs) and, with
+    ``no_return_range``, of its no-return beams as free rays at ``reach`` with evidence 0,
+    in beam order; the beams are counted for the notes."""
+    options.beams += int(ranges.size)
+    options.no_return += int(missing.sum())
+    options.invalid_beams += int(ranges.size - valid.sum() - missing.sum())
+    if options.no_return_range is None or not missing.any():
+        r, a, values = ranges[valid], angles[valid], evidence
+    else:
+        options.free_reach.add(reach)
+        kept = valid | missing
+        all_values = np.zeros(ranges.size)
+        all_values[valid] = evidence
+        r, a, values = np.where(missing, reach, ranges)[kept], angles[kept], all_values[kept]
+    return np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)]), values
+
+
 def _decode_laserscan(message: Any, options: _Options, where: str) -> _Decoded:
     ranges = np.asarray(message.ranges, dtype=np.float64)
     angles = float(message.angle_min) + float(message.angle_increment) * np.arange(ranges.size)
-    valid = np.isfinite(ranges) & (ranges >= float(message.range_min)) & (ranges <= float(message.range_max)) & (ranges > 0)
+    range_min, range_max = float(message.range_min), float(message.range_max)
+    # REP 117: +inf is "no object within range" (as is a value above range_max); -inf
+    # (too close), NaN (erroneous) and values below range_min are invalid and dropped.
+    top = range_max if range_max > 0.0 else np.inf  # a scan without a usable range_max: +inf only
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max) & (ranges > 0)
+        missing = np.isposinf(ranges) | (np.isfinite(ranges) & (ranges > top))
     evidence = _scan_evidence(message.intensities or None, ranges.size, valid, options, where)
-    r, a = ranges[valid], angles[valid]
-    points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
+    reach = min(options.no_return_range, top) if options.no_return_range is not None else np.inf
+    points, evidence = _scan_points(ranges, angles, valid, missing, reach, evidence, options)
     header = message.header
     return _Decoded(points, evidence, _strip_frame(header.frame_id), _stamp_seconds(header.stamp), _IDENTITY)
 
@@ -434,10 +473,12 @@ def _decode_foxglove_laserscan(message: Any, options: _Options, where: str) -> _
     # foxglove spaces the beams evenly from start_angle to end_angle, both included.
     angles = np.linspace(start, end, ranges.size) if ranges.size > 1 else np.full(ranges.size, start)
     valid = np.isfinite(ranges) & (ranges > 0)
+    # foxglove.LaserScan has no range limits: +inf is the only "no return".
+    missing = np.isposinf(ranges)
     intensities = _get(message, "intensities")
     evidence = _scan_evidence(list(intensities) if intensities is not None else None, ranges.size, valid, options, where)
-    r, a = ranges[valid], angles[valid]
-    points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
+    reach = options.no_return_range if options.no_return_range is not None else np.inf
+    points, evidence = _scan_points(ranges, angles, valid, missing, reach, evidence, options)
     return _Decoded(points, evidence, _strip_frame(_get(message, "frame_id")), _stamp_seconds(_get(message, "timestamp")),
                     _foxglove_origin(message))
 
@@ -648,6 +689,7 @@ def read_mcap(
     position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
     group_by: str = "position",
     skip_invalid: bool = False,
+    no_return_range: float | None = None,
 ) -> RangeLog:
     """Read the range channels of an MCAP file into positions of features.
 
@@ -659,7 +701,10 @@ def read_mcap(
         For a corrupt or truncated file, a missing topic, an unsupported schema, a log
         without range data, or invalid evidence values (unless ``skip_invalid``).
     """
+    from occtool.io import check_no_return_range
+
     name = str(path)
+    no_return_range = check_no_return_range(no_return_range)
     with _Reader(path) as reader:
         channel_list = reader.channels()
         protobuf = _protobuf_available()
@@ -694,7 +739,7 @@ def read_mcap(
             raise InputError(f"{name}: base frame '{base}' appears in no transform of the log")
         base_name = base or "base_link"
 
-        options = _Options(evidence_field, evidence, use_intensities, skip_invalid)
+        options = _Options(evidence_field, evidence, use_intensities, skip_invalid, no_return_range)
         scans: list[Scan] = []
         tf_pose: Pose | None = None
         odom_pose: Pose | None = None
@@ -777,6 +822,19 @@ def read_mcap(
     if options.constant_for:
         value = DEFAULT_CONSTANT_EVIDENCE if evidence is None else evidence
         notes.append(f"constant evidence {value} (--evidence) for {' and '.join(sorted(options.constant_for))}")
+    if options.no_return:
+        if no_return_range is None:
+            notes.append(f"dropped {options.no_return} of {options.beams} laser beam(s) with no return "
+                         "(+inf or above range_max)")
+        else:
+            reach = sorted(options.free_reach)
+            at = f"{reach[0]:g} m" if len(reach) == 1 else f"{reach[0]:g} to {reach[-1]:g} m"
+            notes.append(f"kept {options.no_return} of {options.beams} laser beam(s) with no return "
+                         f"(+inf or above range_max) as free rays at {at} with evidence 0 "
+                         f"(--no-return-range {no_return_range:g})")
+    if options.invalid_beams:
+        notes.append(f"dropped {options.invalid_beams} of {options.beams} invalid laser beam(s) "
+                     "(NaN, -inf, <= 0 or below range_min)")
     if dropped_nan:
         notes.append(f"dropped {dropped_nan} point(s) with NaN coordinates (no return)")
     if dropped_origin:
