@@ -184,3 +184,19 @@ def test_real_intel_first_scan_gains_its_no_return_beams(shared_data):
     np.testing.assert_allclose(r, 4.0)
     assert any("kept 4172 of 163800 readings with no return (readings >= 81.83 m) as free rays at 4 m" in note
                for note in log.notes)
+
+
+def test_info_counts_no_return_beams_as_free_rays(fixtures_dir) -> None:
+    from click.testing import CliRunner
+
+    from occtool.cli.main import cli
+
+    path = str(fixtures_dir / "logs" / "tiny.carmen.log")
+    runner = CliRunner()
+    plain = runner.invoke(cli, ["info", path])
+    kept = runner.invoke(cli, ["info", path, "--no-return-range", "5"])
+    assert plain.exit_code == 0 and kept.exit_code == 0, kept.output
+    words = " ".join(kept.output.split())  # rich wraps the notes at the terminal width
+    assert "free rays at 5 m" in words and "free rays" not in plain.output
+    bad = runner.invoke(cli, ["info", path, "--no-return-range", "-1"])
+    assert bad.exit_code == 2 and "must be a finite number of metres > 0" in bad.output

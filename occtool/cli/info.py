@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from occtool.cli.options import no_return_range_callback
+
 
 @click.command(short_help="Describe a model file or a range log.")
 @click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=False))
@@ -11,7 +13,10 @@ import click
               help="List the coefficients of every piece.")
 @click.option("--skip-invalid", is_flag=True, default=False,
               help="Range log: count invalid rows/points in a note instead of stopping at the first.")
-def info(path: str, show_pieces: bool, skip_invalid: bool) -> None:
+@click.option("--no-return-range", type=float, default=None, callback=no_return_range_callback, metavar="METRES",
+              help="Range log: count laser beams that returned nothing as free rays at this range "
+                   "(as fit --no-return-range does).")
+def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: float | None) -> None:
     """Summarise FILE: a model or inverse file (pieces, tree, constraints, fit error,
     samples, run) or any range log the readers understand."""
     from rich.console import Console
@@ -23,7 +28,7 @@ def info(path: str, show_pieces: bool, skip_invalid: bool) -> None:
     if found is None:
         from occtool.io import describe_log
 
-        console.print(describe_log(path, skip_invalid=skip_invalid))
+        console.print(describe_log(path, skip_invalid=skip_invalid, no_return_range=no_return_range))
         return
     kind, obj = found
     if kind == "model":

@@ -135,7 +135,7 @@ def _unit_interval(ctx: click.Context | None, param: click.Parameter | None, val
     return float(value)
 
 
-def _no_return_range(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
+def no_return_range_callback(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
     if value is None:
         return None
     if not 0.0 < float(value) < float("inf"):
@@ -179,7 +179,7 @@ log_options = _compose(
         help="Drop invalid rows/points (NaN, evidence outside [0, 1], unparsable) and report how many.",
     ),
     click.option(
-        "--no-return-range", type=float, default=None, callback=_no_return_range, metavar="METRES",
+        "--no-return-range", type=float, default=None, callback=no_return_range_callback, metavar="METRES",
         help="Laser scans (CARMEN, LaserScan): keep each beam that returned nothing within range as a "
              "free ray, a feature with evidence 0 at min(METRES, the beam's max range), saying its ray is "
              "free and nothing about an obstacle (default: such beams are dropped; ignored for point clouds "
