@@ -21,6 +21,7 @@ sensor-frame (the floor is at ``-robot.sensor_height``).
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -61,8 +62,14 @@ SHRINK_QUAD_SEGMENTS = 16
 MAX_SLICES = 10_000
 #: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).
 MAX_POINTS = 20_000
-#: Ray/edge pairs intersected at a time when placing obstacle points.
+#: Ray/edge pairs intersected at a time when casting rays to a polygon's boundary.
 RAY_CAST_BLOCK = 1 << 20
+#: Radians by which an edge's angular extent is widened when pairing it with the rays
+#: that may hit it (rounding is ~1e-15; the intersection test decides).
+RAY_ANGLE_SLACK = 1e-9
+
+
+_ORIGIN = shapely.Point(0.0, 0.0)
 
 
 class NavigationWarning(UserWarning):
@@ -363,18 +370,33 @@ def horizontal_distances(
             f"inverse_range returned shape {ranges.shape}, expected one that broadcasts to "
             f"({heights.size} heights, {alpha.size} angles)"
         ) from None
-    if np.isnan(ranges).any():
-        raise InputError("inverse_range returned NaN ranges: the model cannot be inverted there")
     # A negative range (a raw inverse tree: the level is crossed behind the sensor) means
-    # occupied at the sensor; capping the rest keeps inf out of the arithmetic.
-    ranges = np.clip(ranges, 0.0, 2.0 * (read_range + np.abs(heights).max()))
-    squared = np.square(ranges) - np.square(heights)[:, None]
-    return np.minimum(np.sqrt(np.maximum(squared, 0.0)), read_range)
+    # occupied at the sensor; capping the rest keeps inf out of the arithmetic. The clip
+    # makes the one new array (the callable's may be shared); the rest works in place.
+    distances = np.clip(ranges, 0.0, 2.0 * (read_range + np.abs(heights).max()))
+    if np.isnan(distances.min()):  # the clip and the minimum both keep NaN
+        raise InputError("inverse_range returned NaN ranges: the model cannot be inverted there")
+    np.square(distances, out=distances)
+    np.subtract(distances, np.square(heights)[:, None], out=distances)
+    np.maximum(distances, 0.0, out=distances)
+    np.sqrt(distances, out=distances)
+    return np.minimum(distances, read_range, out=distances)
 
 
+@functools.lru_cache(maxsize=16)
 def _circle(radius: float, vertices: int) -> Polygon:
     theta = 2.0 * np.pi * np.arange(vertices) / vertices
     return Polygon(np.column_stack([radius * np.cos(theta), radius * np.sin(theta)]))
+
+
+def _next(values: NDArray[np.generic]) -> NDArray[np.generic]:
+    """``values`` moved one place back, cyclically: ``np.roll(values, -1, axis=0)`` without its overhead."""
+    return np.concatenate((values[1:], values[:1]))
+
+
+def _previous(values: NDArray[np.generic]) -> NDArray[np.generic]:
+    """``values`` moved one place on, cyclically: ``np.roll(values, 1, axis=0)``."""
+    return np.concatenate((values[-1:], values[:-1]))
 
 
 def _star_polygon(distances: FloatArray, alpha: FloatArray) -> Polygon:
@@ -383,9 +405,8 @@ def _star_polygon(distances: FloatArray, alpha: FloatArray) -> Polygon:
 
 def _component_at_origin(geometry: BaseGeometry) -> Polygon:
     """The polygon of ``geometry`` that holds the robot (the origin) strictly inside."""
-    origin = shapely.Point(0.0, 0.0)
     for part in getattr(geometry, "geoms", [geometry]):
-        if isinstance(part, Polygon) and part.contains(origin):
+        if isinstance(part, Polygon) and part.contains(_ORIGIN):
             return part
     return Polygon()
 
@@ -564,7 +585,7 @@ def navigation_map(
         # With the margin, a point occupied between two rays is no nearer than the nearer
         # ray's distance; the chord between the rays can reach past that, unless each ray
         # takes the least of its own and its neighbours' distances.
-        nearest = np.minimum(nearest, np.minimum(np.roll(nearest, 1), np.roll(nearest, -1)))
+        nearest = np.minimum(nearest, np.minimum(_previous(nearest), _next(nearest)))
     circle_vertices = max(CIRCLE_OVERSAMPLING * n_angles, MIN_CIRCLE_VERTICES)
     polygon = Polygon()
     if nearest.min() > 0:
@@ -645,10 +666,10 @@ def circle_sectors(polygon: Polygon, max_range: float, circle_vertices: int) -> 
         return []
     tolerance = max_range * (1.0 - math.cos(math.pi / circle_vertices)) * 1.01 + 1e-9 * max_range
     on_circle = np.hypot(ring[:, 0], ring[:, 1]) >= max_range - tolerance
-    following = np.roll(ring, -1, axis=0)
+    following = _next(ring)
     middle = (ring + following) / 2.0
     # Both ends on the circle is not enough: an obstacle's chord can join two of its points.
-    is_arc = on_circle & np.roll(on_circle, -1) & (np.hypot(middle[:, 0], middle[:, 1]) >= max_range - tolerance)
+    is_arc = on_circle & _next(on_circle) & (np.hypot(middle[:, 0], middle[:, 1]) >= max_range - tolerance)
     theta = np.arctan2(ring[:, 1], ring[:, 0])
     if is_arc.all():
         return [(0.0, 2.0 * np.pi)]
@@ -656,8 +677,8 @@ def circle_sectors(polygon: Polygon, max_range: float, circle_vertices: int) -> 
         return []
     # Rotate the ring to start on an edge off the circle, so no run wraps around the end.
     shift = int(np.flatnonzero(~is_arc)[0])
-    is_arc = np.roll(is_arc, -shift)
-    theta = np.roll(theta, -shift)
+    is_arc = np.concatenate((is_arc[shift:], is_arc[:shift]))
+    theta = np.concatenate((theta[shift:], theta[:shift]))
     edges = np.diff(np.concatenate([[0], is_arc.astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     sectors = []
@@ -676,6 +697,86 @@ def _sector_angles(sectors: Sequence[tuple[float, float]], max_range: float, spa
         count = max(1, math.ceil(span * max_range / spacing - 1e-9))
         angles.append(start + (np.arange(count) + 0.5) * span / count)
     return np.concatenate(angles) if angles else np.empty(0)
+
+
+def _first_hits(
+    start: FloatArray, step: FloatArray, angles: FloatArray
+) -> tuple[FloatArray, NDArray[np.intp], FloatArray]:
+    """First hit of each ray from the origin among the edges ``start -> start + step``.
+
+    Returns the distance along each ray (``inf`` for a miss), the index of the edge hit
+    and where along it (0 at ``start``, 1 at its end).
+    """
+    count = len(angles)
+    reach = np.full(count, np.inf)
+    edge = np.zeros(count, dtype=np.intp)
+    where = np.zeros(count)
+    if len(start) == 0 or count == 0:
+        return reach, edge, where
+    # A ray can only hit an edge whose angular extent, seen from the origin, holds the
+    # ray's angle: pair each edge with the rays in its extent (sorted rays, searchsorted)
+    # instead of intersecting every ray with every edge. The extent is widened by
+    # RAY_ANGLE_SLACK, far more than rounding; the intersection test below decides.
+    ends = start + step
+    first_angle = np.arctan2(start[:, 1], start[:, 0])
+    turn = np.mod(np.arctan2(ends[:, 1], ends[:, 0]) - first_angle + np.pi, 2.0 * np.pi) - np.pi
+    low = first_angle + np.minimum(turn, 0.0) - RAY_ANGLE_SLACK
+    high = low + np.abs(turn) + 2.0 * RAY_ANGLE_SLACK
+    # An edge through (or grazing) the origin spans about pi: pair it with every ray.
+    wide = np.abs(turn) >= np.pi - 1e-6
+    low[wide], high[wide] = -4.0 * np.pi, 4.0 * np.pi
+    key = np.mod(angles + np.pi, 2.0 * np.pi) - np.pi  # in [-pi, pi), as the extents (+- 2 pi)
+    ray_order = np.argsort(key, kind="stable")
+    sorted_key = key[ray_order]
+    edges = np.arange(3 * len(start)) % len(start)
+    lows = np.concatenate([low - 2.0 * np.pi, low, low + 2.0 * np.pi])
+    highs = np.concatenate([high - 2.0 * np.pi, high, high + 2.0 * np.pi])
+    first = np.searchsorted(sorted_key, lows, side="left")
+    pairs = np.maximum(np.searchsorted(sorted_key, highs, side="right") - first, 0)
+    # Rays and edges in the same arithmetic as a full (ray x edge) cast, so the same hits.
+    cos, sin = np.cos(angles), np.sin(angles)
+    start_cross_step = start[:, 0] * step[:, 1] - start[:, 1] * step[:, 0]
+    total = np.cumsum(pairs)
+    for lo, hi in _blocks(total, RAY_CAST_BLOCK):  # bounds the pair temporaries
+        counts = pairs[lo:hi]
+        pair_edge = np.repeat(edges[lo:hi], counts)
+        if len(pair_edge) == 0:
+            continue
+        offset = np.arange(len(pair_edge)) - np.repeat(np.cumsum(counts) - counts, counts)
+        pair_ray = ray_order[np.repeat(first[lo:hi], counts) + offset]
+        dx, dy = cos[pair_ray], sin[pair_ray]
+        edge_start, edge_step = start[pair_edge], step[pair_edge]
+        # origin + t d = start + s step  ->  t = (start x step) / (d x step), s = (start x d) / (d x step)
+        denominator = dx * edge_step[:, 1] - dy * edge_step[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = start_cross_step[pair_edge] / denominator
+            s = (edge_start[:, 0] * dy - edge_start[:, 1] * dx) / denominator
+        t[~((denominator != 0) & (s >= 0) & (s <= 1) & (t > 0))] = np.inf
+        # The nearest hit of each ray: sorted by ray, then distance; the first of each ray.
+        order = np.lexsort((t, pair_ray))
+        by_ray = pair_ray[order]
+        best = order[np.flatnonzero(np.concatenate([[True], by_ray[1:] != by_ray[:-1]]))]
+        best = best[t[best] < reach[pair_ray[best]]]
+        rays = pair_ray[best]
+        reach[rays], edge[rays], where[rays] = t[best], pair_edge[best], s[best]
+    return reach, edge, where
+
+
+def _blocks(cumulative: NDArray[np.intp], size: int) -> list[tuple[int, int]]:
+    """Consecutive ranges of items whose counts (given as a running total) add up to about ``size``."""
+    if len(cumulative) == 0 or cumulative[-1] <= size:
+        return [(0, len(cumulative))]
+    cuts = np.unique(np.searchsorted(cumulative, np.arange(size, int(cumulative[-1]), size), side="right"))
+    bounds = [0, *(int(c) for c in cuts if 0 < c < len(cumulative)), len(cumulative)]
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
+def _edges_within(start: FloatArray, step: FloatArray, within: float) -> NDArray[np.bool_]:
+    """Which edges ``start -> start + step`` come within ``within`` of the origin."""
+    # Closest point of each edge to the origin: start + clip(-start.step / |step|^2) step.
+    length2 = np.einsum("ij,ij->i", step, step)
+    along = np.clip(-np.einsum("ij,ij->i", start, step) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    return np.hypot(*(start + along[:, None] * step).T) <= within
 
 
 def ray_boundary_distances(polygon: Polygon, angles: FloatArray, within: float | None = None) -> FloatArray:
@@ -697,30 +798,12 @@ def ray_boundary_distances(polygon: Polygon, angles: FloatArray, within: float |
     numpy.ndarray
         ``(J,)`` metres (``inf`` for a ray that misses).
     """
-    ring = np.asarray(polygon.exterior.coords)
+    ring = shapely.get_coordinates(polygon.exterior)
     start, step = ring[:-1], np.diff(ring, axis=0)
     if within is not None:
-        # Closest point of each edge to the origin: start + clip(-start.step / |step|^2) step.
-        length2 = np.einsum("ij,ij->i", step, step)
-        along = np.clip(-np.einsum("ij,ij->i", start, step) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-        near = np.hypot(*(start + along[:, None] * step).T) <= within
+        near = _edges_within(start, step, within)
         start, step = start[near], step[near]
-    # origin + t d = start + s step  ->  t = (start x step) / (d x step), s = (start x d) / (d x step)
-    start_cross_step = start[:, 0] * step[:, 1] - start[:, 1] * step[:, 0]
-    reach = np.full(len(angles), np.inf)
-    if len(start) == 0:
-        return reach
-    block = max(1, RAY_CAST_BLOCK // len(start))  # bounds the (rays, edges) temporaries
-    for first in range(0, len(angles), block):
-        chunk = angles[first:first + block]
-        dx, dy = np.cos(chunk)[:, None], np.sin(chunk)[:, None]
-        denominator = dx * step[:, 1] - dy * step[:, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = start_cross_step / denominator
-            s = (start[:, 0] * dy - start[:, 1] * dx) / denominator
-        hit = (denominator != 0) & (s >= 0) & (s <= 1) & (t > 0)
-        reach[first:first + block] = np.where(hit, t, np.inf).min(axis=1, initial=np.inf)
-    return reach
+    return _first_hits(start, step, np.asarray(angles, dtype=np.float64))[0]
 
 
 def _gaps_overlapping(rays: FloatArray, low: FloatArray, high: FloatArray) -> NDArray[np.bool_]:
@@ -731,12 +814,10 @@ def _gaps_overlapping(rays: FloatArray, low: FloatArray, high: FloatArray) -> ND
     first = (np.searchsorted(rays, low, side="right") - 1) % count
     last = (np.searchsorted(rays, high, side="left") - 1) % count
     wraps = last < first
-    marks = np.zeros(count + 1, dtype=np.int64)
-    np.add.at(marks, first, 1)
-    np.add.at(marks, last + 1, -1)
+    marks = np.bincount(first, minlength=count + 1) - np.bincount(last + 1, minlength=count + 1)
     # An arc past the last ray runs on from gap `first` to the end and from gap 0 to `last`.
-    np.add.at(marks, np.zeros(wraps.sum(), dtype=np.intp), 1)
-    np.add.at(marks, np.full(wraps.sum(), count), -1)
+    marks[0] += np.count_nonzero(wraps)
+    marks[count] -= np.count_nonzero(wraps)
     return np.cumsum(marks[:-1]) > 0
 
 
@@ -772,17 +853,16 @@ def visible_from_origin(region: Polygon, angles: FloatArray, reach: float) -> Po
         ``region`` itself when it hides nothing within reach.
     """
     region = orient(region, sign=1.0)  # GEOS's shrink returns the outer ring clockwise
-    ring = np.asarray(region.exterior.coords)[:-1]
-    following = np.roll(ring, -1, axis=0)
+    ring = shapely.get_coordinates(region.exterior)[:-1]
+    following = _next(ring)
     outside = reach / math.cos(math.pi / len(angles)) * (1 + 1e-6) + 1e-9
     step = following - ring
-    along = np.clip(-np.einsum("ij,ij->i", ring, step) / np.maximum(np.einsum("ij,ij->i", step, step), 1e-300), 0, 1)
-    near = np.hypot(*(ring + along[:, None] * step).T) <= outside
+    near = _edges_within(ring, step, outside)
     # Edge i runs clockwise, as seen from the origin, when v_i x v_i+1 < 0.
     backward = (ring[:, 0] * following[:, 1] - ring[:, 1] * following[:, 0] < 0) & near
     if not backward.any():
         return region
-    silhouette = (backward != np.roll(backward, 1)) & (np.hypot(ring[:, 0], ring[:, 1]) <= outside)
+    silhouette = (backward != _previous(backward)) & (np.hypot(ring[:, 0], ring[:, 1]) <= outside)
     corners = np.arctan2(ring[silhouette, 1], ring[silhouette, 0])
     side = 1e-7  # radians either side of a silhouette vertex
     rays = np.unique(np.mod(np.concatenate([angles, corners - side, corners + side]) + np.pi, 2.0 * np.pi) - np.pi)
@@ -793,18 +873,28 @@ def visible_from_origin(region: Polygon, angles: FloatArray, reach: float) -> Po
         np.arctan2(ring[backward, 1], ring[backward, 0]),  # ... and its larger
     )
     # Only the rays bounding a shadowed gap need casting.
-    hits = np.full(len(rays), outside)
-    cast = shadowed | np.roll(shadowed, 1)
-    hits[cast] = np.minimum(ray_boundary_distances(region, rays[cast], within=outside), outside)
+    cast = np.flatnonzero(shadowed | _previous(shadowed))
+    near_edges = np.flatnonzero(near)
+    distance, edge, where = _first_hits(ring[near_edges], step[near_edges], rays[cast])
+    hits = np.minimum(distance, outside)
 
     # Two vertices per ray: where the gap before it ends, where the gap after it begins;
     # a gap in the open lets the region through whole, a shadowed one cuts it on the chord.
-    arriving = np.where(np.roll(shadowed, 1), hits, outside)
-    leaving = np.where(shadowed, hits, outside)
-    radii = np.column_stack([arriving, leaving]).ravel()
-    directions = np.repeat(rays, 2)
-    cut = Polygon(np.column_stack([radii * np.cos(directions), radii * np.sin(directions)]))
-    return _component_at_origin(shapely.intersection(region, cut))
+    radii = np.full(len(rays), outside)
+    radii[cast] = hits
+    radii = np.column_stack([np.where(_previous(shadowed), radii, outside), np.where(shadowed, radii, outside)])
+    cut = np.stack([radii * np.cos(rays)[:, None], radii * np.sin(rays)[:, None]], axis=-1).reshape(-1, 2)
+
+    # Each hit is made a vertex of the region too, so the cut's vertices coincide with the
+    # region's exactly: a hit merely near an edge leaves GEOS's overlay a near-degenerate
+    # crossing, which it resolves in a fallback several times as slow.
+    inside = np.flatnonzero(distance < outside)
+    order = inside[np.lexsort((where[inside], edge[inside]))]
+    points = cut.reshape(-1, 2, 2)[cast[order], 0]
+    points = np.where(shadowed[cast[order] - 1, None], points, cut.reshape(-1, 2, 2)[cast[order], 1])
+    split = Polygon(np.insert(ring, near_edges[edge[order]] + 1, points, axis=0),
+                    [interior.coords for interior in region.interiors])
+    return _component_at_origin(shapely.intersection(split, Polygon(cut)))
 
 
 def boundary_points(

@@ -20,6 +20,8 @@ from occtool.navigation import (
     farthest_from_slices,
     navigation_map,
     pan_angles,
+    ray_boundary_distances,
+    visible_from_origin,
 )
 from occtool.robot import Robot
 
@@ -469,6 +471,80 @@ def test_the_body_reaches_every_point_of_the_polygon_straight(scene, radius):
         return
     roomy = reached_straight(free, points, radius + 0.01)
     assert not (roomy & ~inside).any()
+
+
+# --- ray casting and the straight-line cut ---------------------------------------------
+
+
+def every_ray_against_every_edge(polygon: Polygon, angles: np.ndarray, within: float = np.inf) -> np.ndarray:
+    """First boundary hit along each ray, intersecting every ray with every edge (that
+    comes ``within`` of the origin)."""
+    ring = np.asarray(polygon.exterior.coords)
+    start, step = ring[:-1], np.diff(ring, axis=0)
+    near = shapely.distance(shapely.linestrings(np.stack([start, start + step], axis=1)), Point(0, 0)) <= within
+    start, step = start[near], step[near]
+    dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    denominator = dx * step[:, 1] - dy * step[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (start[:, 0] * step[:, 1] - start[:, 1] * step[:, 0]) / denominator
+        s = (start[:, 0] * dy - start[:, 1] * dx) / denominator
+    hit = (denominator != 0) & (s >= 0) & (s <= 1) & (t > 0)
+    return np.where(hit, t, np.inf).min(axis=1, initial=np.inf)
+
+
+def random_region(seed: int) -> Polygon:
+    """A star polygon, its shrink, or a walk that is not star-shaped, holding the origin."""
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(3, 150))
+    theta = np.sort(rng.uniform(-np.pi, np.pi, count))
+    rho = rng.uniform(0.2, 2.0, count)
+    if seed % 3 == 2:
+        walk = np.cumsum(rng.normal(size=(count, 2)), axis=0)
+        region = shapely.make_valid(Polygon(walk - walk.mean(axis=0))).buffer(0)
+    else:
+        region = Polygon(np.column_stack([rho * np.cos(theta), rho * np.sin(theta)]))
+        if seed % 3 == 1:
+            region = region.buffer(-0.1 * rng.uniform(), quad_segs=16)
+    parts = [part for part in getattr(region, "geoms", [region]) if part.contains(Point(0, 0))]
+    return parts[0] if parts else Polygon()
+
+
+@pytest.mark.parametrize("block", [None, 5])
+def test_the_ray_cast_finds_what_every_ray_against_every_edge_finds(monkeypatch, block):
+    import occtool.navigation
+
+    if block is not None:
+        monkeypatch.setattr(occtool.navigation, "RAY_CAST_BLOCK", block)
+    rng = np.random.default_rng(1)
+    checked = 0
+    for seed in range(60):
+        region = random_region(seed)
+        if region.is_empty:
+            continue
+        vertices = np.asarray(region.exterior.coords)
+        for angles in (pan_angles(360), rng.uniform(-10, 10, 40), np.arctan2(vertices[:, 1], vertices[:, 0]),
+                       np.array([0.0, np.pi, -np.pi, np.pi / 2])):
+            np.testing.assert_allclose(ray_boundary_distances(region, angles), every_ray_against_every_edge(region, angles),
+                                       rtol=1e-12)
+            np.testing.assert_allclose(ray_boundary_distances(region, angles, within=1.0),
+                                       every_ray_against_every_edge(region, angles, within=1.0), rtol=1e-12)
+            checked += 1
+    assert checked > 100
+
+
+def test_the_straight_line_cut_keeps_holes_and_cuts_the_shadows():
+    # A room 2 m across with a jamb ahead-left (the boundary runs back behind its corner)
+    # and a hole (a pole) in the open half.
+    outer = Polygon([(-2, -2), (2, -2), (2, 2), (0.5, 2), (0.5, 0.3), (0.3, 0.3), (0.3, 2), (-2, 2)])
+    pole = Point(-1.0, -1.0).buffer(0.2)
+    region = outer.difference(pole)
+    seen = visible_from_origin(region, pan_angles(360), 3.0)
+    assert seen.difference(region).area <= 1e-9
+    assert not seen.intersects(Point(-1.0, -1.0))  # the hole stays a hole
+    assert seen.contains(Point(-1.5, 1.5)) and seen.contains(Point(1.5, -1.5))
+    # Behind the jamb, seen from the origin past its corner (0.3, 0.3), nothing is kept.
+    assert not seen.intersects(Point(0.4, 1.5)) and not seen.intersects(Point(0.31, 1.9))
+    assert seen.contains(Point(0.29, 1.5)) and seen.contains(Point(0.4, 0.2))
 
 
 # --- bad input -----------------------------------------------------------------------------

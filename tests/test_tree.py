@@ -89,3 +89,88 @@ def test_non_positive_range_weight_is_not_invertible():
     tree = MinMaxTree("linear", [[0.0, 0.0, 0.0, 1.0]], 0)
     with pytest.raises(ValueError):
         tree.inverse()
+
+
+# --- the inverse's evaluation over sweeps ------------------------------------------------
+
+
+def shared_weight_tree(seed: int, basis: str = "trig") -> MinMaxTree:
+    """Groups like a fitted model's: the side pieces share the height weight and the
+    constant of a centre piece, and one node mixes pieces and subtrees."""
+    rng = np.random.default_rng(seed)
+    k = 5 if basis == "trig" else 4
+    coefficients = rng.normal(size=(11, k))
+    coefficients[:, -2] = rng.uniform(0.1, 3.0, 11)  # c > 0
+    for group in (0, 4):
+        coefficients[group + 2:group + 4, -3:] = coefficients[group, -3:]  # same b, c, d
+    coefficients[9, -3] = coefficients[8, -3]  # same b only
+    root = Op("max", (Op("min", (0, 1, 2, 3)), Op("min", (4, 5, 6, 7)), Op("min", (8, Op("max", (9, 10))))))
+    return MinMaxTree(basis, coefficients, root)
+
+
+def plain_range(inverse: InverseTree, alpha, h, m) -> np.ndarray:
+    """Every piece at every point, then the tree: the evaluation ``range`` must agree with."""
+    return super(InverseTree, inverse)._eval(alpha, h, m)
+
+
+SWEEPS = {
+    "angles x heights": (np.linspace(-np.pi, np.pi, 90)[None, :], np.linspace(-0.9, 0.1, 13)[:, None], 0.6),
+    "heights x angles": (np.linspace(-np.pi, np.pi, 90)[:, None], np.linspace(-0.9, 0.1, 13)[None, :], 0.4),
+    "levels x heights x angles": (np.linspace(-3, 3, 40), np.linspace(-1, 0, 7)[:, None], np.array([0.2, 0.9])[:, None, None]),
+    "levels along the angles": (np.linspace(-3, 3, 40), np.linspace(-1, 0, 7)[:, None], np.linspace(0, 1, 40)),
+    "angles at one height": (np.linspace(-3, 3, 50), -0.5, 0.6),
+    "one angle, many heights": (0.3, np.linspace(-1, 0.5, 30)[:, None], np.array([0.1, 0.6, 2.0])),
+    "points": (np.linspace(-3, 3, 25), np.linspace(-1, 0, 25), np.linspace(0, 1, 25)),
+    "scalars": (0.3, -0.2, 0.6),
+    "empty": (np.empty((0, 4)), 0.1, 0.5),
+}
+
+
+@pytest.mark.parametrize("basis", ["trig", "linear"])
+@pytest.mark.parametrize("sweep", list(SWEEPS))
+@pytest.mark.parametrize("make", [random_tree, shared_weight_tree])
+def test_the_inverse_over_a_sweep_is_every_piece_at_every_point(make, sweep, basis):
+    inverse = make(7, basis).inverse()
+    alpha, h, m = SWEEPS[sweep]
+    expected = plain_range(inverse, alpha, h, m)
+    got = inverse.range(alpha, h, m)
+    assert got.shape == expected.shape == np.broadcast_shapes(np.shape(alpha), np.shape(h), np.shape(m))
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
+
+
+def test_the_inverse_of_a_single_piece_and_non_finite_inputs():
+    inverse = MinMaxTree("trig", [[0.5, -0.2, 1.0, 2.0, -1.0]], 0).inverse()
+    alpha, h = np.linspace(-3, 3, 8)[None, :], np.array([[-0.5], [np.inf], [np.nan]])
+    expected = plain_range(inverse, alpha, h, 0.6)
+    np.testing.assert_allclose(inverse.range(alpha, h, 0.6), expected, rtol=1e-13)  # same inf and NaN too
+    tree = shared_weight_tree(3).inverse()
+    for alpha, h, m in [([0.0, np.nan], [[-0.5], [np.inf]], 0.6), ([0.0, 1.0], [[-0.5], [0.0]], [np.inf, np.nan])]:
+        np.testing.assert_allclose(tree.range(alpha, h, m), plain_range(tree, alpha, h, m), rtol=1e-13)
+
+
+@pytest.mark.parametrize("block", [1, 7, 64])
+def test_the_inverse_in_blocks_and_flattened(monkeypatch, block):
+    import occtool.tree
+
+    monkeypatch.setattr(occtool.tree, "INVERSE_BLOCK", block)
+    inverse = shared_weight_tree(11).inverse()
+    rng = np.random.default_rng(0)
+    for alpha, h, m in [
+        (np.linspace(-3, 3, 30)[None, :], np.linspace(-1, 0, 9)[:, None], 0.6),  # rows in blocks
+        (np.linspace(-3, 3, 100)[None, :], -0.5, np.array([[0.2], [0.7]])),  # rows longer than a block
+        (rng.uniform(-3, 3, (3, 1, 20)), rng.uniform(-1, 0, (1, 4, 1)), rng.uniform(0, 1, (3, 4, 1))),
+    ]:
+        np.testing.assert_allclose(inverse.range(alpha, h, m), plain_range(inverse, alpha, h, m), rtol=1e-13, atol=1e-13)
+
+
+def test_the_inverse_is_the_same_from_several_threads():
+    from concurrent.futures import ThreadPoolExecutor
+
+    trees = [shared_weight_tree(seed).inverse() for seed in range(4)]
+    alpha, h = np.linspace(-3, 3, 200)[None, :], np.linspace(-1, 0, 50)[:, None]
+    expected = [plain_range(tree, alpha, h, 0.6) for tree in trees]
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda i: [trees[i % 4].range(alpha, h, 0.6) for _ in range(20)], range(8)))
+    for i, runs in enumerate(results):
+        for got in runs:
+            np.testing.assert_allclose(got, expected[i % 4], rtol=1e-13, atol=1e-13)
