@@ -67,6 +67,8 @@ SWEEP_SEED = 1
 # The office doorway, for issue 2's exploration check (docs/scenes.md).
 DOORWAY_CORNERS = ((-0.3, 1.2), (0.7, 1.2))
 WALL_TOP = 2.5
+#: Laser beams with no return become free rays this far out (--no-return-range).
+LASER_NO_RETURN_RANGE = 5.0
 
 
 class Budget:
@@ -161,10 +163,10 @@ def feature_sweep(counts: tuple[int, ...], budget: Budget) -> tuple[list[dict[st
             octomap=True,
             truth=scene,
             seed=SWEEP_SEED,
-            repeat=3 if n <= 10_000 else 1,
+            repeat=3 if n <= 100_000 else 1,
         )
         elapsed = time.perf_counter() - start
-        per_feature = elapsed / n / (3.0 if n <= 10_000 else 1.0)
+        per_feature = elapsed / n / (3.0 if n <= 100_000 else 1.0)
         reports[n] = report
         notes += empty_map_notes(report, f"{n:,} features")
         rows.append(comparison_row(report, sweep="features", features=n, scale_fixed=1))
@@ -290,10 +292,12 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
     # sensor height the floor read as an obstacle ring 0.47 m away.
     # The 2D lasers scan one plane: a robot carrying its laser 0.3 m above the floor and
     # 0.4 m tall, so that the plane lies inside the body's height band.
+    # Laser beams that returned nothing are free rays out to LASER_NO_RETURN_RANGE.
     items = [("octomap_scan/scan.dat.bz2", "OctoMap 3D scan (Freiburg)",
-              Robot(sensor_height=0.08, body_height=0.5))]
+              Robot(sensor_height=0.08, body_height=0.5), None)]
     items += [
-        (f"{folder}/{name}", f"{folder} laser, first scan", Robot(sensor_height=0.3, body_height=0.4))
+        (f"{folder}/{name}", f"{folder} laser, first scan", Robot(sensor_height=0.3, body_height=0.4),
+         LASER_NO_RETURN_RANGE)
         for folder, name in (
             ("intel_lab", "intel-corrected.log.gz"),
             ("fr079", "freiburg-079-corrected.log.gz"),
@@ -301,7 +305,7 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
             ("mit_csail", "csail-corrected.log.gz"),
         )
     ]
-    for relative, label, robot in items:
+    for relative, label, robot, no_return_range in items:
         path = data / relative
         if not path.exists():
             notes.append(f"{relative}: not found, skipped")
@@ -311,7 +315,7 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
             continue
         log(f"real data: {relative}")
         try:
-            range_log = read_log(path, group_by="message")
+            range_log = read_log(path, group_by="message", no_return_range=no_return_range)
             features = range_log.positions[0].features
             report = compare_grid(
                 features,
@@ -532,7 +536,7 @@ def render(results: dict[str, Any], plot_name: str | None, json_name: str) -> st
         f"scipy {meta['machine']['scipy']}, shapely {meta['machine']['shapely']}, pyoctomap {meta['machine']['pyoctomap']}, "
         f"occtool {meta['machine']['occtool']} (commit {meta['machine'].get('commit')}, working tree {meta['machine'].get('working_tree', '?')}).",
         "",
-        "All figures come from this run. Times are wall-clock seconds, the shortest of 3 repeats up to 10k features "
+        "All figures come from this run. Times are wall-clock seconds, the shortest of 3 repeats up to 100k features "
         "(one run above); ratios compare models run in the same process. Grids are 5 cm, fused with OctoMap's "
         "log-odds defaults (hit 0.7, miss 0.4, clamping 0.1192..0.971); both grids get the parametric model's free "
         "prior on the robot's footprint. OctoMap gets the features as 10 scans. Memory: the parametric model's "
@@ -609,8 +613,9 @@ def render(results: dict[str, Any], plot_name: str | None, json_name: str) -> st
                   f"the 5 cm grid from the same features builds in {_s(speed['grid_build_s'])}, "
                   f"so fit / grid build = {speed['fit_over_grid_build']:.2f}."]
     lines += ["", "## Real scans", "",
-              "Laser data carry a constant evidence (0.9, the readers' default); each is inserted into OctoMap as the "
-              "one scan it is. The 3D scan with the scanner 8 cm above the floor (where its floor lies) and a 0.5 m body, "
+              "Laser data carry a constant evidence (0.9, the readers' default); beams that returned nothing are "
+              f"free rays (evidence 0) out to {LASER_NO_RETURN_RANGE:g} m (`--no-return-range`) and count among the "
+              "features; each scan is inserted into OctoMap as the one scan it is. The 3D scan with the scanner 8 cm above the floor (where its floor lies) and a 0.5 m body, "
               "the 2D lasers with the laser 0.3 m above the floor and a 0.4 m body (the scan plane inside the body's "
               "height band). Grids over the data's extent; unobserved grid cells keep the 0.5 prior, below the 0.6 "
               "threshold, so by default grids read unseen space as free where the parametric model closes it. "
