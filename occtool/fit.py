@@ -443,6 +443,8 @@ class _Fitter:
         self.delta = params.huber_delta if params.loss == "huber" else np.inf
         #: The final tree's values at the samples, set by :meth:`alternate`.
         self.prediction: FloatArray | None = None
+        # Hit and near samples grouped by profile bin, and the bins' bounds (built on first use).
+        self._ray_groups: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
 
     @cached_property
     def X(self) -> FloatArray:
@@ -663,8 +665,7 @@ class _Fitter:
         local = [delta] if self.k_angle == 1 else [np.cos(delta) - 1.0, np.sin(delta)]
         rows = np.column_stack([np.ones(target.size), *local, H.ravel()])
 
-        in_segment = np.mod(sample_bin - first, n_bins) < end - first
-        c = self.crossing_slope(in_segment, float(np.median(D_bins)))
+        c = self.crossing_slope(self.segment_ray_samples(first, end, sample_bin, n_bins), float(np.median(D_bins)))
         # Half the pan-weight budget is left to the side pieces that switch the group off.
         bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
         bound_h = self.p.b_max / c
@@ -738,12 +739,27 @@ class _Fitter:
             centres.append(self.project(piece))
         return centres
 
-    def crossing_slope(self, rows: NDArray[np.bool_], distance: float) -> float:
+    def segment_ray_samples(self, first: int, end: int, sample_bin: NDArray[np.intp], n_bins: int) -> NDArray[np.intp]:
+        """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
+
+        Only the samples on rays near their feature say how sharp a crossing is; the robot
+        and footprint samples would pull ``c`` down to ``level / distance``. The samples
+        are grouped by bin once per fit, so each segment takes slices instead of a pass
+        over every sample (8 passes over 2M samples were 0.2 s at 1M features).
+        """
+        if self._ray_groups is None or self._ray_groups[1].size != n_bins + 1:
+            rays = np.flatnonzero(self.on_rays)
+            order, bounds = group_by_bin(sample_bin[rays], n_bins)
+            self._ray_groups = (rays[order], bounds)
+        grouped, bounds = self._ray_groups
+        start, length = first % n_bins, end - first
+        if start + length <= n_bins:
+            return grouped[bounds[start]:bounds[start + length]]
+        return np.concatenate([grouped[bounds[start]:], grouped[:bounds[start + length - n_bins]]])
+
+    def crossing_slope(self, rows: NDArray[np.intp], distance: float) -> float:
         """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples."""
         s = self.samples
-        # Only the samples on rays near their feature say how sharp the crossing is; the
-        # robot and footprint samples would pull c down to level / distance.
-        rows = rows & self.on_rays
         r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
         x = s.r[rows] - r_star
         y = s.m[rows] - self.p.level
@@ -1014,6 +1030,16 @@ def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int
     return first
 
 
+def group_by_bin(bins: NDArray[np.intp], n_bins: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The order that groups ``bins`` by bin (stable: ascending index within a bin) and the
+    ``n_bins + 1`` bounds of the bins' runs in it. A radix sort of small integers."""
+    small = np.int16 if n_bins <= np.iinfo(np.int16).max else np.int32
+    order = np.argsort(bins.astype(small), kind="stable")
+    bounds = np.zeros(n_bins + 1, dtype=np.intp)
+    np.cumsum(np.bincount(bins, minlength=n_bins), out=bounds[1:])
+    return order, bounds
+
+
 def sorted_within_bins(bins: NDArray[np.intp], values: FloatArray,
                        n_bins: int) -> tuple[FloatArray, NDArray[np.intp]]:
     """``values`` grouped by bin (bin 0 first), ascending within each bin.
@@ -1022,10 +1048,8 @@ def sorted_within_bins(bins: NDArray[np.intp], values: FloatArray,
     is a stable radix sort of small integers and only the runs are sorted, several times
     faster than a two-key ``lexsort`` at a million samples, with the same result.
     """
-    small = np.int16 if n_bins <= np.iinfo(np.int16).max else np.int32
-    grouped = values[np.argsort(bins.astype(small), kind="stable")]
-    bounds = np.zeros(n_bins + 1, dtype=np.intp)
-    np.cumsum(np.bincount(bins, minlength=n_bins), out=bounds[1:])
+    order, bounds = group_by_bin(bins, n_bins)
+    grouped = values[order]
     for first, end in zip(bounds[:-1], bounds[1:]):  # a loop over bins; each run sorts in place
         grouped[first:end].sort()
     return grouped, bounds
@@ -1079,13 +1103,14 @@ def frontier_samples(samples: Samples, robot: Robot, focus_range: float) -> Samp
     kind = samples.kind
     rays = (kind == SAMPLE_KINDS["hit"]) | (kind == SAMPLE_KINDS["near"]) | (kind == SAMPLE_KINDS["floor"])
     distance = np.sqrt(np.maximum(samples.r[rays] ** 2 - samples.h[rays] ** 2, 0.0))
-    distance, bounds = sorted_within_bins(angle_bins(samples.alpha[rays], FOCUS_ANGLE_BINS), distance,
-                                          FOCUS_ANGLE_BINS)
+    order, bounds = group_by_bin(angle_bins(samples.alpha[rays], FOCUS_ANGLE_BINS), FOCUS_ANGLE_BINS)
+    distance = distance[order]
     _, rank = adaptive_support(samples.count("robot"))
     extent = np.zeros(FOCUS_ANGLE_BINS)
-    enough = np.diff(bounds) >= rank
-    # The rank-th farthest: ``rank`` places before the end of the bin's ascending run.
-    extent[enough] = distance[bounds[1:][enough] - rank]
+    for b, (first, end) in enumerate(zip(bounds[:-1], bounds[1:])):  # a loop over bins
+        if end - first >= rank:
+            # The rank-th farthest ray end: a partition, not a sort, of the bin's ends.
+            extent[b] = np.partition(distance[first:end], end - first - rank)[end - first - rank]
     # A bin short of both its neighbours is a gap between sparse rays, not an edge of the
     # seen space: it takes the nearer neighbour's extent. (At 2k features one such bin in
     # the office doorway, 6 floor features ending at 1.7 m, closed the doorway in two of
