@@ -419,7 +419,9 @@ def machine() -> dict[str, Any]:
         info["commit"] = subprocess.run(
             ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
         ).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain"], capture_output=True, text=True).stdout
+        # The bench's own outputs do not count: the previous run's results are always there.
+        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--", ".", ":!bench/results.*",
+                                ":!bench/scaling.png"], capture_output=True, text=True).stdout
         info["working_tree"] = "modified" if dirty.strip() else "clean"
     except (OSError, subprocess.CalledProcessError):
         info["commit"] = None
