@@ -322,8 +322,7 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
         try:
             range_log = read_log(path, group_by="message", no_return_range=no_return_range)
             features = range_log.positions[0].features
-            report = compare_grid(
-                features,
+            settings = dict(
                 regressor=OccupancyRegressor(robot=robot, seed=0),
                 navigation={"robot": robot},
                 resolution=RESOLUTION,
@@ -332,20 +331,11 @@ def real_data_section(data: Path, budget: Budget) -> tuple[list[dict[str, Any]],
                 octomap_scans=1,
                 seed=0,
             )
+            report = compare_grid(features, **settings)
             # The same, with the grids reading unobserved space as occupied (a careful
             # planner's reading; docs/comparison.md "Unobserved space"). Only the grids'
             # polygons change: their agreement and areas are kept.
-            closed = compare_grid(
-                features,
-                regressor=OccupancyRegressor(robot=robot, seed=0),
-                navigation={"robot": robot},
-                resolution=RESOLUTION,
-                octomap=True,
-                octomap_scans=1,
-                seed=0,
-                file_sizes=False,
-                unknown="occupied",
-            )
+            closed = compare_grid(features, **settings, file_sizes=False, unknown="occupied")
         except OcctoolError as exc:
             notes.append(f"{relative}: {exc}")
             continue
