@@ -1012,8 +1012,9 @@ def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int
     Isolated outliers (mismatches at a random range) must not count as an obstacle, so
     the first obstacle is the nearest hit followed by at least ``support`` - 1
     more hits within :data:`FOCUS_WINDOW` of its distance (``support`` times
-    :data:`NEAR_SUPPORT_DISTANCE` / distance nearer than that distance). ``inf`` where there is none.
-    Each feature gives two hit samples, so the support counts samples, not features.
+    :data:`NEAR_SUPPORT_DISTANCE` / distance nearer than that distance). ``inf`` where
+    there is none. Each feature gives two hit samples, so the support counts samples, not
+    features.
     """
     distance, bounds = sorted_within_bins(angle_bins(alpha, n_bins), distance, n_bins)
     bins = np.repeat(np.arange(n_bins), np.diff(bounds))
