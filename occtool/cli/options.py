@@ -136,11 +136,14 @@ def _unit_interval(ctx: click.Context | None, param: click.Parameter | None, val
 
 
 def no_return_range_callback(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
-    if value is None:
-        return None
-    if not 0.0 < float(value) < float("inf"):
-        raise click.BadParameter(f"must be a finite number of metres > 0, got {value}")
-    return float(value)
+    # The readers' own check, so the rule lives in one place; click names the option.
+    from occtool.errors import InputError
+    from occtool.io import check_no_return_range
+
+    try:
+        return check_no_return_range(value)
+    except InputError as exc:
+        raise click.BadParameter(str(exc)) from None
 
 
 log_options = _compose(

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
+from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
 
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
@@ -148,7 +149,7 @@ def read_log(
     use_intensities: bool = False,
     sensor_frame: str | None = None,
     base_frame: str | None = None,
-    position_tolerance: Sequence[float] = (0.25, 0.26),
+    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
     group_by: str = "position",
     skip_invalid: bool = False,
     no_return_range: float | None = None,
