@@ -246,7 +246,7 @@ def scenes_section(budget: Budget, seeds: tuple[int, ...], counts: tuple[int, ..
                 features, scene = simulate_scene(name, n_features=n, seed=seed)
                 model, fit_s = timed(lambda: OccupancyRegressor(robot=robot, seed=seed).fit(features))
                 nav, extract_s = timed(
-                    lambda: navigation_map(model.inverse_range, robot=robot, slope_bounds=model.slope_bounds_)
+                    lambda: model.navigation_map(robot=robot)
                 )
                 evaluation = evaluate_navigation(nav.polygon, scene, robot_radius=robot.radius, max_range=nav.max_range)
                 row = {
@@ -274,7 +274,7 @@ def speed_section() -> dict[str, Any]:
     features, _ = simulate_scene("office", n_features=10_000, seed=SWEEP_SEED)
     model, fit_s = timed(lambda: OccupancyRegressor(pieces=32, robot=robot, seed=SWEEP_SEED).fit(features), repeat=3)
     _, extract_s = timed(
-        lambda: navigation_map(model.inverse_range, robot=robot, slope_bounds=model.slope_bounds_), repeat=7
+        lambda: model.navigation_map(robot=robot), repeat=7
     )
     _, grid_s = timed(lambda: build_grid(features, resolution=RESOLUTION, robot=robot, sensor=model.sensor_), repeat=3)
     return {

@@ -477,7 +477,9 @@ def compare_grid(
     # --- parametric model
     model, fit_s = _timed(lambda: type(regressor)(**settings).fit(train), repeat)
     (nav, notes), extract_s = _timed(
-        lambda: _navigation(model.inverse_range, navigation, slope_bounds=model.slope_bounds_), repeat
+        lambda: _navigation(model.inverse_range, navigation, free_bounds=model.free_distance_bounds,
+                            guard=model.guard_),
+        repeat,
     )
     results["parametric"] = ModelResult(
         name="parametric",

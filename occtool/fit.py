@@ -36,6 +36,7 @@ import hashlib
 import logging
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
@@ -44,6 +45,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
+from occtool import guard as guard_module
+from occtool.guard import (
+    ReturnGuard,
+    build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count, supported_returns,
+)
 from occtool.linear_program import solve_lp
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
@@ -73,6 +79,7 @@ PROFILE_BINS = 360
 PROFILE_FULL_DENSITY = 9000
 #: Heights of the body band at which a centre's crossing is kept in front of obstacles.
 PROFILE_HEIGHTS = 9
+CALIBRATE_SURFACE = True
 #: Samples whose loss is summed at once.
 LOSS_CHUNK = 1 << 16
 
@@ -83,6 +90,16 @@ def features_digest(features: Features) -> str:
     digest.update(np.ascontiguousarray(features.points, dtype="<f8").tobytes())
     digest.update(np.ascontiguousarray(features.evidence, dtype="<f8").tobytes())
     return digest.hexdigest()
+
+
+@dataclass(frozen=True)
+class _Screen:
+    """What the fit and the return guard know of the features before any sample is made."""
+
+    obstacle: NDArray[np.bool_]
+    origin: float
+    planar: bool
+    mismatch: NDArray[np.bool_]
 
 
 def huber_loss(residual: FloatArray, delta: float) -> FloatArray:
@@ -153,6 +170,11 @@ class OccupancyRegressor:
         navigation map looks 1.5 m far by default; beyond this the model extrapolates
         (monotonically) and the initial segments are not spent on distant walls. Scale it
         with the max range of the maps you extract (``--focus-range``; about 1.7 x).
+    guard
+        Keep the position's returns (evidence at or above ``level``, in the body's height
+        band, outside the robot's footprint, not seen through by other rays) as a
+        :class:`~occtool.guard.ReturnGuard` that the navigation map keeps the robot's
+        radius from, and fit the tree's range profile in front of them too.
     progress
         Optional ``callback(done, total)`` called after each group is built and after
         each refit sweep.
@@ -187,6 +209,7 @@ class OccupancyRegressor:
         seed: int = 0,
         focus: bool = True,
         focus_range: float = 2.5,
+        guard: bool = True,
         progress: ProgressCallback | None = None,
     ) -> None:
         self.pieces = pieces
@@ -209,6 +232,7 @@ class OccupancyRegressor:
         self.seed = seed
         self.focus = focus
         self.focus_range = focus_range
+        self.guard = guard
         self.progress = progress
 
     # ------------------------------------------------------------------ parameters
@@ -263,23 +287,15 @@ class OccupancyRegressor:
         rng = np.random.default_rng(self.seed)
         if len(features) == 0:
             raise InputError("no features to fit")
-        # Mismatches a few centimetres apart can pass for a small obstacle; where other
-        # rays in nearly the same direction see through them, they are dropped. Floor
-        # features are not obstacles, and grazing rays see "through" them all the time.
-        # The trig basis has no seam, so the angular bins can start anywhere: starting them
-        # at the mean direction of the obstacle features makes the whole fit (the mismatch
-        # test included) turn with the scene: rotating the features rotates the model
-        # exactly, not up to a bin.
-        obstacle = sensor.is_obstacle(features, robot) & ~sensor.is_floor(features.height, robot)
-        origin = mean_direction(features.alpha[obstacle]) if self.basis == "trig" else 0.0
-        if self.focus:
-            # Only features the focus keeps can mislead the fit: test those alone.
-            horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
-            candidates = obstacle & (horizontal <= self.focus_range)
-            mismatch = contradicted_features(features, origin=origin, candidates=candidates)
-            usable = features.select(~mismatch)
-        else:
-            usable = features
+        screen = self._screen(features, sensor, robot)
+        usable = features.select(~screen.mismatch) if screen.mismatch.any() else features
+        guard = None
+        if self.guard:
+            mask, scale = self._guard_mask(features, screen, robot)
+            points = features.points[mask]
+            guard = build_guard(np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1]) * scale,
+                                self.level)
+        origin = screen.origin
         samples = sensor.samples(usable, robot, rng)
         if samples.count("hit") + samples.count("near") + samples.count("floor") == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
@@ -290,7 +306,8 @@ class OccupancyRegressor:
             frontier = frontier_samples(turned, robot, self.focus_range)
             focused = focus_samples(turned, robot, self.focus_range, floor_is_obstacle=sensor.floor == "obstacle")
             turned = join_samples(focused, frontier)
-        fitter = _Fitter(self, turned, robot, floor_is_obstacle=sensor.floor == "obstacle")
+        fitter = _Fitter(self, turned, robot, floor_is_obstacle=sensor.floor == "obstacle",
+                         depth_error=sensor.depth_error)
         tree, loss_history = fitter.run()
         if origin:
             tree = fitter.turned_tree(tree, origin)
@@ -318,7 +335,78 @@ class OccupancyRegressor:
         self.features_digest_ = features_digest(features)
         self.slope_bounds_ = slope_bounds(tree)
         self.inverse_ = tree.inverse()
+        self.guard_ = guard
         return self
+
+    def _screen(self, features: Features, sensor: SensorModel, robot: Robot) -> _Screen:
+        """Which features are obstacles, which are mismatches, and the fit's pan origin."""
+        # Mismatches a few centimetres apart can pass for a small obstacle; where other
+        # rays in nearly the same direction see through them, they are dropped. Floor
+        # features are not obstacles, and grazing rays see "through" them all the time.
+        # The trig basis has no seam, so the angular bins can start anywhere: starting them
+        # at the mean direction of the obstacle features makes the whole fit (the mismatch
+        # test included) turn with the scene: rotating the features rotates the model
+        # exactly, not up to a bin.
+        obstacle = sensor.is_obstacle(features, robot) & ~sensor.is_floor(features.height, robot)
+        origin = mean_direction(features.alpha[obstacle]) if self.basis == "trig" else 0.0
+        # A planar scan (a 2D laser) has one beam per direction: a beam passing beside a
+        # return says only that the object is narrower than the beam spacing, never that
+        # the return is a mismatch (a chair leg is often hit by a single beam).
+        planar = is_planar_scan(features.height[obstacle])
+        mismatch = np.zeros(len(features), dtype=bool)
+        if self.focus and not planar:
+            # Only features the focus keeps can mislead the fit: test those alone.
+            horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
+            candidates = obstacle & (horizontal <= self.focus_range)
+            mismatch = contradicted_features(features, origin=origin, candidates=candidates)
+        return _Screen(obstacle, origin, planar, mismatch)
+
+    def guarded_returns(self, features: Features) -> NDArray[np.bool_]:
+        """Which of ``features`` the return guard holds (:mod:`occtool.guard`): the returns
+        every navigation map of a model fitted to them keeps the robot's radius from.
+
+        A function of the features and the estimator's parameters alone (fitted or not).
+        """
+        self._validate()
+        sensor = self.sensor if self.sensor is not None else SensorModel()
+        robot = self.robot if self.robot is not None else Robot()
+        return self._guard_mask(features, self._screen(features, sensor, robot), robot)[0]
+
+    def _guard_mask(self, features: Features, screen: _Screen, robot: Robot) -> tuple[NDArray[np.bool_], float]:
+        """The guarded returns, and the share of their distance the guard keeps."""
+        returns = screen.obstacle & guard_candidates(features, features.evidence, robot, self.level)
+        if self.focus:
+            # Only as far as the fit reaches: beyond it the model is an extrapolation anyway.
+            returns &= np.hypot(features.points[:, 0], features.points[:, 1]) <= self.focus_range + robot.radius
+        if screen.planar:
+            # A planar scan has no mismatches of this kind: every return is guarded, as measured.
+            return returns, 1.0
+        # 3D data. A return is dropped as a mismatch only when rays clearly pass through it:
+        # a stricter test than the fit's, which also drops the front edge of a thin seat or
+        # table top that rays graze on their way to the floor beyond.
+        strict = contradicted_features(features, origin=screen.origin, candidates=returns & screen.mismatch,
+                                       tolerance=GUARD_SIGHT_TOLERANCE, ratio=GUARD_SIGHT_RATIO)
+        returns &= ~strict
+        spacing = ray_spacing(features.points)
+        # A return alone may be a mismatch; one confirmed by returns on neighbouring rays at
+        # nearly its range (at any height: a sign hanging into the band is confirmed by its
+        # part above it) is a surface.
+        index = np.flatnonzero(returns)
+        candidates = features.points[index]
+        distance = np.hypot(candidates[:, 0], candidates[:, 1])
+        # Support from returns near enough (in reach and height) to confirm a candidate.
+        x, y, z = features.points.T
+        low, high = robot.body_band
+        near = (np.hypot(x, y) <= 1.2 * float(distance.max(initial=0.0)) + 0.1) & (
+            z >= low - SUPPORT_HEIGHT_REACH) & (z <= high + SUPPORT_HEIGHT_REACH)
+        support = features.points[near & screen.obstacle & ~strict & (features.evidence >= self.level)]
+        # Near the robot a surface spans a wide tilt range and many rays end on it, while
+        # two mismatches there box the robot in: the count grows as 1 / distance, as the fit's.
+        needed = support_count(len(features)) * np.maximum(1.0, NEAR_SUPPORT_DISTANCE / np.maximum(distance, 1e-9))
+        confirmed = supported_returns(candidates, support, needed, spacing)
+        returns[index[~confirmed]] = False
+        # A surface seen from above is first hit up to a ray spacing or two behind its front face.
+        return returns, max(0.0, 1.0 - guard_module.SPACING_FACTOR * spacing)
 
     # ------------------------------------------------------------------ using the fit
     def _check_fitted(self) -> None:
@@ -348,6 +436,28 @@ class OccupancyRegressor:
         r = np.where(np.isnan(r), np.inf, r)
         return np.maximum(r, 0.0)
 
+    def free_distance_bounds(self, alpha_low: ArrayLike, alpha_high: ArrayLike, h_edges: ArrayLike,
+                             level: float) -> FloatArray:
+        """Lower bounds of the free horizontal distance over boxes of pan angle x height at
+        ``level``: ``(len(h_edges) - 1, len(alpha_low))``, see
+        :meth:`occtool.tree.InverseTree.horizontal_lower_bound`. Pass it to
+        :func:`occtool.navigation.navigation_map` as ``free_bounds``."""
+        self._check_fitted()
+        return self.inverse_.horizontal_lower_bound(alpha_low, alpha_high, h_edges, level)
+
+    def navigation_map(self, **options: Any) -> Any:
+        """This model's navigation map: :func:`occtool.navigation.navigation_map` with the
+        model's inverse, its exact free-distance bounds, its return guard and (unless
+        ``robot`` is given) the robot it was fitted for; ``options`` are the rest of that
+        function's keywords (``threshold``, ``heights``, ``max_range``, ...)."""
+        from occtool.navigation import navigation_map
+
+        self._check_fitted()
+        options.setdefault("robot", self.robot_)
+        options.setdefault("free_bounds", self.free_distance_bounds)
+        options.setdefault("guard", self.guard_)
+        return navigation_map(self.inverse_range, **options)
+
     def training_summary(self) -> dict[str, Any]:
         """Features, samples, fit error and the input digest, as written to a model file."""
         self._check_fitted()
@@ -365,7 +475,7 @@ class OccupancyRegressor:
 
 _PARAM_NAMES = (
     "pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
-    "sensor", "robot", "seed", "focus", "focus_range", "progress",
+    "sensor", "robot", "seed", "focus", "focus_range", "guard", "progress",
 )
 
 
@@ -416,8 +526,9 @@ class _Fitter:
     """One fit: holds the samples, the design matrix and the evolving pieces."""
 
     def __init__(self, params: OccupancyRegressor, samples: Samples, robot: Robot, *,
-                 floor_is_obstacle: bool = False) -> None:
+                 floor_is_obstacle: bool = False, depth_error: float = 0.0) -> None:
         self.p = params
+        self.depth_error = depth_error
         self.floor_is_obstacle = floor_is_obstacle
         self.samples = samples
         self.robot = robot
@@ -529,6 +640,10 @@ class _Fitter:
         distance = np.sqrt(np.maximum(s.r[hit] ** 2 - s.h[hit] ** 2, 0.0))
         support, _ = adaptive_support(s.count("robot"))
         profile = first_obstacle_distance(s.alpha[hit], distance, n_bins, support)
+        if CALIBRATE_SURFACE:
+            # A cluster starts at the nearer hit sample of its nearest feature, r (1 - depth
+            # error): the measured surface lies at r, and that is where the crossing belongs.
+            profile = profile / (1.0 - self.depth_error)
         frontier = s.kind == SAMPLE_KINDS["frontier"]
         if frontier.any():
             reach = np.sqrt(np.maximum(s.r[frontier] ** 2 - s.h[frontier] ** 2, 0.0))
@@ -940,6 +1055,14 @@ def adaptive_support(n_rays: int) -> tuple[int, int]:
 #: at all) and added no collision; 1.0 m let two office maps collide (0.97 %).
 NEAR_SUPPORT_DISTANCE = 0.6
 
+#: The return guard's line-of-sight test (:meth:`OccupancyRegressor._return_guard`): rays
+#: must pass within 1 cm (+ 1 % of the distance) of a return's height, three of them and
+#: three times as many as end near it, to drop it.
+GUARD_SIGHT_TOLERANCE = (0.01, 0.01)
+GUARD_SIGHT_RATIO = 3
+#: Returns this far (m) above or below the body band still confirm a guarded return (a
+#: sign hanging into the band is confirmed by its part above it).
+SUPPORT_HEIGHT_REACH = 0.5
 #: Pan-angle bins of the line-of-sight test (:func:`contradicted_features`).
 SIGHT_BINS = 120
 #: A ray passes "through" a feature when it crosses the feature's horizontal distance
@@ -956,7 +1079,9 @@ SIGHT_BLOCK = 1 << 15
 
 
 def contradicted_features(features: Features, origin: float = 0.0,
-                          candidates: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
+                          candidates: NDArray[np.bool_] | None = None, *,
+                          tolerance: tuple[float, float] = (SIGHT_HEIGHT_TOLERANCE, SIGHT_HEIGHT_SHARE),
+                          ratio: int = 2) -> NDArray[np.bool_]:
     """Features that other rays in nearly the same direction pass through.
 
     A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
@@ -986,6 +1111,8 @@ def contradicted_features(features: Features, origin: float = 0.0,
         rays = members[:: max(1, members.size // SIGHT_MAX_RAYS)]
         if candidates is not None:
             members = members[candidates[members]]
+            if members.size == 0:
+                continue
         d, z = distance[None, rays], h[None, rays]
         # Blocks of features against the bin's rays: (block x rays) temporaries stay in
         # cache (whole bins at 1M features took 12x the time of 100k for 10x the work).
@@ -994,14 +1121,14 @@ def contradicted_features(features: Features, origin: float = 0.0,
             tested = members[start:start + block]
             D, H = distance[tested, None], h[tested, None]
             window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
-            tolerance = SIGHT_HEIGHT_TOLERANCE + SIGHT_HEIGHT_SHARE * D
+            within = tolerance[0] + tolerance[1] * D
             with np.errstate(divide="ignore", invalid="ignore"):
                 height_there = z * D / d
-            passes = (d > D + window) & (np.abs(height_there - H) < tolerance)
-            ends_near = (np.abs(d - D) <= window) & (np.abs(z - H) < tolerance)
+            passes = (d > D + window) & (np.abs(height_there - H) < within)
+            ends_near = (np.abs(d - D) <= window) & (np.abs(z - H) < within)
             beyond = passes.sum(axis=1)
             near = np.maximum(ends_near.sum(axis=1), 1)
-            contradicted[tested] = beyond >= np.maximum(2, 2 * near)
+            contradicted[tested] = beyond >= np.maximum(ratio, ratio * near)
     return contradicted
 
 

@@ -36,10 +36,14 @@ from shapely.geometry.polygon import orient
 
 from occtool.errors import InputError
 from occtool.features import Pose
+from occtool.guard import ReturnGuard
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
 InverseRange = Callable[[FloatArray, FloatArray, float], ArrayLike]
+#: ``free_bounds(alpha_low, alpha_high, h_edges, level) -> (H - 1, N)``: lower bounds of the
+#: free horizontal distance over boxes of pan angle x height (:meth:`occtool.tree.InverseTree.horizontal_lower_bound`).
+FreeBounds = Callable[[FloatArray, FloatArray, FloatArray, float], FloatArray]
 
 #: Default spacing of the default heights across the robot's body band, metres.
 DEFAULT_HEIGHT_SPACING = 0.25
@@ -58,6 +62,10 @@ MIN_CIRCLE_VERTICES = 720
 MIN_SECTOR_LENGTH = 1e-6
 #: Segments per quarter circle of the arcs the shrink draws round obstacle corners.
 SHRINK_QUAD_SEGMENTS = 16
+#: With ``free_bounds``: the body band is covered by boxes at most this tall, metres (the
+#: bound is exact piece by piece; a box spanning the height where two pieces of a group
+#: trade places gives a little away, less the thinner the box).
+BOUND_HEIGHT_STEP = 0.05
 #: Most heights a map may be cut at (a guard against a tiny slice spacing or a huge body).
 MAX_SLICES = 10_000
 #: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).
@@ -383,6 +391,32 @@ def horizontal_distances(
     return np.minimum(distances, read_range, out=distances)
 
 
+def _bounded_distances(free_bounds: FreeBounds, alpha: FloatArray, edges: FloatArray, level: float,
+                       read_range: float) -> FloatArray:
+    """``(len(edges) - 1, n)``: per height box, each ray's least free distance over the two
+    angle intervals beside it (from the previous ray to the next), at most ``read_range``.
+
+    An interval that crosses +-pi is bounded in two parts (the paper's linear basis jumps there).
+    """
+    n = alpha.size
+    step = 2.0 * math.pi / n
+    low = np.mod(alpha + math.pi, 2.0 * math.pi) - math.pi
+    high = low + step
+    crossing = high > math.pi
+    lows = np.concatenate([low, np.full(int(crossing.sum()), -math.pi)])
+    highs = np.concatenate([np.minimum(high, math.pi), high[crossing] - 2.0 * math.pi])
+    bounds = np.asarray(free_bounds(lows, highs, edges, level), dtype=np.float64)
+    if bounds.shape != (edges.size - 1, lows.size):
+        raise InputError(f"free_bounds returned shape {bounds.shape}, expected {(edges.size - 1, lows.size)}")
+    if np.isnan(bounds).any():
+        raise InputError("free_bounds returned NaN")
+    interval = bounds[:, :n].copy()
+    interval[:, crossing] = np.minimum(interval[:, crossing], bounds[:, n:])
+    # Ray i lies between interval i - 1 (from the previous ray) and interval i (to the next).
+    per_ray = np.minimum(interval, np.roll(interval, 1, axis=1))
+    return np.minimum(np.maximum(per_ray, 0.0), read_range)
+
+
 @functools.lru_cache(maxsize=16)
 def _circle(radius: float, vertices: int) -> Polygon:
     theta = 2.0 * np.pi * np.arange(vertices) / vertices
@@ -423,6 +457,8 @@ def navigation_map(
     slope_bounds: Mapping[str, float] | None = None,
     slice_spacing: float | None = None,
     straight_line: bool = True,
+    guard: ReturnGuard | None = None,
+    free_bounds: FreeBounds | None = None,
 ) -> NavigationMap:
     """Extract the navigation polygon, obstacle and exploration points from a model.
 
@@ -473,6 +509,11 @@ def navigation_map(
         Keep only what the robot reaches in a straight line with its body clear
         (:func:`visible_from_origin`), as the paper promises; if false, every point where
         the body fits, including those behind a door jamb or a pole close by.
+    guard
+        The position's own returns (a fitted model's ``guard_``,
+        :class:`~occtool.guard.ReturnGuard`): each ray's free distance is capped by the
+        guarded returns around it before the shrink, so the polygon keeps every one at
+        least the robot's radius away, whatever the model's pieces say.
 
     Returns
     -------
@@ -536,6 +577,9 @@ def navigation_map(
     requested = np.unique(requested)
 
     margin = 0.0
+    if free_bounds is not None:
+        # Exact bounds over boxes: no Lipschitz margin, no added slices.
+        slope_bounds, slice_spacing = None, None
     if slope_bounds is not None:
         a_max, _, _ = _checked_bounds(slope_bounds)
         lipschitz = height_lipschitz(slope_bounds)
@@ -549,6 +593,10 @@ def navigation_map(
                 f"{MAX_SLICES} times"
             )
     cuts = requested if slice_spacing is None else add_slices(requested, band, float(slice_spacing))
+    if free_bounds is not None:
+        # Box edges: the requested heights and the band's ends, split to BOUND_HEIGHT_STEP.
+        edges = np.unique(np.concatenate([requested, [band[0], band[1]]]))
+        cuts = add_slices(edges, (edges[0], edges[-1]), BOUND_HEIGHT_STEP)
     # Keep added slices above the floor: a cut on the floor sees only the floor.
     cuts = cuts[cuts > robot.floor_h]
     if slope_bounds is not None:
@@ -569,12 +617,17 @@ def navigation_map(
     # arc: shrink by a little more than the radius so the chords keep the full radius.
     shrink = radius / math.cos(math.pi / (4 * SHRINK_QUAD_SEGMENTS))
     read_range = (max_range + shrink) / math.cos(math.pi / n_angles) * (1 + 1e-6) + 1e-9
-    distances = horizontal_distances(inverse_range, alpha, cuts, level, read_range)
-    requested_rows = np.searchsorted(cuts, requested)
+    if free_bounds is None:
+        distances = horizontal_distances(inverse_range, alpha, cuts, level, read_range)
+        requested_rows = np.searchsorted(cuts, requested)
+        requested_distances = distances[requested_rows]
+    else:
+        requested_distances = horizontal_distances(inverse_range, alpha, requested, level, read_range)
+        distances = _bounded_distances(free_bounds, alpha, cuts, level, read_range)
     slice_polygons = shapely.polygons(
-        np.stack([distances[requested_rows] * np.cos(alpha), distances[requested_rows] * np.sin(alpha)], axis=-1)
+        np.stack([requested_distances * np.cos(alpha), requested_distances * np.sin(alpha)], axis=-1)
     )
-    slices = [Slice(float(cuts[row]), polygon) for row, polygon in zip(requested_rows, slice_polygons)]
+    slices = [Slice(float(height), polygon) for height, polygon in zip(requested, slice_polygons)]
 
     # Star polygons on common rays: the one through the per-ray least distance lies
     # inside their intersection (each triangle between two rays lies inside every
@@ -586,6 +639,8 @@ def navigation_map(
         # ray's distance; the chord between the rays can reach past that, unless each ray
         # takes the least of its own and its neighbours' distances.
         nearest = np.minimum(nearest, np.minimum(_previous(nearest), _next(nearest)))
+    if guard is not None:
+        nearest = np.minimum(nearest, guard.ray_bounds(alpha))
     circle_vertices = max(CIRCLE_OVERSAMPLING * n_angles, MIN_CIRCLE_VERTICES)
     polygon = Polygon()
     if nearest.min() > 0:
@@ -600,7 +655,9 @@ def navigation_map(
         polygon = _component_at_origin(shapely.intersection(polygon, _circle(max_range, circle_vertices)))
     if polygon.is_empty:
         if level > 0:  # otherwise the margin warning above says why
-            blocked = cuts[distances.min(axis=1) <= radius * 1.001]
+            # With free_bounds a row of distances is the box from one cut to the next.
+            rows = cuts if distances.shape[0] == cuts.size else cuts[:-1]
+            blocked = rows[distances.min(axis=1) <= radius * 1.001]
             where = (
                 f"at heights {blocked.min() + robot.sensor_height:.2f} to {blocked.max() + robot.sensor_height:.2f} m "
                 "above the floor"
@@ -615,7 +672,8 @@ def navigation_map(
         obstacles = exploration = np.empty((0, 2))
     else:
         polygon = orient(polygon, sign=1.0)  # RFC 7946: outer ring counter-clockwise
-        obstacles, exploration = boundary_points(polygon, max_range, point_spacing, circle_vertices)
+        obstacles, exploration = boundary_points(polygon, max_range, point_spacing, circle_vertices,
+                                                 min_distance=radius)
 
     return NavigationMap(
         polygon=polygon,
@@ -898,7 +956,8 @@ def visible_from_origin(region: Polygon, angles: FloatArray, reach: float) -> Po
 
 
 def boundary_points(
-    polygon: Polygon, max_range: float, spacing: float, circle_vertices: int = MIN_CIRCLE_VERTICES
+    polygon: Polygon, max_range: float, spacing: float, circle_vertices: int = MIN_CIRCLE_VERTICES,
+    min_distance: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """Obstacle and exploration points of a navigation polygon clipped to the max-range disk.
 
@@ -913,12 +972,17 @@ def boundary_points(
         least one point, so a doorway narrower than the spacing is not missed.
     circle_vertices
         Vertices of the disk the polygon was clipped to.
+    min_distance
+        No obstacle point nearer the origin than this (the robot's radius): where the
+        boundary runs inside the robot's own disc (the unseen space behind a laser, a wall
+        the body touches) a point would lie inside the robot, which tells a planner nothing.
 
     Returns
     -------
     obstacle_points, exploration_points
-        ``(K, 2)`` arrays: obstacle points on the boundary inside the circle, exploration
-        points on the circle, each at evenly spaced angles in their sectors.
+        ``(K, 2)`` arrays: obstacle points on the boundary inside the circle (and not
+        within ``min_distance`` of the origin), exploration points on the circle, each at
+        evenly spaced angles in their sectors.
     """
     on_circle = circle_sectors(polygon, max_range, circle_vertices)
     explore_angles = _sector_angles(on_circle, max_range, spacing)
@@ -936,7 +1000,7 @@ def boundary_points(
         blocked = [(0.0, 2.0 * np.pi)]
     obstacle_angles = _sector_angles(blocked, max_range, spacing)
     reach = ray_boundary_distances(polygon, obstacle_angles)
-    keep = np.isfinite(reach)
+    keep = np.isfinite(reach) & (reach >= min_distance)
     directions = np.column_stack([np.cos(obstacle_angles), np.sin(obstacle_angles)])
     obstacles = (reach[keep, None] * directions[keep]).reshape(-1, 2)
     return obstacles, exploration

@@ -353,11 +353,77 @@ def _open() -> list[Obstacle]:
     ]
 
 
+def _aisle() -> list[Obstacle]:
+    # A 1.1 m aisle along x between two rows of shelves (to 2 m), each row broken by a
+    # narrow gap (0.5 m on the left, 0.6 m on the right: the robot's diameter and a
+    # little more, no passage once shrunk but area in front of them to keep). A beam sticks
+    # out of the right row 0.3 m above the floor into the aisle; a sign hangs across the
+    # aisle from 0.9 m, into the body's height; the aisle ends in a wall 4 m ahead.
+    return [
+        box("shelf left (behind gap)", -3.5, 0.55, 1.0, 1.15, 0.0, 2.0),
+        box("shelf left (beyond gap)", 1.5, 0.55, 4.1, 1.15, 0.0, 2.0),
+        box("shelf right (behind gap)", -3.5, -1.15, -0.4, -0.55, 0.0, 2.0),
+        box("shelf right (beyond gap)", 0.2, -1.15, 4.1, -0.55, 0.0, 2.0),
+        _wall("wall end", 4.0, -1.2, 4.0, 1.2),
+        _wall("wall back", -3.5, -1.2, -3.5, 1.2),
+        box("beam", 1.9, -0.55, 2.0, -0.25, 0.25, 0.35),
+        box("sign", -1.3, -0.4, -1.25, 0.4, 0.9, 1.3),
+    ]
+
+
+def _chair(name: str, x: float, y: float, yaw: float) -> list[Obstacle]:
+    """A chair: four 3 cm legs, a 0.45 m seat 3 cm thick at 0.45 m, a thin back to 0.9 m."""
+    size, leg, seat_z = 0.45, 0.03, 0.45
+    c, s = math.cos(yaw), math.sin(yaw)
+
+    def placed(x0: float, y0: float, x1: float, y1: float) -> tuple[tuple[float, float], ...]:
+        corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        return tuple((x + c * u - s * v, y + s * u + c * v) for u, v in corners)
+
+    half = size / 2.0
+    parts = [Obstacle(f"{name} seat", placed(-half, -half, half, half), seat_z - 0.03, seat_z)]
+    for i, (u, v) in enumerate([(-half, -half), (half - leg, -half), (half - leg, half - leg), (-half, half - leg)]):
+        parts.append(Obstacle(f"{name} leg {i + 1}", placed(u, v, u + leg, v + leg), 0.0, seat_z - 0.03))
+    parts.append(Obstacle(f"{name} back", placed(-half, half - leg, half, half), seat_z, 0.9))
+    return parts
+
+
+def _chairs() -> list[Obstacle]:
+    # A 5 x 5 m room with three chairs close around the robot: 3 cm legs that one or two
+    # rays meet, seats at 0.45 m that the body cannot pass under.
+    return [
+        _wall("wall back", -2.0, -2.6, -2.0, 2.6),
+        _wall("wall front", 3.0, -2.6, 3.0, 2.6),
+        _wall("wall right", -2.1, -2.5, 3.1, -2.5),
+        _wall("wall left", -2.1, 2.5, 3.1, 2.5),
+        *_chair("chair 1", 1.0, 0.3, 0.2),
+        *_chair("chair 2", -0.4, 1.1, 1.9),
+        *_chair("chair 3", 0.2, -1.2, -0.6),
+    ]
+
+
+def _hall() -> list[Obstacle]:
+    # An open hall: textured walls beyond the sensor's range (nothing but the floor seen
+    # there), and two rows of 0.3 m pillars 1.6 m apart, the nearest 0.9 m away.
+    pillars = []
+    for i, (x, y) in enumerate([(0.9, 0.8), (0.9, -0.8), (2.5, 0.8), (2.5, -0.8), (-0.7, 0.8), (-0.7, -0.8),
+                                (-2.3, 0.8), (-2.3, -0.8)]):
+        pillars.append(box(f"pillar {i + 1}", x - 0.15, y - 0.15, x + 0.15, y + 0.15, 0.0, WALL_HEIGHT))
+    return [
+        *pillars,
+        _wall("wall far ahead", 8.0, -8.0, 8.0, 8.0),
+        _wall("wall far behind", -8.0, -8.0, -8.0, 8.0),
+    ]
+
+
 _BUILDERS: dict[str, Callable[[], list[Obstacle]]] = {
     "office": _office,
     "corridor": _corridor,
     "clutter": _clutter,
     "open": _open,
+    "aisle": _aisle,
+    "chairs": _chairs,
+    "hall": _hall,
 }
 
 #: The built-in scenes: name -> description.
@@ -378,6 +444,17 @@ SCENES: dict[str, str] = {
     "open": (
         "An open hall beyond sensor range in most directions (only the floor has features there), "
         "an untextured white wall 1.4 m ahead, a pillar and a low bench."
+    ),
+    "aisle": (
+        "A 1.1 m aisle between rows of shelves with narrow gaps (0.5 and 0.6 m), a beam sticking out "
+        "0.3 m above the floor and a sign hanging across the aisle from 0.9 m."
+    ),
+    "chairs": (
+        "A 5 x 5 m room with three chairs around the robot: 3 cm legs, seats at 0.45 m, thin backs to 0.9 m."
+    ),
+    "hall": (
+        "An open hall with walls beyond the sensor's range and two rows of 0.3 m pillars 1.6 m apart, "
+        "the nearest 0.9 m away."
     ),
 }
 

@@ -496,6 +496,61 @@ class InverseTree(_PieceTree):
             self._run(program, angles, rest, buffers)
         return out.reshape(shape)
 
+    def horizontal_lower_bound(self, alpha_low: ArrayLike, alpha_high: ArrayLike, h_edges: ArrayLike,
+                               m: float) -> FloatArray:
+        """A lower bound of the free horizontal distance over boxes of pan angle x height.
+
+        The free horizontal distance at ``(alpha, h)`` is ``sqrt(r^2 - h^2)`` with ``r`` the
+        range where the level ``m`` is reached (0 where it is reached before height ``h``
+        or before the sensor). For the boxes ``[alpha_low[i], alpha_high[i]] x
+        [h_edges[j], h_edges[j + 1]]`` this returns ``(len(h_edges) - 1, len(alpha_low))``
+        numbers no larger than that distance anywhere in the box: the navigation map then
+        holds between its rays and cuts exactly, with no Lipschitz margin. (The linear
+        basis jumps at +-pi: an interval must not cross it.)
+
+        Why it holds: ``sqrt(max(r^2 - h^2, 0))`` of ``max(r, 0)`` is non-decreasing in
+        ``r``, so it commutes with the tree's MIN and MAX and can be taken piece by piece.
+        A piece is ``r = u(alpha) + b h`` with ``u`` the angle terms plus ``m``'s term and the
+        offset; its least ``u`` over the angle interval is closed-form (a cosine's largest
+        value, or a line's). With ``r >= 0`` at both height ends, ``(u + b h)^2 - h^2`` grows
+        with ``u`` and is a quadratic in ``h`` whose least value over the height interval
+        lies at an end or at its vertex. The bound of a MIN node is the MIN of its
+        children's; the MAX of the children's bounds bounds a MAX node from below.
+        """
+        lo = np.asarray(alpha_low, dtype=np.float64).ravel()
+        hi = np.asarray(alpha_high, dtype=np.float64).ravel()
+        h_edges = np.asarray(h_edges, dtype=np.float64).ravel()
+        k = len(self._names[self.basis]) - 3
+        W = self.coefficients
+        # u: least angle part over each interval, plus m's term and the offset: (L, N).
+        if self.basis == "linear":
+            a = W[:, :1]
+            angle_min = np.minimum(a * lo[None, :], a * hi[None, :])
+        else:
+            a1, a2 = W[:, :1], W[:, 1:2]
+            ends = np.minimum(a1 * np.cos(lo) + a2 * np.sin(lo), a1 * np.cos(hi) + a2 * np.sin(hi))
+            # a1 cos + a2 sin = R cos(alpha - phi) reaches -R at alpha = phi + pi.
+            radius = np.hypot(a1, a2)
+            trough = np.arctan2(a2, a1) + np.pi
+            inside = np.mod(trough - lo[None, :], 2.0 * np.pi) <= (hi - lo)[None, :]
+            angle_min = np.where(inside, -radius, ends)
+        u = angle_min + (W[:, k + 1] * m + W[:, k + 2])[:, None]
+        b = W[:, k][:, None, None]
+        h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
+        u = u[:, None, :]
+        r0, r1 = u + b * h0, u + b * h1
+        q = np.minimum(r0 * r0 - h0 * h0, r1 * r1 - h1 * h1)
+        # (b^2 - 1) h^2 + 2 u b h + u^2 is convex only when |b| > 1: then its vertex counts too.
+        curved = (b * b > 1.0)
+        if curved.any():
+            with np.errstate(divide="ignore", invalid="ignore"):
+                vertex = np.clip(-u * b / (b * b - 1.0), h0, h1)
+            rv = u + b * vertex
+            q = np.where(curved, np.minimum(q, rv * rv - vertex * vertex), q)
+        bound = np.where((r0 >= 0) & (r1 >= 0), np.sqrt(np.maximum(q, 0.0)), 0.0)
+        L, H, N = bound.shape
+        return _evaluate(self.root, bound.reshape(L, H * N)).reshape(H, N)
+
     def _angle_part(self, alpha: FloatArray, constant: FloatArray) -> FloatArray:
         """``(L, *alpha.shape)``: each piece's constant plus its angle terms."""
         k = len(self._names[self.basis]) - 3

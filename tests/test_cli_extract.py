@@ -44,7 +44,7 @@ def run(*args):
 
 
 def test_stdout_carries_the_collection_when_no_output_is_given(sphere_inverse):
-    result = run("extract", sphere_inverse, "--heights=-0.5", "--max-range", "1.5")
+    result = run("extract", sphere_inverse, "--heights=-0.5", "--max-range", "1.5", "--ignore-bounds")
     assert result.exit_code == 0, result.output
     collection = json.loads(result.stdout)
     assert collection["type"] == "FeatureCollection"
@@ -53,7 +53,16 @@ def test_stdout_carries_the_collection_when_no_output_is_given(sphere_inverse):
     # At h = -0.5 the sphere is sqrt(1.2^2 - 0.5^2) away; the robot keeps 0.25 m from it.
     expected = math.sqrt(1.2**2 - 0.5**2) - 0.25
     assert polygon.area == pytest.approx(math.pi * expected**2, rel=2e-3)
-    assert "no slope bounds" in result.stderr
+
+
+def test_the_map_holds_over_the_whole_body_band_not_only_at_the_given_heights(sphere_inverse):
+    # The body spans 0.05 to 1 m above the floor (sensor frame -0.95 to 0): the sphere is
+    # nearest at the band's lowest height, sqrt(1.2^2 - 0.95^2), whatever height is asked for.
+    result = run("extract", sphere_inverse, "--heights=-0.5", "--max-range", "1.5")
+    assert result.exit_code == 0, result.output
+    polygon = shapely.geometry.shape(json.loads(result.stdout)["features"][0]["geometry"])
+    expected = math.sqrt(1.2**2 - 0.95**2) - 0.25
+    assert polygon.area == pytest.approx(math.pi * expected**2, rel=2e-3)
 
 
 def test_output_file_sequence_slices_and_precision(sphere_inverse, tmp_path):
@@ -86,8 +95,12 @@ def test_a_fitted_model_brings_its_slope_bounds_and_robot(fitted_model, tmp_path
     properties = json.loads(out.read_text())["properties"]
     assert properties["sensor_height"] == 0.8 and properties["body_height"] == 0.9
     assert properties["robot_radius"] == 0.2
-    assert properties["effective_threshold"] < properties["threshold"] == 0.6
-    assert len(properties["slice_heights"]) >= len(properties["heights"])
+    # The model's pieces bound the map between cuts exactly: no margin, the whole band cut.
+    assert properties["effective_threshold"] == properties["threshold"] == 0.6
+    assert properties["margin"] == 0
+    slices = properties["slice_heights"]
+    assert len(slices) > len(properties["heights"])
+    assert min(slices) == pytest.approx(0.05 - 0.8) and max(slices) == pytest.approx(0.9 - 0.8)
     # Options given on the command line override the model's robot.
     result = run("extract", fitted_model, "-o", out, "--robot-radius", "0.3", "--threshold", "0.7")
     assert result.exit_code == 0, result.output

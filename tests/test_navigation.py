@@ -334,6 +334,75 @@ def test_a_thin_overhang_between_two_heights_is_kept_clear_of_with_the_slope_bou
     assert len(safe.exploration_points) > 0 and angles_of(safe.exploration_points).__abs__().min() > 0.5
 
 
+def test_a_thin_overhang_between_two_heights_is_kept_clear_of_with_exact_bounds():
+    model = RealTreeModel(table_top(-0.33, -0.28))  # 5 cm thick, between the cuts at -0.5 and -0.1
+    heights = [-0.9, -0.5, -0.1]
+    obstacles = true_obstacles(model.inverse_range, 0.6, ROBOT, 1.5)
+    nav = navigation_map(model.inverse_range, robot=ROBOT, heights=heights,
+                         free_bounds=model.inverse.horizontal_lower_bound)
+    assert shapely.distance(nav.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+    # No margin: the threshold is cut as asked, and the map reaches as far as the slope bounds' or farther.
+    assert nav.margin == 0 and nav.effective_threshold == 0.6
+    with_margin = navigation_map(model.inverse_range, robot=ROBOT, heights=heights, slope_bounds=model.slope_bounds)
+    assert nav.polygon.area >= with_margin.polygon.area * (1 - 1e-6)
+    assert nav.polygon.contains(Point(0.5, 0.0)) and not nav.polygon.contains(Point(0.65, 0.0))
+
+
+@settings(max_examples=25)
+@given(
+    pieces=st.lists(
+        st.tuples(st.floats(-1, 1), st.floats(-2, 2), st.floats(0.2, 3), st.floats(-4, -0.8)), min_size=4, max_size=4
+    ),
+    heights=st.lists(st.floats(-0.9, -0.05), min_size=1, max_size=3),
+)
+def test_random_trees_with_exact_bounds_never_let_the_body_touch_an_obstacle(pieces, heights):
+    model = RealTreeModel(PiecewiseLinearModel(pieces, ("max", [("min", [0, 1]), ("min", [2, 3])])))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = navigation_map(model.inverse_range, robot=ROBOT, heights=heights, n_angles=180,
+                             free_bounds=model.inverse.horizontal_lower_bound)
+    if nav.polygon.is_empty:
+        return
+    low, high = ROBOT.body_band
+    levels = np.linspace(low, high, 191)
+    alpha = pan_angles(720)
+    r = model.inverse_range(alpha[None, :], levels[:, None], 0.6)
+    rho = np.sqrt(np.maximum(np.square(np.minimum(r, 1e6)) - np.square(levels)[:, None], 0.0))
+    rows, cols = np.nonzero(rho < 1.5 + 2 * ROBOT.radius)
+    obstacles = np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
+    if len(obstacles):
+        assert shapely.distance(nav.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+
+
+@settings(max_examples=40)
+@given(
+    pieces=st.lists(st.tuples(st.floats(-12, 12), st.floats(-12, 12), st.floats(-8, 8), st.floats(0.25, 8),
+                              st.floats(-10, 10)), min_size=2, max_size=6),
+    lo=st.floats(-np.pi, np.pi), width=st.floats(0.001, 0.5), h0=st.floats(-1.2, 0.3), height=st.floats(0.001, 0.4),
+    level=st.floats(0.1, 0.9),
+)
+def test_the_horizontal_lower_bound_lies_below_the_free_distance_in_every_box(pieces, lo, width, h0, height, level):
+    from occtool.tree import MinMaxTree, Op
+
+    half = len(pieces) // 2
+    root = Op("max", (Op("min", tuple(range(half))), Op("min", tuple(range(half, len(pieces))))))
+    inverse = MinMaxTree("trig", pieces, root).inverse()
+    bound = inverse.horizontal_lower_bound([lo], [lo + width], [h0, h0 + height], level)[0, 0]
+    alpha, h = np.meshgrid(np.linspace(lo, lo + width, 41), np.linspace(h0, h0 + height, 41))
+    r = np.maximum(inverse.range(alpha, h, level), 0.0)
+    rho = np.sqrt(np.maximum(r * r - h * h, 0.0))
+    assert bound <= rho.min() * (1 + 1e-9) + 1e-12
+    # ... and it is not a bound by giving everything away: a single piece's box is exact at a corner.
+
+
+def test_the_horizontal_lower_bound_of_one_piece_is_reached():
+    from occtool.tree import MinMaxTree
+
+    inverse = MinMaxTree("trig", [[0.0, 0.0, 0.0, 2.0, -1.4]], 0).inverse()  # r = 1 at level 0.6
+    bound = inverse.horizontal_lower_bound([0.0], [0.1], [-0.6, -0.2], 0.6)[0, 0]
+    assert bound == pytest.approx(math.sqrt(1.0 - 0.36))
+
+
 def test_slice_spacing_trades_slices_for_margin():
     model = table_top(-0.33, -0.28)
     with pytest.warns(NavigationWarning, match="margin"):  # 10 cm is too coarse for this table
@@ -442,7 +511,10 @@ def test_rotating_the_model_rotates_the_polygon(scene, steps):
         turned = navigation_map(rotated, robot=ROBOT, n_angles=n_angles)
     expected = shapely.affinity.rotate(base.polygon, yaw, origin=(0, 0), use_radians=True)
     assert expected.symmetric_difference(turned.polygon).area <= 1e-6 * max(base.polygon.area, 1e-3)
-    assert len(turned.exploration_points) + len(turned.obstacle_points) > 0 or base.polygon.is_empty
+    # Every map has points, unless its boundary lies within the robot's own disc, where obstacle
+    # points would lie inside the robot.
+    inside_disc = base.polygon.is_empty or shapely.Point(0, 0).hausdorff_distance(base.polygon) < ROBOT.radius
+    assert len(turned.exploration_points) + len(turned.obstacle_points) > 0 or inside_disc
 
 
 @settings(max_examples=25)

@@ -12,55 +12,6 @@ from occtool.cli.options import (
 )
 
 
-def load_inverse_function(path: str) -> tuple[Any, dict[str, float] | None, Any]:
-    """The ``inverse_range`` callable, slope bounds and robot of a model or inverse file.
-
-    Parameters
-    ----------
-    path
-        A model file written by ``occtool fit`` or an inverse written by ``occtool invert``.
-
-    Returns
-    -------
-    inverse_range, slope_bounds, robot
-        ``slope_bounds`` and ``robot`` are ``None`` when the file records none.
-
-    Raises
-    ------
-    InputError
-        If the file is neither.
-    """
-    import json
-
-    import numpy as np
-
-    from occtool.errors import InputError
-    from occtool.io.model import read_any
-    from occtool.robot import Robot
-
-    found = read_any(path)
-    if found is None:
-        raise InputError(f"{path}: not an occtool model or inverse file (write one with `occtool fit`)")
-    kind, item = found
-    if kind == "model":
-        return item.inverse_range, dict(item.slope_bounds_), item.robot_
-
-    def inverse_range(alpha: Any, h: Any, level: float) -> Any:
-        # The inverse tree gives where the level is crossed, before the sensor too (r < 0).
-        r = item.range(alpha, h, level)
-        return np.maximum(np.where(np.isnan(r), np.inf, r), 0.0)
-
-    with open(path, encoding="utf-8") as handle:
-        data = json.load(handle)
-    bounds = data.get("slope_bounds")
-    robot = data.get("robot")
-    try:
-        robot = Robot(**{k: float(v) for k, v in robot.items()}) if isinstance(robot, dict) else None
-    except (TypeError, ValueError):
-        robot = None
-    return inverse_range, (dict(bounds) if isinstance(bounds, dict) else None), robot
-
-
 def _is_model_set(path: str) -> bool:
     from pathlib import Path
 
@@ -84,8 +35,8 @@ def _robot_given(ctx: click.Context) -> set[str]:
 @extract_options
 @geojson_options
 @click.option("--ignore-bounds", is_flag=True, default=False,
-              help="Cut at the given heights only, with no added cuts and no margin (the paper's plain "
-                   "extraction: an obstacle between two heights may be missed).")
+              help="Cut at the given heights only, with no bounds between them (the paper's plain "
+                   "extraction: an obstacle between two heights may be missed); the return guard still holds.")
 @click.option("--straight-line/--no-straight-line", default=True, show_default=True,
               help="Keep only what the robot reaches in a straight line with its body clear (the paper's "
                    "promise), or every point where the body fits.")
@@ -103,8 +54,9 @@ def extract(
     angle; the polygons are shrunk by --robot-radius, intersected and clipped to the
     --max-range circle. Obstacle points lie on the polygon's boundary inside the circle,
     exploration points on the circle where the polygon reaches it. The map holds between
-    the heights too: cuts are added and the threshold lowered by the model's slope bounds
-    (docs/navigation.md).
+    the heights and rays too: the model's pieces bound the free distance over every box of
+    pan angle x height exactly, and it keeps the robot's radius from every return the
+    model's guard holds (docs/navigation.md).
 
     MODEL may be a model set (a folder from `occtool fit -o DIR/`, or its index.json): one
     map per position, all in one file with each feature's "position" (or, with -o DIR/,
@@ -126,7 +78,7 @@ def extract(
     from occtool.errors import InputError
     from occtool.features import Pose
     from occtool.io.geojson import write_navigation, write_navigation_set
-    from occtool.io.model import read_model_set
+    from occtool.io.model import read_model_set, read_navigable
     from occtool.navigation import NavigationWarning, navigation_map
 
     logger = logging.getLogger("occtool.extract")
@@ -138,7 +90,8 @@ def extract(
     }
 
     def one_map(path: Any) -> Any:
-        inverse_range, slope_bounds, model_robot = load_inverse_function(str(path))
+        navigable = read_navigable(path)
+        model_robot = navigable.robot
         settings = dict(options)
         if model_robot is not None:
             # The model was fitted for a robot (its floor, its body): keep what the user did not override.
@@ -148,13 +101,10 @@ def extract(
                 model_robot,
                 **{field: getattr(options["robot"], field) for name, field in fields.items() if name in given},
             )
-        if ignore_bounds:
-            slope_bounds = None
-        elif slope_bounds is None:
-            logger.warning("%s records no slope bounds: the map holds at the given heights only", path)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", NavigationWarning)
-            nav = navigation_map(inverse_range, slope_bounds=slope_bounds, straight_line=straight_line, **settings)
+            nav = navigation_map(navigable.inverse_range, straight_line=straight_line,
+                                 **navigable.navigation_options(bounds=not ignore_bounds), **settings)
         for warning in caught:
             logger.warning("%s: %s", path, warning.message)
         if nav.margin > 0:

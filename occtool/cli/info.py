@@ -67,6 +67,11 @@ def _model_summary(path: str, model, show_pieces: bool):
     counts = ", ".join(f"{k} {v}" for k, v in model.sample_counts_.items() if v)
     table.add_row("training", f"{model.n_features_} features -> {model.n_samples_} samples ({counts})")
     table.add_row("input sha256", model.features_digest_)
+    guard = model.guard_
+    table.add_row("return guard", "none (fitted with --no-guard, or an older file)" if guard is None else
+                  f"{guard.n_returns_bins} of {guard.bins} pan bins hold returns (evidence >= {guard.level:g}), "
+                  f"nearest {float(guard.distance.min()):.3f} m" if guard.n_returns_bins else
+                  f"no returns in the body band (of {guard.bins} pan bins)")
     sensor = model.sensor_
     table.add_row("sensor model", f"depth error {sensor.depth_error:g}, near {sensor.near_positions} x r with "
                   f"{sensor.near_values} x m, floor {sensor.floor}, footprint {sensor.footprint_samples}, "

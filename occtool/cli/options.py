@@ -217,7 +217,7 @@ SENSOR_OPTION_NAMES = (
     "background_weight", "background_range",
 )
 FIT_OPTION_NAMES = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "loss", "huber_delta", "groups", "max_sweeps",
-                    "focus_range")
+                    "focus_range", "guard")
 
 
 def _pair(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> tuple[float, float] | None:
@@ -271,6 +271,9 @@ def fit_options(function: F) -> F:
         click.option("--focus-range", type=click.FloatRange(min=0.0, min_open=True), default=None,
                      help="Farthest horizontal distance fitted, metres; scale it with the maps' "
                           "--max-range (about 1.7x) [default: 2.5]."),
+        click.option("--guard/--no-guard", default=None,
+                     help="Keep the position's returns in the model, so that every navigation map keeps the "
+                          "robot's radius from each of them [default: guard]."),
     )
     return options(function)
 

@@ -16,8 +16,11 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from occtool.errors import InputError, ModelFormatError
 from occtool.io._atomic import atomic_write
@@ -41,7 +44,7 @@ FRAME = {
 UNITS = {"alpha": "rad", "h": "m", "r": "m", "m": "occupancy in [0, 1]"}
 
 _FIT_PARAMS = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
-               "seed", "focus", "focus_range")
+               "seed", "focus", "focus_range", "guard")
 
 
 def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
@@ -62,9 +65,23 @@ def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
         "fit": {name: getattr(model, name) for name in _FIT_PARAMS},
         "training": model.training_summary(),
     }
+    if getattr(model, "guard_", None) is not None:
+        data["guard"] = model.guard_.to_dict()
     if run is not None:
         data["run"] = dict(run)
     return data
+
+
+def _guard_from(data: dict[str, Any], source: str) -> Any:
+    """The file's return guard (``None`` when it has none: older files, ``--no-guard``)."""
+    from occtool.guard import ReturnGuard
+
+    if data.get("guard") is None:
+        return None
+    try:
+        return ReturnGuard.from_dict(data["guard"])
+    except ModelFormatError as exc:
+        raise ModelFormatError(f"{source}: {exc}") from None
 
 
 def _robot_dict(robot: Robot) -> dict[str, float]:
@@ -83,9 +100,19 @@ def save_model(model: Any, path: str | os.PathLike[str], *, run: dict | None = N
     run
         Details of this run (duration, date, version, host) for the ``run`` object.
     """
-    text = json.dumps(model_to_dict(model, run=run), indent=1, allow_nan=False)
+    text = _dumps(model_to_dict(model, run=run))
     with atomic_write(path, "w") as handle:
         handle.write(text + "\n")
+
+
+def _dumps(data: dict[str, Any]) -> str:
+    """JSON with one key a line, but the guard's hundreds of distances on one line."""
+    guard = data.get("guard")
+    if guard is None:
+        return json.dumps(data, indent=1, allow_nan=False)
+    marker = "@@guard-distances@@"
+    text = json.dumps({**data, "guard": {**guard, "distance_mm": marker}}, indent=1, allow_nan=False)
+    return text.replace(json.dumps(marker), json.dumps(guard["distance_mm"], separators=(",", ":")), 1)
 
 
 def _read_json(path: str | os.PathLike[str]) -> Any:
@@ -161,6 +188,7 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
     model.robot_ = robot
     model.slope_bounds_ = slope_bounds(tree)
     model.inverse_ = tree.inverse()
+    model.guard_ = _guard_from(data, source)
     model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}
     return model
 
@@ -207,6 +235,8 @@ def inverse_to_dict(inverse: InverseTree, *, model: Any | None = None, level_hin
     if model is not None:
         data["slope_bounds"] = dict(model.slope_bounds_)
         data["robot"] = _robot_dict(model.robot_)
+        if getattr(model, "guard_", None) is not None:
+            data["guard"] = model.guard_.to_dict()
         data["model_training"] = model.training_summary()
     if run is not None:
         data["run"] = dict(run)
@@ -229,7 +259,7 @@ def save_inverse(inverse: InverseTree, path: str | os.PathLike[str], *, model: A
     run
         Details of this run for the ``run`` object.
     """
-    text = json.dumps(inverse_to_dict(inverse, model=model, run=run), indent=1, allow_nan=False)
+    text = _dumps(inverse_to_dict(inverse, model=model, run=run))
     with atomic_write(path, "w") as handle:
         handle.write(text + "\n")
 
@@ -266,6 +296,71 @@ def read_any(path: str | os.PathLike[str]) -> tuple[str, Any] | None:
     if isinstance(data, dict) and data.get("format") == INVERSE_FORMAT:
         return "inverse", load_inverse(path)
     return None
+
+
+@dataclass(frozen=True)
+class Navigable:
+    """What :func:`occtool.navigation.navigation_map` needs of a model or inverse file.
+
+    Attributes
+    ----------
+    inverse_range
+        ``inverse_range(alpha, h, level) -> r`` (0 where the level is reached at the sensor).
+    free_bounds
+        Exact lower bounds of the free horizontal distance over boxes
+        (:meth:`occtool.tree.InverseTree.horizontal_lower_bound`).
+    slope_bounds
+        The pieces' largest weights, or ``None`` when the file records none.
+    robot
+        The robot the model was fitted for, or ``None``.
+    guard
+        The position's :class:`~occtool.guard.ReturnGuard`, or ``None``.
+    """
+
+    inverse_range: Any
+    free_bounds: Any
+    slope_bounds: dict[str, float] | None
+    robot: Robot | None
+    guard: Any
+
+    def navigation_options(self, *, bounds: bool = True) -> dict[str, Any]:
+        """Keyword arguments for :func:`~occtool.navigation.navigation_map` (but ``robot``);
+        ``bounds=False`` gives the paper's plain cut at the given heights (no bounds)."""
+        if not bounds:
+            return {"guard": self.guard}
+        return {"free_bounds": self.free_bounds, "slope_bounds": self.slope_bounds, "guard": self.guard}
+
+
+def read_navigable(path: str | os.PathLike[str]) -> Navigable:
+    """The inverse function, bounds, robot and return guard of a model or inverse file.
+
+    Raises
+    ------
+    InputError
+        If the file is neither (:class:`ModelFormatError` if it is one but broken).
+    """
+    found = read_any(path)
+    if found is None:
+        raise InputError(f"{path}: not an occtool model or inverse file (write one with `occtool fit`)")
+    kind, item = found
+    if kind == "model":
+        return Navigable(item.inverse_range, item.free_distance_bounds, dict(item.slope_bounds_), item.robot_,
+                         item.guard_)
+
+    def inverse_range(alpha: Any, h: Any, level: float) -> Any:
+        # The inverse tree gives where the level is crossed, before the sensor too (r < 0).
+        r = item.range(alpha, h, level)
+        return np.maximum(np.where(np.isnan(r), np.inf, r), 0.0)
+
+    data = _read_json(path)
+    bounds = data.get("slope_bounds")
+    robot = data.get("robot")
+    try:
+        robot = Robot(**{k: float(v) for k, v in robot.items()}) if isinstance(robot, dict) else None
+    except (InputError, TypeError, ValueError):
+        robot = None
+    return Navigable(inverse_range, item.horizontal_lower_bound, dict(bounds) if isinstance(bounds, dict) else None,
+                     robot, _guard_from(data, str(path)))
 
 
 def save_model_set_index(folder: str | os.PathLike[str], entries: list[dict[str, Any]], *, source: str) -> None:

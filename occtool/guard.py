@@ -1,0 +1,255 @@
+"""The return guard: a position's own returns, which its navigation polygon must keep clear of.
+
+A min/max tree of a few dozen linear pieces is a smooth summary: an obstacle seen by one
+or two rays (a chair leg in a laser scan, a pallet corner in sparse stereo) can fall
+between its pieces, and the navigation map would then send the robot into a return of
+its own scan. The returns are known when the model is fitted, so the model keeps the
+least it needs to rule that out: per pan-angle bin (:data:`GUARD_BINS` over
+``[-pi, pi)``), the horizontal distance of the nearest *guarded return*, a feature
+
+* with evidence at or above the model's level (the threshold it is fitted for),
+* inside the robot's height band (above the ground clearance, below the body's top),
+* outside the robot's current footprint (a return inside it is the robot itself or a
+  mismatch: the robot stands there), and
+* not contradicted by other rays passing through it (:func:`occtool.fit.contradicted_features`,
+  the stereo mismatch test); a *planar* scan's returns are never contradicted, since
+  its beams pass beside each other, never through the same spot twice.
+
+The navigation map (:func:`occtool.navigation.navigation_map`) caps every ray's free
+distance by the guard's distances around it, before the shrink by the robot's radius:
+the star polygon through the rays then holds no guarded return strictly inside, so the
+shrunk polygon keeps every one at least the radius away. The fit builds its range
+profile with the guard too, so the tree itself stops in front of the returns wherever its
+pieces can follow them.
+
+A guard is 720 distances, about 4 KB in a model file, whatever the number of features.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import ModelFormatError
+from occtool.features import Features
+from occtool.robot import Robot
+
+FloatArray = NDArray[np.float64]
+
+#: Pan-angle bins of a guard over [-pi, pi): half a degree, finer than a SICK scanner's beams.
+GUARD_BINS = 720
+#: Distances are stored rounded *down* to whole millimetres, so a stored guard is never
+#: farther than the returns it stands for.
+GUARD_RESOLUTION = 0.001  # metres
+#: A position is a planar scan when all its returns lie within this height (m) of each other.
+PLANAR_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class ReturnGuard:
+    """Nearest guarded return per pan-angle bin.
+
+    Attributes
+    ----------
+    distance
+        ``(bins,)`` horizontal distance (m) of the nearest guarded return in each bin of
+        ``[-pi, pi)`` (bin ``i`` spans ``-pi + i w`` to ``-pi + (i + 1) w``, ``w = 2 pi / bins``);
+        ``inf`` where there is none.
+    level
+        Evidence at or above which a return is guarded: the model's level. A map cut at a
+        lower threshold is guarded only for returns at or above this level.
+    """
+
+    distance: FloatArray
+    level: float
+
+    def __post_init__(self) -> None:
+        distance = np.asarray(self.distance, dtype=np.float64).reshape(-1)
+        if distance.size < 8:
+            raise ModelFormatError(f"a return guard needs at least 8 bins, got {distance.size}")
+        if np.isnan(distance).any() or (distance <= 0).any():
+            raise ModelFormatError("a return guard's distances must be numbers > 0 (or null for none)")
+        if not (math.isfinite(self.level) and 0.0 < self.level <= 1.0):
+            raise ModelFormatError(f"a return guard's level must lie in (0, 1], got {self.level!r}")
+        object.__setattr__(self, "distance", distance)
+
+    @property
+    def bins(self) -> int:
+        return int(self.distance.size)
+
+    @property
+    def n_returns_bins(self) -> int:
+        """Bins holding a guarded return."""
+        return int(np.isfinite(self.distance).sum())
+
+    def ray_bounds(self, alpha: ArrayLike) -> FloatArray:
+        """Farthest free distance of each of ``n`` evenly spaced rays that keeps the guard.
+
+        ``alpha`` are the map's pan angles, ``alpha[i + 1] - alpha[i] = 2 pi / n``. Each
+        ray gets the least guarded distance over the bins that overlap the angles from its
+        previous to its next ray: the two triangles (origin, ray, neighbour ray) of a star
+        polygon through rays so capped lie within the disk of that distance, so no guarded
+        return lies strictly inside the polygon.
+        """
+        alpha = np.asarray(alpha, dtype=np.float64).reshape(-1)
+        n = alpha.size
+        if n == 0:
+            return np.empty(0)
+        step = 2.0 * math.pi / n
+        width = 2.0 * math.pi / self.bins
+        # Bin indices (unwrapped) of each ray's window [alpha - step, alpha + step]; a
+        # hair wider, so rounding never leaves out a bin that the window touches.
+        slack = 1e-9
+        low = np.floor((alpha - step - slack + math.pi) / width).astype(np.int64)
+        high = np.floor((alpha + step + slack + math.pi) / width).astype(np.int64)
+        span = int((high - low).max()) + 1
+        index = low[:, None] + np.arange(span)[None, :]
+        values = self.distance[np.mod(index, self.bins)]
+        values = np.where(index <= high[:, None], values, np.inf)
+        return values.min(axis=1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"bins", "level", "distance_mm": [whole millimetres, or null for none]}``."""
+        return {
+            "bins": self.bins,
+            "level": float(self.level),
+            "distance_mm": [None if not math.isfinite(d) else int(round(d * 1000.0)) for d in self.distance.tolist()],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ReturnGuard:
+        """Read :meth:`to_dict` output; :class:`ModelFormatError` when it is malformed."""
+        if not isinstance(data, dict):
+            raise ModelFormatError("'guard' must be an object")
+        values = data.get("distance_mm")
+        if not isinstance(values, list) or data.get("bins") != len(values):
+            raise ModelFormatError("the guard's 'distance_mm' must be a list of 'bins' whole numbers or nulls")
+        distance = np.empty(len(values))
+        for i, value in enumerate(values):
+            if value is None:
+                distance[i] = np.inf
+            elif isinstance(value, int) and not isinstance(value, bool) and 0 < value < 10**9:
+                distance[i] = value / 1000.0
+            else:
+                raise ModelFormatError(f"the guard's distance {i} is not a whole number of millimetres > 0 or null: "
+                                       f"{value!r}")
+        level = data.get("level")
+        if isinstance(level, bool) or not isinstance(level, (int, float)):
+            raise ModelFormatError(f"the guard's level must be a number, got {level!r}")
+        return cls(distance, float(level))
+
+
+def is_planar_scan(heights: ArrayLike) -> bool:
+    """Whether returns at sensor-frame ``heights`` all lie in one horizontal plane (a 2D laser)."""
+    heights = np.asarray(heights, dtype=np.float64)
+    return heights.size > 0 and float(heights.max() - heights.min()) <= PLANAR_TOLERANCE
+
+
+def guard_candidates(features: Features, evidence: ArrayLike, robot: Robot, level: float) -> NDArray[np.bool_]:
+    """Features that are returns the robot must keep clear of (before the mismatch test).
+
+    Evidence at or above ``level``, height within the robot's body band, horizontal
+    distance beyond the robot's radius. ``evidence`` is the features' evidence (passed
+    apart so a caller may mask free rays or floor features beforehand).
+    """
+    x, y, z = features.points.T
+    low, high = robot.body_band
+    return (
+        (np.asarray(evidence) >= level) & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
+    )
+
+
+#: Returns (itself included) that confirm a return of 3D data at about
+#: :data:`SUPPORT_REFERENCE` features per position; the count grows with the square root
+#: of the feature count, as mismatches do per neighbourhood.
+SUPPORT_COUNT = 2
+SUPPORT_REFERENCE = 1000
+#: Neighbours confirm a return when their rays lie within this many ray spacings of its
+#: ray and they end at nearly its range (:data:`SUPPORT_RANGE_SHARE`): a surface is hit by
+#: neighbouring rays at nearly the same range, a mismatch lies alone on its ray.
+SUPPORT_SPACINGS = 3.0
+#: Relative range difference (about 15 %) within which neighbouring returns lie on one surface.
+SUPPORT_RANGE_SHARE = 0.15
+
+
+def support_count(n_features: int) -> int:
+    """Returns that confirm one another among ``n_features``."""
+    return max(SUPPORT_COUNT, int(round(SUPPORT_COUNT * math.sqrt(max(n_features, 1) / SUPPORT_REFERENCE))))
+
+
+def supported_returns(points: ArrayLike, support: ArrayLike, count: ArrayLike, spacing: float) -> NDArray[np.bool_]:
+    """Returns at ``points`` (x, y, z) with at least ``count`` (per return, or one for all)
+    of the ``support`` points (all returns of the position, at any height, themselves
+    included) on neighbouring rays: within :data:`SUPPORT_SPACINGS` ray spacings
+    (``spacing``, radians) of direction and :data:`SUPPORT_RANGE_SHARE` of range. A
+    surface is hit by neighbouring rays at nearly the same range, even a thin sign or a
+    seat seen from above; a mismatch lies alone on its ray. A sign hanging into the
+    body's height band is confirmed by its part above the band."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    count = np.broadcast_to(np.asarray(count, dtype=np.float64), (points.shape[0],))
+    if points.shape[0] == 0 or (count <= 1).all():
+        return np.ones(points.shape[0], dtype=bool)
+
+    def embedded(p: FloatArray) -> FloatArray:
+        # Unit direction scaled so the angular reach is 1, log range so the range share is 1.
+        r = np.linalg.norm(p, axis=1)
+        direction = p / r[:, None] / max(SUPPORT_SPACINGS * spacing, 1e-9)
+        return np.column_stack([direction, np.log(r) / math.log1p(SUPPORT_RANGE_SHARE)])
+
+    tree = cKDTree(embedded(np.asarray(support, dtype=np.float64).reshape(-1, 3)))
+    found = np.asarray(tree.query_ball_point(embedded(points), 1.0, return_length=True))
+    return found >= count
+
+
+#: A guarded return of 3D data stands this many ray spacings nearer than measured (see
+#: :func:`ray_spacing`): a surface seen from above (a crate's top, a pallet) is first hit
+#: up to a ray spacing behind its front face.
+SPACING_FACTOR = 2.0
+#: Features whose nearest neighbours measure the ray spacing, at most (an even subsample).
+SPACING_SAMPLE = 2000
+
+
+def ray_spacing(points: ArrayLike) -> float:
+    """Typical angle (radians) between neighbouring rays: twice the median angle from a
+    ray to its nearest neighbour (an even subsample of at most :data:`SPACING_SAMPLE`
+    rays, scaled back to the full count)."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = points.shape[0]
+    if n < 2:
+        return 0.0
+    step = max(1, n // SPACING_SAMPLE)
+    sample = points[::step]
+    directions = sample / np.linalg.norm(sample, axis=1, keepdims=True)
+    distance, _ = cKDTree(directions).query(directions, k=2)
+    # Chord to angle; a subsample's spacing is sqrt(step) times the full set's.
+    angle = 2.0 * np.arcsin(np.clip(distance[:, 1] / 2.0, 0.0, 1.0))
+    return float(2.0 * np.median(angle) / math.sqrt(step))
+
+
+def build_guard(alpha: ArrayLike, distance: ArrayLike, level: float, bins: int = GUARD_BINS) -> ReturnGuard:
+    """The guard of returns at pan angles ``alpha`` and horizontal distances ``distance``."""
+    alpha = np.asarray(alpha, dtype=np.float64)
+    distance = np.asarray(distance, dtype=np.float64)
+    nearest = np.full(bins, np.inf)
+    index = np.mod(np.floor((alpha + math.pi) * (bins / (2.0 * math.pi))).astype(np.int64), bins)
+    np.minimum.at(nearest, index, distance)
+    # Down to whole millimetres (a hair below, so x / 1000 read back is never farther than
+    # the return): the guard in memory is the guard a model file gives back.
+    finite = np.isfinite(nearest)
+    millimetres = np.maximum(np.floor(nearest[finite] / GUARD_RESOLUTION - 1e-6), 1.0)
+    nearest[finite] = millimetres / 1000.0
+    return ReturnGuard(nearest, float(level))
+
+
+__all__ = [
+    "GUARD_BINS", "ReturnGuard", "build_guard", "guard_candidates", "is_planar_scan", "ray_spacing", "support_count",
+    "supported_returns",
+]

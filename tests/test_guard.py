@@ -1,0 +1,150 @@
+"""The return guard: a position's own returns never come within the robot's radius of its map."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from occtool.errors import ModelFormatError
+from occtool.features import Features
+from occtool.fit import OccupancyRegressor
+from occtool.guard import GUARD_BINS, ReturnGuard, build_guard, is_planar_scan
+from occtool.io.model import load_model, save_model
+from occtool.navigation import NavigationWarning, pan_angles
+from occtool.robot import Robot
+from occtool.simulate import simulate_scene
+
+#: A 2D laser 0.3 m above the floor on a 0.5 m tall robot, as on the CARMEN logs.
+LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
+
+
+def laser_scan(room: tuple[float, float, float, float], poles: list[tuple[float, float, float]],
+               n_beams: int = 180, fov: float = math.pi) -> Features:
+    """A planar scan from the origin of a rectangular room (x0, x1, y0, y1 around the origin)
+    with round poles (x, y, radius): each beam returns at the nearest surface."""
+    x0, x1, y0, y1 = room
+    angles = -fov / 2 + (np.arange(n_beams) + 0.5) * fov / n_beams
+    c, s = np.cos(angles), np.sin(angles)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        walls = np.stack([np.where(c > 0, x1 / c, np.where(c < 0, x0 / c, np.inf)),
+                          np.where(s > 0, y1 / s, np.where(s < 0, y0 / s, np.inf))])
+    ranges = np.nanmin(np.where(walls > 0, walls, np.inf), axis=0)
+    for px, py, pr in poles:
+        along = px * c + py * s
+        miss = px * px + py * py - along * along
+        hit = (along > 0) & (miss <= pr * pr)
+        ranges = np.where(hit, np.minimum(ranges, along - np.sqrt(np.maximum(pr * pr - miss, 0.0))), ranges)
+    points = np.column_stack([ranges * c, ranges * s, np.zeros(n_beams)])
+    return Features(points, np.full(n_beams, 0.9))
+
+
+def returns_near_polygon(features: Features, polygon, robot: Robot, level: float = 0.6) -> int:
+    """Returns (evidence >= level, in the body band, beyond the footprint) closer than the radius to the polygon."""
+    x, y, z = features.points.T
+    low, high = robot.body_band
+    returns = (features.evidence >= level) & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
+    if polygon.is_empty or not returns.any():
+        return 0
+    distance = shapely.distance(polygon, shapely.points(features.points[returns, :2]))
+    return int((distance < robot.radius * (1 - 1e-9)).sum())
+
+
+rooms = st.tuples(st.floats(-4.0, -0.6), st.floats(0.6, 4.0), st.floats(-4.0, -0.6), st.floats(0.6, 4.0))
+poles = st.lists(st.tuples(st.floats(-1.8, 1.8), st.floats(-1.8, 1.8), st.floats(0.01, 0.04)), max_size=4)
+
+
+@settings(max_examples=30, deadline=None)
+@given(room=rooms, poles=poles, beams=st.sampled_from([90, 180, 361]))
+def test_no_return_of_a_planar_scan_comes_within_the_radius_of_its_map(room, poles, beams):
+    # Thin poles (chair legs) that one or two beams hit, anywhere: the map keeps clear of them.
+    poles = [p for p in poles if math.hypot(p[0], p[1]) > LASER_ROBOT.radius + p[2] + 0.05]
+    features = laser_scan(room, poles, n_beams=beams)
+    model = OccupancyRegressor(robot=LASER_ROBOT).fit(features)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = model.navigation_map()
+    assert returns_near_polygon(features, nav.polygon, LASER_ROBOT) == 0
+    # Obstacle points lie on the polygon's boundary, never inside the robot's own disc.
+    if len(nav.obstacle_points):
+        assert np.hypot(*nav.obstacle_points.T).min() >= LASER_ROBOT.radius * (1 - 1e-9)
+        assert shapely.distance(nav.polygon.exterior, shapely.points(nav.obstacle_points)).max() < 1e-6
+
+
+@settings(max_examples=12, deadline=None)
+@given(scene=st.sampled_from(["office", "clutter", "chairs", "aisle"]), seed=st.integers(0, 10_000),
+       n=st.sampled_from([400, 1000, 2000]))
+def test_no_guarded_return_of_sparse_stereo_comes_within_the_radius(scene, seed, n):
+    features, _ = simulate_scene(scene, n_features=n, seed=seed)
+    model = OccupancyRegressor().fit(features)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = model.navigation_map()
+    guarded = features.select(model.guarded_returns(features))
+    assert returns_near_polygon(guarded, nav.polygon, model.robot_) == 0
+
+
+def test_a_chair_leg_hit_by_one_beam_closes_the_map_around_it():
+    features = laser_scan((-3.0, 3.0, -3.0, 3.0), [(0.8, 0.0, 0.015)], n_beams=180)
+    model = OccupancyRegressor(robot=LASER_ROBOT).fit(features)
+    nav = model.navigation_map()
+    assert not nav.polygon.contains(shapely.Point(0.8, 0.0).buffer(LASER_ROBOT.radius * 0.99))
+    assert nav.polygon.contains(shapely.Point(1.2, 0.5)) and nav.polygon.contains(shapely.Point(1.2, -0.5))
+    unguarded = OccupancyRegressor(robot=LASER_ROBOT, guard=False).fit(features)
+    assert unguarded.guard_ is None
+
+
+def test_a_planar_scan_is_recognised():
+    assert is_planar_scan(np.zeros(10)) and is_planar_scan(np.full(3, 0.004) * np.arange(3))
+    assert not is_planar_scan(np.array([-0.5, 0.0])) and not is_planar_scan(np.empty(0))
+
+
+@given(st.lists(st.tuples(st.floats(-math.pi, math.pi), st.floats(0.3, 5.0)), min_size=1, max_size=40),
+       st.sampled_from([36, 90, 360, 720]))
+def test_a_star_polygon_through_the_ray_bounds_holds_no_return_inside(returns, n_rays):
+    alpha, distance = np.array(returns).T
+    guard = build_guard(alpha, distance, 0.6)
+    rays = pan_angles(n_rays)
+    reach = np.minimum(guard.ray_bounds(rays), 10.0)
+    star = shapely.Polygon(np.column_stack([reach * np.cos(rays), reach * np.sin(rays)]))
+    points = shapely.points(np.column_stack([distance * np.cos(alpha), distance * np.sin(alpha)]))
+    assert not shapely.contains_properly(star, points).any()
+
+
+def test_the_guard_is_never_farther_than_its_returns_and_round_trips(tmp_path):
+    alpha = np.array([0.1, 0.1004, 2.0, -3.0])
+    distance = np.array([1.23456, 0.98765, 2.0, 0.3001])
+    guard = build_guard(alpha, distance, 0.6)
+    assert guard.bins == GUARD_BINS and guard.n_returns_bins == 3
+    index = np.floor((alpha + math.pi) * GUARD_BINS / (2 * math.pi)).astype(int)
+    assert (guard.distance[index] <= distance).all()
+    assert guard.distance[index[0]] == pytest.approx(0.987, abs=1e-9)  # the nearer of the bin's two
+    back = ReturnGuard.from_dict(json.loads(json.dumps(guard.to_dict())))
+    np.testing.assert_array_equal(back.distance, guard.distance)
+    # And through a model file, compactly (the distances on one line).
+    features, _ = simulate_scene("office", n_features=1500, seed=2)
+    model = OccupancyRegressor().fit(features)
+    path = tmp_path / "model.json"
+    save_model(model, path)
+    np.testing.assert_array_equal(load_model(path).guard_.distance, model.guard_.distance)
+    assert path.stat().st_size < 16_000
+
+
+@pytest.mark.parametrize("broken, message", [
+    ({"bins": 3, "level": 0.6, "distance_mm": [1, 2]}, "distance_mm"),
+    ({"bins": 8, "level": 0.6, "distance_mm": [1, 2, 3, 4, 5, 6, 7, -8]}, "millimetres"),
+    ({"bins": 8, "level": 0.6, "distance_mm": [1, 2, 3, 4, 5, 6, 7, True]}, "millimetres"),
+    ({"bins": 8, "level": 0.6, "distance_mm": [1, 2, 3, 4, 5, 6, 7, "8"]}, "millimetres"),
+    ({"bins": 8, "level": 1.5, "distance_mm": [1] * 8}, "level"),
+    ({"bins": 4, "level": 0.6, "distance_mm": [1] * 4}, "8 bins"),
+    ([1, 2], "object"),
+])
+def test_a_malformed_guard_is_a_model_format_error(broken, message):
+    with pytest.raises(ModelFormatError, match=message):
+        ReturnGuard.from_dict(broken)
