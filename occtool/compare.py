@@ -134,6 +134,36 @@ def holdout_points(features: Features, free_ray: NDArray[np.bool_]) -> tuple[Flo
     return occupied, free
 
 
+def in_front_of_first_obstacle(points: FloatArray, features: Features, robot: Robot, *,
+                               occupied: bool) -> NDArray[np.bool_]:
+    """Test points that lie in front of the first obstacle at their pan angle, in the body band.
+
+    A function increasing in range cannot show free space behind an obstacle at the same
+    pan angle (a ray passing over a low box to the wall beyond): those points are
+    unreachable for the parametric model by construction. Per pan-angle bin the first
+    obstacle is the nearest cluster of ``features``' returns in the body band (the fit's
+    :func:`occtool.fit.first_obstacle_distance`); free points count when nearer than it,
+    ``occupied`` points (returns) when no farther than it plus its cluster window.
+    """
+    from occtool.fit import FOCUS_ANGLE_BINS, FOCUS_WINDOW, FOCUS_WINDOW_ABS, adaptive_support, angle_bins
+    from occtool.fit import first_obstacle_distance
+
+    low, high = robot.body_band
+    x, y, z = features.points.T
+    band = (z >= low) & (z <= high) & (features.evidence > 0)
+    distance = np.hypot(x[band], y[band])
+    support, _ = adaptive_support(len(features))
+    # Each feature counts twice, as the fit's two hit samples do.
+    first = first_obstacle_distance(np.repeat(np.arctan2(y[band], x[band]), 2), np.repeat(distance, 2),
+                                     FOCUS_ANGLE_BINS, support)
+    px, py, pz = np.asarray(points, dtype=np.float64).reshape(-1, 3).T
+    limit = first[angle_bins(np.arctan2(py, px), FOCUS_ANGLE_BINS)]
+    if occupied:
+        limit = limit * (1.0 + FOCUS_WINDOW) + FOCUS_WINDOW_ABS
+        return (pz >= low) & (pz <= high) & (np.hypot(px, py) <= limit)
+    return (pz >= low) & (pz <= high) & (np.hypot(px, py) < limit)
+
+
 @dataclass
 class ModelResult:
     """What one model cost and produced."""
@@ -519,6 +549,10 @@ def compare_grid(
             test_points=(occupied_points, free_points),
         )
 
+    # The points a function increasing in range can represent: in front of the first
+    # obstacle at their pan angle, in the body band (first obstacles from all the features).
+    front_occupied = in_front_of_first_obstacle(occupied_points, features, robot, occupied=True)
+    front_free = in_front_of_first_obstacle(free_points, features, robot, occupied=False)
     parametric = results["parametric"]
     report: dict[str, Any] = {
         "version": REPORT_VERSION,
@@ -556,6 +590,8 @@ def compare_grid(
         },
         "auc": {name: roc_auc(*pair) for name, pair in scores.items()},
         "auc_points": {"occupied": int(occupied_points.shape[0]), "free": int(free_points.shape[0])},
+        "auc_front": {name: roc_auc(pair[0][front_occupied], pair[1][front_free]) for name, pair in scores.items()},
+        "auc_front_points": {"occupied": int(front_occupied.sum()), "free": int(front_free.sum())},
         "ratios": {},
     }
     for name, result in results.items():

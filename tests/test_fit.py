@@ -410,5 +410,11 @@ def test_near_mismatches_need_more_support_than_a_near_box_has():
     model = OccupancyRegressor(seed=1).fit(features)
     alpha, h = np.linspace(-0.3, 0.3, 7), np.linspace(-0.95, -0.45, 3)[:, None]
     ahead = np.sqrt(model.inverse_range(alpha, h, 0.6) ** 2 - h**2)
-    assert np.all(ahead <= 0.45 / np.cos(alpha))  # in front of the crate's face
-    assert ahead.min() > 0.35  # and not far in front of it
+    # At the crate's face, up to the sensor model's depth error (3 %) ...
+    assert np.all(ahead <= 0.45 / np.cos(alpha) * 1.03)
+    assert ahead.min() > 0.35  # ... and not far in front of it
+    # ... and the robot's body keeps clear of it.
+    import shapely
+
+    crate = shapely.box(0.45, -0.3, 0.9, 0.3)
+    assert model.navigation_map().polygon.intersection(crate.buffer(model.robot_.radius * 0.98)).is_empty
