@@ -178,6 +178,8 @@ class ModelResult:
     extra: dict[str, Any] = field(default_factory=dict)
     #: Why the navigation map is degenerate (an empty polygon: the robot in collision), if it is.
     warnings: list[str] = field(default_factory=list)
+    #: A grid's polygon under each further reading of unobserved space (``also_unknown``).
+    readings: dict[str, shapely.Geometry] = field(default_factory=dict)
 
     def figures(self) -> dict[str, Any]:
         return {
@@ -385,14 +387,18 @@ def _run_baseline(
     repeat: int,
     file_sizes: bool,
     test_points: tuple[FloatArray, FloatArray],
+    also_unknown: tuple[str, ...] = (),
 ) -> tuple[ModelResult, tuple[FloatArray, FloatArray]]:
     """Build one baseline, extract its navigation polygon and score its occupancy."""
     built, build_s = _timed(lambda: baseline.build(inputs), repeat)
 
-    def inverse_range(alpha: Any, h: Any, level: float) -> FloatArray:
-        return built.inverse_range(alpha, h, level, max_range=read_range, unknown=unknown, band=band)
+    def reading(unknown: str) -> Callable[..., FloatArray]:
+        def inverse_range(alpha: Any, h: Any, level: float) -> FloatArray:
+            return built.inverse_range(alpha, h, level, max_range=read_range, unknown=unknown, band=band)
+        return inverse_range
 
-    (nav, notes), extract_s = _timed(lambda: _navigation(inverse_range, navigation), repeat)
+    (nav, notes), extract_s = _timed(lambda: _navigation(reading(unknown), navigation), repeat)
+    others = {other: _navigation(reading(other), navigation)[0].polygon for other in also_unknown if other != unknown}
     result = ModelResult(
         name=baseline.name,
         samples=int(baseline.samples(built, inputs)),
@@ -403,6 +409,7 @@ def _run_baseline(
         polygon=nav.polygon,
         extra=baseline.figures(built, inputs),
         warnings=notes,
+        readings=others,
     )
     logger.info(
         "%s: built in %.3f s, extract %.4f s (%s)",
@@ -427,6 +434,7 @@ def compare_grid(
     file_sizes: bool = True,
     grid_bounds: tuple[Any, Any] | None = None,
     unknown: str = "free",
+    also_unknown: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Compare the parametric model with a dense grid (and OctoMap) on the same features.
 
@@ -465,6 +473,11 @@ def compare_grid(
         How the grids' navigation polygons read unobserved space: ``"free"`` (its prior
         0.5, below the threshold) or ``"occupied"`` (a ray also ends at the first cell
         whose column has no observed cell in the :func:`observation_band`).
+    also_unknown
+        Further readings of unobserved space to extract the grids' polygons with (each
+        grid is built once): the report's ``readings`` then holds, per reading and grid,
+        the polygon's area, its agreement with the parametric one and, with ``truth``,
+        its IoU and violation.
 
     Returns
     -------
@@ -547,6 +560,7 @@ def compare_grid(
             repeat=repeat,
             file_sizes=file_sizes,
             test_points=(occupied_points, free_points),
+            also_unknown=tuple(check_unknown(other) for other in also_unknown),
         )
 
     # The points a function increasing in range can represent: in front of the first
@@ -615,6 +629,20 @@ def compare_grid(
                 "violation": float(evaluation.violation),
                 "coverage": float(evaluation.coverage),
             }
+    readings: dict[str, dict[str, Any]] = {}
+    for name, result in results.items():
+        for other, polygon in result.readings.items():
+            entry: dict[str, Any] = {"polygon_area": float(polygon.area),
+                                     "agreement": {"iou": polygon_iou(parametric.polygon, polygon)}}
+            if truth is not None:
+                from occtool.evaluate import evaluate_navigation
+
+                evaluation = evaluate_navigation(polygon, truth, robot_radius=robot.radius, max_range=max_range)
+                entry["truth"] = {"iou": float(evaluation.iou), "violation": float(evaluation.violation),
+                                  "coverage": float(evaluation.coverage)}
+            readings.setdefault(other, {})[name] = entry
+    if readings:
+        report["readings"] = readings
     report["polygons"] = {name: json.loads(shapely.to_geojson(result.polygon)) for name, result in results.items()}
     return report
 

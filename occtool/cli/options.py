@@ -251,7 +251,7 @@ def fit_options(function: F) -> F:
     options = _compose(
         sensor_options,
         robot_options,
-        click.option("-L", "--pieces", type=click.IntRange(min=1), default=32, show_default=True,
+        click.option("-L", "--pieces", type=click.IntRange(min=1), default=64, show_default=True,
                      help="Number of linear pieces."),
         click.option("--basis", type=click.Choice(["trig", "linear"]), default="trig", show_default=True,
                      help="Pieces a1 cos(alpha) + a2 sin(alpha) + b h + c r + d (seam-free) or the paper's "
@@ -270,7 +270,7 @@ def fit_options(function: F) -> F:
                      help="Least-squares refit sweeps after the construction [default: 0]."),
         click.option("--focus-range", type=click.FloatRange(min=0.0, min_open=True), default=None,
                      help="Farthest horizontal distance fitted, metres; scale it with the maps' "
-                          "--max-range (about 1.7x) [default: 2.5]."),
+                          "--max-range (about 2.5x) [default: 4]."),
         click.option("--guard/--no-guard", default=None,
                      help="Keep the position's returns in the model, so that every navigation map keeps the "
                           "robot's radius from each of them [default: guard]."),

@@ -106,13 +106,26 @@ def save_model(model: Any, path: str | os.PathLike[str], *, run: dict | None = N
 
 
 def _dumps(data: dict[str, Any]) -> str:
-    """JSON with one key a line, but the guard's hundreds of distances on one line."""
-    guard = data.get("guard")
-    if guard is None:
-        return json.dumps(data, indent=1, allow_nan=False)
-    marker = "@@guard-distances@@"
-    text = json.dumps({**data, "guard": {**guard, "distance_mm": marker}}, indent=1, allow_nan=False)
-    return text.replace(json.dumps(marker), json.dumps(guard["distance_mm"], separators=(",", ":")), 1)
+    """JSON with one key a line, but each piece, the tree and the guard's hundreds of
+    distances on a line of their own: a 64-piece model stays well under 16 KB."""
+    compact: dict[str, str] = {}
+
+    def placeholder(value: Any) -> str:
+        marker = f"@@compact-{len(compact)}@@"
+        compact[marker] = json.dumps(value, separators=(", ", ": "), allow_nan=False)
+        return marker
+
+    shaped = dict(data)
+    if isinstance(shaped.get("tree"), dict):
+        shaped["tree"] = placeholder(shaped["tree"])
+    if isinstance(shaped.get("pieces"), list):
+        shaped["pieces"] = [placeholder(piece) for piece in shaped["pieces"]]
+    if isinstance(shaped.get("guard"), dict):
+        shaped["guard"] = {**shaped["guard"], "distance_mm": placeholder(shaped["guard"]["distance_mm"])}
+    text = json.dumps(shaped, indent=1, allow_nan=False)
+    for marker, value in compact.items():
+        text = text.replace(json.dumps(marker), value, 1)
+    return text
 
 
 def _read_json(path: str | os.PathLike[str]) -> Any:
