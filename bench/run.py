@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
@@ -53,6 +54,7 @@ from occtool.fit import DEFAULT_FOCUS_RANGE, OccupancyRegressor  # noqa: E402
 from occtool.grid import build_grid  # noqa: E402
 from occtool.navigation import NavigationWarning, navigation_map  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
+from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
 from occtool.simulate import SCENES, DEFAULT_RANGE_NOISE, DEFAULT_SENSOR_RANGE, Scene, build_scene, simulate_scene  # noqa: E402
 
 warnings.simplefilter("ignore", NavigationWarning)
@@ -553,6 +555,10 @@ def render(results: dict[str, Any], plot_name: str | None, json_name: str) -> st
     for name, measured, holds in results["targets"]:
         lines.append(f"| {name} | {measured} | {'yes' if holds else 'no' if holds is not None else '-'} |")
     lines.append("")
+    lines += render_quality(results.get("map_quality_summary", []), results.get("map_quality", []),
+                            results.get("laser_logs", []))
+    lines += [f"- {note}" for note in results["notes"].get("map_quality", []) + results["notes"].get("laser_logs", [])]
+    lines.append("")
 
     def model_table(rows: list[dict[str, Any]], key: str, label: str) -> list[str]:
         names = ["parametric", "grid", "octomap"]
@@ -707,7 +713,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--output", default="bench/results.md", help="Markdown results file.")
     parser.add_argument("--quick", action="store_true", help="Small sizes only (a smoke run, minutes less).")
-    parser.add_argument("--budget", type=float, default=720.0,
+    parser.add_argument("--budget", type=float, default=1800.0,
                         help="Seconds the run may take; larger items are skipped to stay within it.")
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"), help="Folder of the real data sets.")
     args = parser.parse_args(argv)
@@ -736,9 +742,18 @@ def main(argv: list[str] | None = None) -> int:
         results["real_data"], notes["real_data"] = real_data_section(data, budget)
     else:
         results["real_data"], notes["real_data"] = [], [f"{data} not found: real scans skipped"]
+    if data.is_dir():
+        results["laser_logs"], notes["laser_logs"] = laser_quality(data, budget)
+    quality_counts = (1_000, 3_000, 10_000) if args.quick else (1_000, 3_000, 10_000, 30_000, 100_000)
+    results["map_quality"], notes["map_quality"] = scene_quality(budget, quality_counts, seeds)
+    results["map_quality_summary"] = summarise_scenes(results["map_quality"])
     results["feature_sweep"], notes["feature_sweep"], reports = feature_sweep(counts, budget)
     results["notes"] = notes
     results["targets"] = targets(results["feature_sweep"], results["scale_sweep"], results["scenes"], results["speed"])
+    office = reports.get(10_000)
+    model_bytes = office["models"]["parametric"]["file_bytes"] if office else None
+    results["targets"] += quality_targets(results["map_quality_summary"], results.get("laser_logs", []),
+                                          results["speed"], model_bytes)
     elapsed = budget.seconds - budget.left
     command = "python bench/run.py " + " ".join(argv if argv is not None else sys.argv[1:])
     results["meta"] = {

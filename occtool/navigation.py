@@ -65,7 +65,7 @@ SHRINK_QUAD_SEGMENTS = 16
 #: With ``free_bounds``: the body band is covered by boxes at most this tall, metres (the
 #: bound is exact piece by piece; a box spanning the height where two pieces of a group
 #: trade places gives a little away, less the thinner the box).
-BOUND_HEIGHT_STEP = 0.05
+BOUND_HEIGHT_STEP = 0.1
 #: Most heights a map may be cut at (a guard against a tiny slice spacing or a huge body).
 MAX_SLICES = 10_000
 #: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).

@@ -536,20 +536,26 @@ class InverseTree(_PieceTree):
             angle_min = np.where(inside, -radius, ends)
         u = angle_min + (W[:, k + 1] * m + W[:, k + 2])[:, None]
         b = W[:, k][:, None, None]
-        h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
-        u = u[:, None, :]
-        r0, r1 = u + b * h0, u + b * h1
-        q = np.minimum(r0 * r0 - h0 * h0, r1 * r1 - h1 * h1)
+        # r and r^2 - h^2 at every height edge once: a box's least value lies at one of its
+        # two edges (concave in h when |b| <= 1), shared with its neighbour.
+        edges = h_edges[None, :, None]
+        r = u[:, None, :] + b * edges
+        q = r * r - edges * edges
+        q = np.where(r >= 0, q, -1.0)  # level reached before the sensor: nothing free
+        box = np.minimum(q[:, :-1], q[:, 1:])
         # (b^2 - 1) h^2 + 2 u b h + u^2 is convex only when |b| > 1: then its vertex counts too.
-        curved = (b * b > 1.0)
-        if curved.any():
-            with np.errstate(divide="ignore", invalid="ignore"):
-                vertex = np.clip(-u * b / (b * b - 1.0), h0, h1)
-            rv = u + b * vertex
-            q = np.where(curved, np.minimum(q, rv * rv - vertex * vertex), q)
-        bound = np.where((r0 >= 0) & (r1 >= 0), np.sqrt(np.maximum(q, 0.0)), 0.0)
-        L, H, N = bound.shape
-        return _evaluate(self.root, bound.reshape(L, H * N)).reshape(H, N)
+        curved = np.flatnonzero(np.abs(W[:, k]) > 1.0)
+        if curved.size:
+            bc = b[curved]
+            h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
+            uc = u[curved][:, None, :]
+            vertex = np.clip(-uc * bc / (bc * bc - 1.0), h0, h1)
+            rv = uc + bc * vertex
+            box[curved] = np.minimum(box[curved], np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
+        L, H, N = box.shape
+        # sqrt(max(., 0)) is increasing, so it commutes with the tree: taken once, at the end.
+        least = _evaluate(self.root, box.reshape(L, H * N)).reshape(H, N)
+        return np.sqrt(np.maximum(least, 0.0))
 
     def _angle_part(self, alpha: FloatArray, constant: FloatArray) -> FloatArray:
         """``(L, *alpha.shape)``: each piece's constant plus its angle terms."""
