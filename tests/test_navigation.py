@@ -153,6 +153,21 @@ def true_obstacles(inverse, threshold: float, robot: Robot, max_range: float) ->
     return np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
 
 
+def assert_body_keeps_clear(nav, inverse) -> None:
+    """Occupied points sampled every 5 mm of the body band and 0.5 degrees all keep a robot radius from the polygon."""
+    if nav.polygon.is_empty:
+        return
+    low, high = ROBOT.body_band
+    levels = np.linspace(low, high, 191)
+    alpha = pan_angles(720)
+    r = inverse(alpha[None, :], levels[:, None], 0.6)
+    rho = np.sqrt(np.maximum(np.square(np.minimum(r, 1e6)) - np.square(levels)[:, None], 0.0))
+    rows, cols = np.nonzero(rho < 1.5 + 2 * ROBOT.radius)
+    obstacles = np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
+    if len(obstacles):
+        assert shapely.distance(nav.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+
+
 def angles_of(points: np.ndarray) -> np.ndarray:
     return np.arctan2(points[:, 1], points[:, 0])
 
@@ -361,17 +376,7 @@ def test_random_trees_with_exact_bounds_never_let_the_body_touch_an_obstacle(pie
         warnings.simplefilter("ignore", NavigationWarning)
         nav = navigation_map(model.inverse_range, robot=ROBOT, heights=heights, n_angles=180,
                              free_bounds=model.inverse.horizontal_lower_bound)
-    if nav.polygon.is_empty:
-        return
-    low, high = ROBOT.body_band
-    levels = np.linspace(low, high, 191)
-    alpha = pan_angles(720)
-    r = model.inverse_range(alpha[None, :], levels[:, None], 0.6)
-    rho = np.sqrt(np.maximum(np.square(np.minimum(r, 1e6)) - np.square(levels)[:, None], 0.0))
-    rows, cols = np.nonzero(rho < 1.5 + 2 * ROBOT.radius)
-    obstacles = np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
-    if len(obstacles):
-        assert shapely.distance(nav.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+    assert_body_keeps_clear(nav, model.inverse_range)
 
 
 @settings(max_examples=40)
@@ -655,24 +660,13 @@ def test_an_inverse_returning_nan_or_the_wrong_shape_is_refused():
     heights=st.lists(st.floats(-0.9, -0.05), min_size=1, max_size=3),
 )
 def test_random_min_max_models_never_let_the_body_touch_an_obstacle(pieces, heights):
-    # Occupied points sampled every 5 mm of the body band and 0.5 degrees must all keep
-    # a robot radius from the polygon (without the bounds most such models fail this).
+    # Without the bounds most such models fail this.
     model = PiecewiseLinearModel(pieces, ("max", [("min", [0, 1]), ("min", [2, 3])]))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NavigationWarning)
         nav = navigation_map(model.inverse_range, robot=ROBOT, heights=heights, slope_bounds=model.slope_bounds,
                              n_angles=180)
-    if nav.polygon.is_empty:
-        return
-    low, high = ROBOT.body_band
-    levels = np.linspace(low, high, 191)
-    alpha = pan_angles(720)
-    r = model.inverse_range(alpha[None, :], levels[:, None], 0.6)
-    rho = np.sqrt(np.maximum(np.square(np.minimum(r, 1e6)) - np.square(levels)[:, None], 0.0))
-    rows, cols = np.nonzero(rho < 1.5 + 2 * ROBOT.radius)
-    obstacles = np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
-    if len(obstacles):
-        assert shapely.distance(nav.polygon, shapely.points(obstacles)).min() >= ROBOT.radius * (1 - 1e-6)
+    assert_body_keeps_clear(nav, model.inverse_range)
 
 
 def test_a_doorway_keeps_its_exploration_points_under_the_guarantee():
