@@ -179,7 +179,7 @@ SUPPORT_RANGE_SHARE = 0.15
 
 def support_count(n_features: int) -> int:
     """Returns that confirm one another among ``n_features``."""
-    return max(SUPPORT_COUNT, int(round(SUPPORT_COUNT * math.sqrt(max(n_features, 1) / SUPPORT_REFERENCE))))
+    return max(SUPPORT_COUNT, int(math.floor(SUPPORT_COUNT * math.sqrt(max(n_features, 1) / SUPPORT_REFERENCE))))
 
 
 def supported_returns(points: ArrayLike, support: ArrayLike, count: ArrayLike, spacing: float) -> NDArray[np.bool_]:
