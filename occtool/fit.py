@@ -47,8 +47,9 @@ from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
 from occtool import guard as guard_module
 from occtool.guard import (
+    GUARD_BINS,
     ReturnGuard,
-    build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count, supported_returns,
+    Support, build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count,
 )
 from occtool.linear_program import solve_lp
 from occtool.robot import Robot
@@ -421,7 +422,27 @@ class OccupancyRegressor:
         # Near the robot a surface spans a wide tilt range and many rays end on it, while
         # two mismatches there box the robot in: the count grows as 1 / distance, as the fit's.
         needed = support_count(len(features)) * np.maximum(1.0, NEAR_SUPPORT_DISTANCE / np.maximum(distance, 1e-9))
-        confirmed = supported_returns(candidates, support, needed, spacing)
+        # Only a guard bin's nearest confirmed return counts: test each bin's nearest
+        # returns first, and farther ones only in bins where none was confirmed yet (a
+        # million features: 0.9 s of the fit for the support test of every return).
+        bins = np.mod(np.floor((np.arctan2(candidates[:, 1], candidates[:, 0]) + math.pi)
+                               * (GUARD_BINS / (2.0 * math.pi))).astype(np.int64), GUARD_BINS)
+        order = np.lexsort((distance, bins))
+        starts = np.searchsorted(bins[order], np.arange(GUARD_BINS))
+        rank = np.empty(order.size, dtype=np.int64)
+        rank[order] = np.arange(order.size) - starts[bins[order]]
+        confirmed = np.zeros(index.size, dtype=bool)
+        settled = np.zeros(GUARD_BINS, dtype=bool)
+        confirming = Support(support, spacing)
+        low_rank, chunk = 0, GUARD_TEST_CHUNK
+        while low_rank < max(int(rank.max(initial=-1)) + 1, 0):
+            tested = (rank >= low_rank) & (rank < low_rank + chunk) & ~settled[bins]
+            if not tested.any():
+                break
+            chosen = np.flatnonzero(tested)
+            confirmed[chosen] = confirming.confirmed(candidates[chosen], needed[chosen])
+            settled[bins[chosen[confirmed[chosen]]]] = True
+            low_rank, chunk = low_rank + chunk, 2 * chunk
         returns[index[~confirmed]] = False
         # A surface seen from above is first hit up to a ray spacing or two behind its front face.
         return returns, max(0.0, 1.0 - guard_module.SPACING_FACTOR * spacing)
@@ -1084,6 +1105,9 @@ NEAR_SUPPORT_DISTANCE = 0.6
 #: three times as many as end near it, to drop it.
 GUARD_SIGHT_TOLERANCE = (0.01, 0.01)
 GUARD_SIGHT_RATIO = 3
+#: Returns of each guard bin tested for support at first, nearest first (then twice as
+#: many more, and so on, in the bins where none was confirmed).
+GUARD_TEST_CHUNK = 16
 #: Returns this far (m) above or below the body band still confirm a guarded return (a
 #: sign hanging into the band is confirmed by its part above it).
 SUPPORT_HEIGHT_REACH = 0.5
