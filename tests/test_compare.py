@@ -276,3 +276,42 @@ def test_an_empty_polygon_says_why(round_room_report: dict) -> None:
     for name, figures in report["models"].items():
         in_collision = any("in collision where it stands" in note for note in figures["warnings"])
         assert in_collision == (figures["polygon_area"] == 0.0), name
+
+
+def test_also_unknown_gives_the_other_reading_from_the_same_build() -> None:
+    # One build, both readings: the second reading's polygon is the one a separate run gives.
+    robot = Robot(sensor_height=0.3, body_height=0.4)
+    features = _planar_scan()
+    settings = dict(regressor=OccupancyRegressor(pieces=8, robot=robot), navigation={"robot": robot, "n_angles": 180},
+                    resolution=0.05, file_sizes=False)
+    both = compare_grid(features, **settings, unknown="occupied", also_unknown=("free",))
+    alone = compare_grid(features, **settings, unknown="free")
+    free_polygon = shapely.geometry.shape(alone["polygons"]["grid"])
+    reading = both["readings"]["free"]["grid"]
+    assert reading["polygon_area"] == pytest.approx(free_polygon.area)
+    assert reading["agreement"]["iou"] == pytest.approx(alone["agreement"]["grid"]["iou"])
+    assert "readings" not in alone
+    with pytest.raises(InputError):
+        compare_grid(features, **settings, also_unknown=("maybe",))
+
+
+def test_auc_in_front_of_the_first_obstacle_leaves_out_what_lies_behind_it() -> None:
+    from occtool.compare import in_front_of_first_obstacle
+
+    # A wall 1.2 m away all round: a point at 1.0 m is in front of it, at 1.5 m behind it,
+    # and a point above the body band is out of it either way.
+    features = _round_room()
+    robot = Robot()
+    free = np.array([[1.0, 0.0, -0.5], [1.5, 0.0, -0.5], [0.0, 1.0, 0.5]])
+    assert in_front_of_first_obstacle(free, features, robot, occupied=False).tolist() == [True, False, False]
+    occupied = np.array([[1.2, 0.0, -0.5], [0.0, -1.25, -0.2], [2.5, 0.0, -0.5]])
+    assert in_front_of_first_obstacle(occupied, features, robot, occupied=True).tolist() == [True, True, False]
+
+
+def test_the_report_scores_the_front_points_too(round_room_report: dict) -> None:
+    report = round_room_report
+    assert set(report["auc_front"]) == set(report["auc"])
+    counts = report["auc_front_points"]
+    assert 0 < counts["occupied"] <= report["auc_points"]["occupied"]
+    assert 0 < counts["free"] <= report["auc_points"]["free"]
+    assert all(0.5 < value <= 1.0 for value in report["auc_front"].values())

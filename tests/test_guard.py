@@ -148,3 +148,46 @@ def test_the_guard_is_never_farther_than_its_returns_and_round_trips(tmp_path):
 def test_a_malformed_guard_is_a_model_format_error(broken, message):
     with pytest.raises(ModelFormatError, match=message):
         ReturnGuard.from_dict(broken)
+
+
+def test_support_confirms_a_surface_and_not_a_lone_return():
+    from occtool.guard import Support
+
+    # A patch of wall 1 m ahead seen by rays 1 degree apart, and one return alone at 0.6 m.
+    angles = np.radians(np.arange(-5, 6))
+    heights = np.linspace(-0.3, 0.3, 7)
+    wall = np.array([[1.0, np.tan(a), h] for a in angles for h in heights])
+    lone = np.array([[0.6 * np.cos(0.5), 0.6 * np.sin(0.5), -0.2]])
+    support = Support(np.vstack([wall, lone]), math.radians(1.0))
+    assert support.confirmed(wall[[0, 40]], 3).all()
+    assert not support.confirmed(lone, 2).any()
+    assert support.confirmed(lone, 1).all()  # a count of one needs nothing but itself
+
+
+def test_a_model_file_and_its_inverse_extract_the_same_guarded_map(tmp_path):
+    from occtool.io.model import read_navigable, save_inverse
+
+    features = laser_scan((-3.0, 3.0, -3.0, 3.0), [(0.8, 0.0, 0.015)], n_beams=180)
+    model = OccupancyRegressor(robot=LASER_ROBOT).fit(features)
+    save_model(model, tmp_path / "model.json")
+    save_inverse(model.invert(), tmp_path / "inverse.json", model=model)
+    maps = []
+    for name in ("model.json", "inverse.json"):
+        navigable = read_navigable(tmp_path / name)
+        assert navigable.guard is not None and navigable.robot == LASER_ROBOT
+        maps.append(navigation_map_of(navigable))
+    assert maps[0].polygon.equals(maps[1].polygon)
+    assert maps[0].polygon.equals(model.navigation_map().polygon)
+    assert returns_near_polygon(features, maps[0].polygon, LASER_ROBOT) == 0
+    # Without the guard (the paper's plain map from the same pieces) the leg is run into.
+    plain = navigation_map_of(read_navigable(tmp_path / "model.json"), guard=False)
+    assert returns_near_polygon(features, plain.polygon, LASER_ROBOT) > 0
+
+
+def navigation_map_of(navigable, guard: bool = True):
+    from occtool.navigation import navigation_map
+
+    options = navigable.navigation_options()
+    if not guard:
+        options["guard"] = None
+    return navigation_map(navigable.inverse_range, robot=navigable.robot, **options)
