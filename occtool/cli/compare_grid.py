@@ -189,6 +189,7 @@ def report_table(report: dict[str, Any]) -> Any:
     row("time ratio", ["1" if n == "parametric" else f"{report['ratios'][n]['time']:.3g}x" for n in names])
     row("IoU with parametric", ["-" if n == "parametric" else f"{report['agreement'][n]['iou']:.3f}" for n in names])
     row("ROC AUC (held out)", [_number(report["auc"].get(n)) for n in names])
+    row("AUC in front of 1st obstacle", [_number(report["auc_front"].get(n)) for n in names])
     if "truth" in report:
         row("IoU with truth", [_number(report["truth"][n]["iou"]) for n in names])
         row("violation", [f"{100 * report['truth'][n]['violation']:.2f}%" for n in names])
