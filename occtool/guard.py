@@ -10,17 +10,19 @@ least it needs to rule that out: per pan-angle bin (:data:`GUARD_BINS` over
 * with evidence at or above the model's level (the threshold it is fitted for),
 * inside the robot's height band (above the ground clearance, below the body's top),
 * outside the robot's current footprint (a return inside it is the robot itself or a
-  mismatch: the robot stands there), and
-* not contradicted by other rays passing through it (:func:`occtool.fit.contradicted_features`,
-  the stereo mismatch test); a *planar* scan's returns are never contradicted, since
-  its beams pass beside each other, never through the same spot twice.
+  mismatch: the robot stands there), within the fit's reach (``focus_range`` plus the
+  radius), and
+* for 3D data, not clearly passed through by other rays (:func:`occtool.fit.contradicted_features`
+  with a tight tolerance) and confirmed by returns on neighbouring rays at nearly its
+  range (:class:`Support`), taken two ray spacings nearer (a surface seen from above is
+  first hit behind its front face); a *planar* scan's returns are all guarded as measured,
+  since its beams pass beside each other, never through the same spot twice.
 
 The navigation map (:func:`occtool.navigation.navigation_map`) caps every ray's free
 distance by the guard's distances around it, before the shrink by the robot's radius:
 the star polygon through the rays then holds no guarded return strictly inside, so the
-shrunk polygon keeps every one at least the radius away. The fit builds its range
-profile with the guard too, so the tree itself stops in front of the returns wherever its
-pieces can follow them.
+shrunk polygon keeps every one at least the radius away. (The tree itself is not bent to
+single returns: that cost IoU for no safety the guard does not give.)
 
 A guard is 360 distances, under 2 KB in a model file, whatever the number of features.
 """
