@@ -511,3 +511,13 @@ def test_model_set_outputs_respect_no_overwrite(inputs, tmp_path):
     assert sorted(p.name for p in maps.iterdir()) == ["nav_0001.geojson"]
     assert run("extract", models, "-o", f"{maps}/", "--angles", "36").exit_code == 0
     assert sorted(p.name for p in maps.iterdir()) == ["nav_0000.geojson", "nav_0001.geojson"]
+
+
+@pytest.mark.parametrize("value", ["1.5", "5", "1", "0", "-0.2", "nan"])
+@pytest.mark.parametrize("command", ["extract", "compare-grid"])
+def test_an_occupancy_threshold_outside_0_1_is_refused(value, command, inputs, out):
+    # At 1.5 or 5 nothing reads occupied: 6 % and 45 % of a map were in collision.
+    source = inputs["model"] if command == "extract" else inputs["csv"]
+    args = [command, source, "--threshold", value] + (["-o", out / "nav.geojson"] if command == "extract" else [])
+    assert_fails(run(*args), "--threshold")
+    assert_nothing_written(out)

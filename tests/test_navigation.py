@@ -638,6 +638,10 @@ def test_the_straight_line_cut_keeps_holes_and_cuts_the_shadows():
         ({"point_spacing": -1.0}, "point spacing"),
         ({"slope_bounds": {"a_max": 1.0, "b_max": 1.0}}, "c_max"),
         ({"slope_bounds": {"a_max": 1.0, "b_max": -1.0, "c_max": 1.0}}, "b_max"),
+        ({"threshold": 1.5}, "threshold must lie strictly between 0 and 1"),
+        ({"threshold": 1.0}, "threshold"),
+        ({"threshold": 0.0}, "threshold"),
+        ({"threshold": float("nan")}, "threshold"),
     ],
 )
 def test_bad_parameters_are_named(kwargs, message):

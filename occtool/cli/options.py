@@ -308,6 +308,13 @@ def _positive(ctx: click.Context | None, param: click.Parameter | None, value: A
     return value
 
 
+def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
+    # NaN passes every range comparison: test for the interval itself.
+    if value is not None and not 0.0 < float(value) < 1.0:
+        raise click.BadParameter(f"an occupancy threshold must lie strictly between 0 and 1, got {value}")
+    return value
+
+
 robot_options = _compose(
     click.option("--robot-radius", type=float, default=0.25, show_default=True,
                  help="Robot footprint radius, metres: the navigation polygon is shrunk by it."),
@@ -321,8 +328,8 @@ robot_options = _compose(
 
 extract_options = _compose(
     robot_options,
-    click.option("--threshold", type=float, default=0.6, show_default=True,
-                 help="Occupancy at or above which space is an obstacle."),
+    click.option("--threshold", type=float, default=0.6, show_default=True, callback=_occupancy,
+                 help="Occupancy at or above which space is an obstacle, in (0, 1)."),
     click.option("--heights", callback=float_list, default=None, metavar="H,H,...",
                  help="Sensor-frame heights to cut the model at, metres, comma-separated (floor at "
                       "-SENSOR_HEIGHT; default: spanning the robot body)."),
