@@ -263,8 +263,11 @@ class OccupancyRegressor:
             raise InputError(f"loss must be 'huber' or 'squared', got {self.loss!r}")
         if self.groups is not None and (int(self.groups) != self.groups or not 1 <= self.groups <= self.pieces):
             raise InputError(f"groups must be between 1 and the number of pieces ({self.pieces}), got {self.groups}")
-        if not (isinstance(self.focus_range, (int, float)) and self.focus_range > 0):
-            raise InputError(f"focus range must be a positive number of metres, got {self.focus_range!r}")
+        if not (isinstance(self.focus_range, (int, float)) and math.isfinite(self.focus_range)
+                and self.focus_range > 0):
+            raise InputError(f"focus range must be a finite positive number of metres, got {self.focus_range!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise InputError(f"seed must be a whole number >= 0, got {self.seed!r}")
         if int(self.max_sweeps) != self.max_sweeps or self.max_sweeps < 0:
             raise InputError(f"max sweeps must be a whole number >= 0, got {self.max_sweeps}")
 

@@ -521,3 +521,29 @@ def test_an_occupancy_threshold_outside_0_1_is_refused(value, command, inputs, o
     args = [command, source, "--threshold", value] + (["-o", out / "nav.geojson"] if command == "extract" else [])
     assert_fails(run(*args), "--threshold")
     assert_nothing_written(out)
+
+
+@pytest.mark.parametrize(("args", "fragment"), [
+    (["--seed", "-1"], "--seed"),
+    (["--focus-range", "inf"], "--focus-range"),
+])
+def test_fit_options_out_of_their_domain_are_refused(args, fragment, inputs, out):
+    assert_fails(run("fit", inputs["csv"], "-o", out / "model.json", *args), fragment)
+    assert_nothing_written(out)
+
+
+def test_a_precision_beyond_a_double_is_refused(inputs, out):
+    assert_fails(run("extract", inputs["model"], "-o", out / "nav.geojson", "--precision", "400"), "--precision")
+    assert_nothing_written(out)
+
+
+@pytest.mark.parametrize(("content", "fragment"), [
+    (b"pieces = 8.7\n", "whole number"),
+    (b"seed = true\n", "whole number"),
+    (b"\xff\xfe not text", "UTF-8"),
+])
+def test_a_config_file_is_read_as_written_or_refused(content, fragment, inputs, out, tmp_path):
+    config = tmp_path / "fit.toml"
+    config.write_bytes(content)
+    assert_fails(run("fit", inputs["csv"], "-o", out / "model.json", "--config", config), fragment)
+    assert_nothing_written(out)

@@ -68,6 +68,17 @@ def test_init_only_stores_parameters():
         model.fit(ring_room(200))
 
 
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"seed": -1}, "seed"),
+    ({"seed": 1.5}, "seed"),
+    ({"focus_range": float("inf")}, "focus range"),
+    ({"focus_range": float("nan")}, "focus range"),
+])
+def test_parameters_out_of_their_domain_are_input_errors(kwargs, message):
+    with pytest.raises(InputError, match=message):
+        OccupancyRegressor(**kwargs).fit(ring_room(200))
+
+
 @pytest.mark.parametrize("basis", ["trig", "linear"])
 def test_constraints_hold_exactly(basis):
     model = OccupancyRegressor(pieces=12, basis=basis, c_min=1.5, a_max=5.0, b_max=2.0).fit(ring_room(1500))
@@ -373,7 +384,7 @@ def dense_segment_near_runs(profile, far, n_segments, max_length):
     return segments[::-1]
 
 
-def segment_cost(profile: FloatArray, first: int, end: int) -> float:
+def segment_cost(profile: np.ndarray, first: int, end: int) -> float:
     """Squared error of the best line through a (circular) run of the profile."""
     y = profile[np.mod(np.arange(first, end), profile.shape[0])]
     if y.size < 3:

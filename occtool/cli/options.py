@@ -62,6 +62,8 @@ def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) 
         raise click.BadParameter(f"cannot read {value}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise click.BadParameter(f"{value} is not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise click.BadParameter(f"{value} is not a TOML file: not UTF-8 text") from None
     flat: dict[str, Any] = {}
     for key, item in data.items():
         if isinstance(item, dict):
@@ -73,6 +75,15 @@ def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) 
     unknown = sorted(set(flat) - known)
     if unknown:
         raise click.BadParameter(f"{value}: unknown settings for `{ctx.info_name}`: {', '.join(unknown)}")
+    # Click turns 8.7 into 8 for an integer option: a whole-number setting must be one.
+    for option in ctx.command.params:
+        setting = flat.get(option.name)
+        integer = isinstance(option.type, click.types.IntParamType) or (
+            isinstance(option.type, click.IntRange))
+        if integer and isinstance(setting, float) and not setting.is_integer():
+            raise click.BadParameter(f"{value}: {option.name} must be a whole number, got {setting}")
+        if isinstance(setting, bool) and integer:
+            raise click.BadParameter(f"{value}: {option.name} must be a whole number, got {setting}")
     ctx.default_map = {**(ctx.default_map or {}), **flat}
     return value
 
@@ -92,7 +103,8 @@ output_option = click.option(
     "-o", "--output", type=click.Path(dir_okay=True, allow_dash=True), default=None,
     help="Output file ('-' or absent: standard output, where the command allows it).",
 )
-seed_option = click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+seed_option = click.option("--seed", type=click.IntRange(min=0, max=2**63 - 1), default=0, show_default=True,
+                           help="Random seed, a whole number >= 0.")
 overwrite_option = click.option(
     "--overwrite/--no-overwrite", default=True, show_default=True,
     help="Replace existing output files, or refuse (and write nothing) if one exists.",
@@ -268,7 +280,7 @@ def fit_options(function: F) -> F:
                      help="Angular segments of the tree [default: pieces // 4]."),
         click.option("--max-sweeps", type=click.IntRange(min=0), default=None,
                      help="Least-squares refit sweeps after the construction [default: 0]."),
-        click.option("--focus-range", type=click.FloatRange(min=0.0, min_open=True), default=None,
+        click.option("--focus-range", type=click.FloatRange(min=0.0, min_open=True), default=None, callback=_positive,
                      help="Farthest horizontal distance fitted, metres; scale it with the maps' "
                           "--max-range (about 2.5x) [default: 4]."),
         click.option("--guard/--no-guard", default=None,
@@ -350,7 +362,7 @@ geojson_options = _compose(
                  help="Also write the free polygon at each height (kind 'slice')."),
     click.option("--sequence/--collection", default=False, show_default=True,
                  help="Write newline-delimited GeoJSON features instead of one FeatureCollection."),
-    click.option("--precision", type=click.IntRange(min=0), default=None,
+    click.option("--precision", type=click.IntRange(min=0, max=17), default=None,
                  help="Decimal places of the coordinates (default: full precision)."),
     click.option("--indent", type=click.IntRange(min=0), default=None,
                  help="Indentation of the JSON collection (default: compact)."),
