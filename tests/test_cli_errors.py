@@ -308,6 +308,10 @@ def _model_variants(model: dict) -> dict[str, tuple[str, list[str]]]:
         "bad tree": (changed(tree={"op": "max", "children": [0, 99]}), ["99"]),
         "binary": ("\x00\xff" * 10, []),
         "no loss": (changed(training=no_loss), []),  # optional: must load, and re-save
+        "guard distance text": (changed(guard=dict(model["guard"], distance_mm=["x"] * model["guard"]["bins"])),
+                                ["guard", "millimetres"]),
+        "guard too short": (changed(guard=dict(model["guard"], distance_mm=[1000])), ["distance_mm"]),
+        "guard level 2": (changed(guard=dict(model["guard"], level=2)), ["level"]),
     }
 
 
@@ -325,6 +329,16 @@ def test_broken_model(case, command, inputs, out, tmp_path):
         assert result.exit_code == 0, result.output
         return
     assert_fails(result, "model.json", *fragments, exit_code=1)
+    assert_nothing_written(out)
+
+
+@pytest.mark.parametrize("command", sorted(MODEL_COMMANDS))
+@pytest.mark.parametrize("case", ["guard distance text", "guard too short", "guard level 2"])
+def test_broken_return_guard(case, command, inputs, out, tmp_path):
+    content, fragments = _model_variants(json.loads(inputs["model"].read_text()))[case]
+    path = tmp_path / "model.json"
+    path.write_text(content)
+    assert_fails(run(*MODEL_COMMANDS[command](path, out, inputs)), "model.json", *fragments, exit_code=1)
     assert_nothing_written(out)
 
 
