@@ -28,6 +28,7 @@ import numpy as np
 
 from occtool.compare import compare_grid
 from occtool.errors import OcctoolError
+from occtool.evaluate import returns_within_body
 from occtool.fit import OccupancyRegressor
 from occtool.navigation import NavigationWarning
 from occtool.robot import Robot
@@ -127,14 +128,11 @@ def summarise_scenes(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def log_quality(path: str, every: int = AUC_EVERY) -> dict[str, Any]:
     """One CARMEN log, every position: same-scan safety, area, obstacle points; AUC every ``every``-th."""
-    import shapely
-
     from occtool.io import read_log
 
     robot = LASER_ROBOT
     started = time.perf_counter()
     log = read_log(path, no_return_range=LASER_NO_RETURN_RANGE)
-    low, high = robot.body_band
     unsafe_positions = unsafe_returns = disc_points = all_points = empty = 0
     areas, aucs = [], []
     with warnings.catch_warnings():
@@ -144,12 +142,9 @@ def log_quality(path: str, every: int = AUC_EVERY) -> dict[str, Any]:
             nav = OccupancyRegressor(robot=robot).fit(features).navigation_map()
             areas.append(nav.polygon.area)
             empty += nav.polygon.is_empty
-            x, y, z = features.points.T
-            returns = (features.evidence >= nav.threshold) & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
-            if returns.any() and not nav.polygon.is_empty:
-                near = shapely.distance(nav.polygon, shapely.points(features.points[returns, :2])) < robot.radius * (1 - 1e-9)
-                unsafe_returns += int(near.sum())
-                unsafe_positions += bool(near.any())
+            touched = returns_within_body(features, nav.polygon, robot, nav.threshold)
+            unsafe_returns += int(touched.sum())
+            unsafe_positions += bool(touched.any())
             if len(nav.obstacle_points):
                 disc_points += int((np.hypot(*nav.obstacle_points.T) < robot.radius).sum())
                 all_points += len(nav.obstacle_points)

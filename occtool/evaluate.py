@@ -25,7 +25,9 @@ from numpy.typing import ArrayLike, NDArray
 from shapely.geometry.base import BaseGeometry
 
 from occtool.errors import InputError
-from occtool.features import Pose
+from occtool.features import Features, Pose
+from occtool.guard import guard_candidates
+from occtool.robot import Robot
 from occtool.simulate import Obstacle, Scene
 
 FloatArray = NDArray[np.float64]
@@ -368,6 +370,24 @@ def robot_frame_polygon(polygon: BaseGeometry, pose: Pose) -> BaseGeometry:
     return shapely.transform(polygon, lambda xy: robot_frame_points(xy, pose))
 
 
+def returns_within_body(features: Features, polygon: BaseGeometry, robot: Robot, level: float = 0.6) -> NDArray[np.bool_]:
+    """Which returns of a position's own data the robot's body would touch somewhere in its polygon.
+
+    A return (evidence at or above ``level``, inside the body's height band, beyond the
+    robot's current footprint: :func:`occtool.guard.guard_candidates`) lying closer than
+    the robot's radius to the navigation polygon (robot frame, metres). The same-scan
+    safety check of real logs, where there is no other truth; ``False`` everywhere for an
+    empty polygon.
+    """
+    returns = guard_candidates(features, features.evidence, robot, level)
+    touched = np.zeros(len(features), dtype=bool)
+    if polygon.is_empty or not returns.any():
+        return touched
+    distance = shapely.distance(polygon, shapely.points(features.points[returns, :2]))
+    touched[np.flatnonzero(returns)] = distance < robot.radius * (1 - 1e-9)
+    return touched
+
+
 __all__ = [
     "Evaluation",
     "as_polygon",
@@ -375,6 +395,7 @@ __all__ = [
     "configuration_obstacles",
     "evaluate_navigation",
     "reachable_region",
+    "returns_within_body",
     "robot_frame_points",
     "robot_frame_polygon",
     "true_reach",

@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from occtool.errors import ModelFormatError
+from occtool.evaluate import returns_within_body
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
 from occtool.guard import GUARD_BINS, ReturnGuard, build_guard, is_planar_scan
@@ -47,13 +48,7 @@ def laser_scan(room: tuple[float, float, float, float], poles: list[tuple[float,
 
 def returns_near_polygon(features: Features, polygon, robot: Robot, level: float = 0.6) -> int:
     """Returns (evidence >= level, in the body band, beyond the footprint) closer than the radius to the polygon."""
-    x, y, z = features.points.T
-    low, high = robot.body_band
-    returns = (features.evidence >= level) & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
-    if polygon.is_empty or not returns.any():
-        return 0
-    distance = shapely.distance(polygon, shapely.points(features.points[returns, :2]))
-    return int((distance < robot.radius * (1 - 1e-9)).sum())
+    return int(returns_within_body(features, polygon, robot, level).sum())
 
 
 rooms = st.tuples(st.floats(-4.0, -0.6), st.floats(0.6, 4.0), st.floats(-4.0, -0.6), st.floats(0.6, 4.0))

@@ -153,6 +153,13 @@ def true_obstacles(inverse, threshold: float, robot: Robot, max_range: float) ->
     return np.column_stack([rho[rows, cols] * np.cos(alpha[cols]), rho[rows, cols] * np.sin(alpha[cols])])
 
 
+#: Four pieces ``a alpha + b h + c r + d`` (c > 0) of a random two-group min/max model, and cut heights.
+random_pieces = st.lists(
+    st.tuples(st.floats(-1, 1), st.floats(-2, 2), st.floats(0.2, 3), st.floats(-4, -0.8)), min_size=4, max_size=4
+)
+random_heights = st.lists(st.floats(-0.9, -0.05), min_size=1, max_size=3)
+
+
 def assert_body_keeps_clear(nav, inverse) -> None:
     """Occupied points sampled every 5 mm of the body band and 0.5 degrees all keep a robot radius from the polygon."""
     if nav.polygon.is_empty:
@@ -364,12 +371,7 @@ def test_a_thin_overhang_between_two_heights_is_kept_clear_of_with_exact_bounds(
 
 
 @settings(max_examples=25)
-@given(
-    pieces=st.lists(
-        st.tuples(st.floats(-1, 1), st.floats(-2, 2), st.floats(0.2, 3), st.floats(-4, -0.8)), min_size=4, max_size=4
-    ),
-    heights=st.lists(st.floats(-0.9, -0.05), min_size=1, max_size=3),
-)
+@given(pieces=random_pieces, heights=random_heights)
 def test_random_trees_with_exact_bounds_never_let_the_body_touch_an_obstacle(pieces, heights):
     model = RealTreeModel(PiecewiseLinearModel(pieces, ("max", [("min", [0, 1]), ("min", [2, 3])])))
     with warnings.catch_warnings():
@@ -657,12 +659,7 @@ def test_an_inverse_returning_nan_or_the_wrong_shape_is_refused():
 
 
 @settings(max_examples=15)
-@given(
-    pieces=st.lists(
-        st.tuples(st.floats(-1, 1), st.floats(-2, 2), st.floats(0.2, 3), st.floats(-4, -0.8)), min_size=4, max_size=4
-    ),
-    heights=st.lists(st.floats(-0.9, -0.05), min_size=1, max_size=3),
-)
+@given(pieces=random_pieces, heights=random_heights)
 def test_random_min_max_models_never_let_the_body_touch_an_obstacle(pieces, heights):
     # Without the bounds most such models fail this.
     model = PiecewiseLinearModel(pieces, ("max", [("min", [0, 1]), ("min", [2, 3])]))
