@@ -1,4 +1,5 @@
-# occtool: `make demo` runs the bundled example, `make test` the tests, `make bench` the benchmark.
+# occtool: `make demo` runs the bundled example, `make test` the tests, `make lint` ruff and mypy,
+# `make bench` the benchmark.
 # Each target sets up its own virtual environment on first use (Python >= 3.10 needed).
 PYTHON ?= python3
 VENV   ?= .venv
@@ -34,6 +35,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check occtool tests bench
+	$(BIN)/mypy
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py --output bench/results.md

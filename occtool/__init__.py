@@ -8,17 +8,61 @@ Data flows one way::
 Coordinates follow ROS REP-103 (x forward, y left, z up; metres, radians). Features
 are expressed in the robot frame centred at the sensor: pan angle ``alpha =
 atan2(y, x)``, height ``h = z`` and range ``r = |p|``.
+
+The names below are the library's front door; each is imported on first use (PEP 562),
+so ``import occtool`` (and ``occtool --help``) loads neither numpy nor scipy::
+
+    from occtool import OccupancyRegressor, navigation_map, read_log, load_model, save_model
 """
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
+# The one version source: pyproject.toml reads it ([tool.setuptools.dynamic]).
 __version__ = "0.1.0"
 
-from occtool.errors import (  # noqa: F401
-    InputError,
-    MissingDependencyError,
-    ModelFormatError,
-    NotFittedError,
-    OcctoolError,
-)
-from occtool.features import Features, Pose, Position, RangeLog  # noqa: F401
+# public name -> module that defines it
+_LAZY: dict[str, str] = {
+    "OccupancyRegressor": "occtool.fit",
+    "navigation_map": "occtool.navigation",
+    "NavigationMap": "occtool.navigation",
+    "read_log": "occtool.io",
+    "load_model": "occtool.io.model",
+    "save_model": "occtool.io.model",
+    "Features": "occtool.features",
+    "Pose": "occtool.features",
+    "Position": "occtool.features",
+    "RangeLog": "occtool.features",
+    "Robot": "occtool.robot",
+    "OcctoolError": "occtool.errors",
+    "InputError": "occtool.errors",
+    "ModelFormatError": "occtool.errors",
+    "NotFittedError": "occtool.errors",
+    "MissingDependencyError": "occtool.errors",
+}
+
+__all__ = ["__version__", *_LAZY]
+
+if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checkers and IDEs
+    from occtool.errors import InputError, MissingDependencyError, ModelFormatError, NotFittedError, OcctoolError
+    from occtool.features import Features, Pose, Position, RangeLog
+    from occtool.fit import OccupancyRegressor
+    from occtool.io import read_log
+    from occtool.io.model import load_model, save_model
+    from occtool.navigation import NavigationMap, navigation_map
+    from occtool.robot import Robot
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'occtool' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
