@@ -180,7 +180,7 @@ def compare(report: str, bench: str | None, output: str, overwrite: bool, dpi: f
     figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.plot import compare_figure, read_json
 
-    document = read_json(report, "comparison report")
-    bench_document = read_json(bench, "benchmark result") if bench else None
+    document = read_json(report)
+    bench_document = read_json(bench) if bench else None
     figure = compare_figure(document, bench=bench_document, source=report, size=figure_size, dpi=dpi, title=title)
     _write(figure, output)

@@ -490,6 +490,33 @@ def read_navigation(path: str | os.PathLike[str], position: int | None = None) -
     )
 
 
+def read_navigation_maps(path: str | os.PathLike[str]) -> list[tuple[int | None, NavigationMap]]:
+    """Every map in a navigation GeoJSON file, with the robot position each belongs to.
+
+    A file of one map (:func:`write_navigation`) gives ``[(None, map)]``; a file of a
+    model set (:func:`write_navigation_set`: a collection or a sequence whose features
+    carry ``position``) gives one ``(position, map)`` per position, in position order.
+
+    Raises
+    ------
+    InputError
+        If the file is not a navigation map (the message names the file).
+    """
+    source = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
+    except UnicodeDecodeError:
+        raise InputError(f"{source}: not a text (UTF-8) file") from None
+    features, _ = _parse(text, source)
+    tags = {feature["properties"].get("position") for feature in features
+            if isinstance(feature, Mapping) and isinstance(feature.get("properties"), Mapping)}
+    positions = sorted(t for t in tags if isinstance(t, int) and not isinstance(t, bool))
+    if not positions:
+        return [(None, read_navigation(path))]
+    return [(position, read_navigation(path, position=position)) for position in positions]
+
+
 __all__ = [
     "CRS_NOTE",
     "map_properties",
@@ -497,6 +524,7 @@ __all__ = [
     "navigation_set_to_geojson",
     "navigation_to_geojson",
     "read_navigation",
+    "read_navigation_maps",
     "write_navigation",
     "write_navigation_set",
 ]
