@@ -47,6 +47,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
+
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
 from occtool.evaluate import evaluate_navigation  # noqa: E402
@@ -54,8 +56,7 @@ from occtool.fit import DEFAULT_FOCUS_RANGE, OccupancyRegressor  # noqa: E402
 from occtool.grid import build_grid  # noqa: E402
 from occtool.navigation import NavigationWarning  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
-from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
-from occtool.simulate import SCENES, DEFAULT_RANGE_NOISE, DEFAULT_SENSOR_RANGE, Scene, build_scene, simulate_scene  # noqa: E402
+from occtool.simulate import DEFAULT_RANGE_NOISE, DEFAULT_SENSOR_RANGE, SCENES, Scene, build_scene, simulate_scene  # noqa: E402
 
 warnings.simplefilter("ignore", NavigationWarning)
 

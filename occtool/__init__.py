@@ -43,7 +43,25 @@ _LAZY: dict[str, str] = {
     "MissingDependencyError": "occtool.errors",
 }
 
-__all__ = ["__version__", *_LAZY]
+__all__ = [
+    "Features",
+    "InputError",
+    "MissingDependencyError",
+    "ModelFormatError",
+    "NavigationMap",
+    "NotFittedError",
+    "OccupancyRegressor",
+    "OcctoolError",
+    "Pose",
+    "Position",
+    "RangeLog",
+    "Robot",
+    "__version__",
+    "load_model",
+    "navigation_map",
+    "read_log",
+    "save_model",
+]
 
 if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checkers and IDEs
     from occtool.errors import InputError, MissingDependencyError, ModelFormatError, NotFittedError, OcctoolError

@@ -145,8 +145,14 @@ def in_front_of_first_obstacle(points: FloatArray, features: Features, robot: Ro
     :func:`occtool.fit.first_obstacle_distance`); free points count when nearer than it,
     ``occupied`` points (returns) when no farther than it plus its cluster window.
     """
-    from occtool.fit import FOCUS_ANGLE_BINS, FOCUS_WINDOW, FOCUS_WINDOW_ABS, adaptive_support, angle_bins
-    from occtool.fit import first_obstacle_distance
+    from occtool.fit import (
+        FOCUS_ANGLE_BINS,
+        FOCUS_WINDOW,
+        FOCUS_WINDOW_ABS,
+        adaptive_support,
+        angle_bins,
+        first_obstacle_distance,
+    )
 
     low, high = robot.body_band
     x, y, z = features.points.T
@@ -322,7 +328,11 @@ def _build_grid(inputs: BuildInputs) -> OccupancyMap:
     from occtool.grid import build_grid
 
     return build_grid(
-        inputs.features, resolution=inputs.resolution, robot=inputs.robot, sensor=inputs.sensor, bounds=inputs.grid_bounds
+        inputs.features,
+        resolution=inputs.resolution,
+        robot=inputs.robot,
+        sensor=inputs.sensor,
+        bounds=inputs.grid_bounds,
     )
 
 
@@ -330,14 +340,20 @@ def _build_octomap(inputs: BuildInputs) -> OccupancyMap:
     from occtool.octomap import build_octomap
 
     return build_octomap(
-        inputs.features, resolution=inputs.resolution, robot=inputs.robot, scans=inputs.octomap_scans, sensor=inputs.sensor
+        inputs.features,
+        resolution=inputs.resolution,
+        robot=inputs.robot,
+        scans=inputs.octomap_scans,
+        sensor=inputs.sensor,
     )
 
 
 def _octomap_samples(tree: Any, inputs: BuildInputs) -> int:
     from occtool.octomap import octomap_updates
 
-    return octomap_updates(inputs.features, inputs.resolution, inputs.octomap_scans, robot=inputs.robot, sensor=inputs.sensor)
+    return octomap_updates(
+        inputs.features, inputs.resolution, inputs.octomap_scans, robot=inputs.robot, sensor=inputs.sensor
+    )
 
 
 #: The dense 3D log-odds grid of :mod:`occtool.grid`.
@@ -512,7 +528,9 @@ def compare_grid(
     train_index, test_index = split_holdout(len(features), holdout, seed)
     train = features.select(train_index)
     test = features.select(test_index)
-    occupied_points, free_points = holdout_points(test, np.asarray(sensor.is_floor(test.height, robot), dtype=bool) | (test.evidence == 0))
+    occupied_points, free_points = holdout_points(
+        test, np.asarray(sensor.is_floor(test.height, robot), dtype=bool) | (test.evidence == 0)
+    )
 
     results: dict[str, ModelResult] = {}
     scores: dict[str, tuple[FloatArray, FloatArray]] = {}

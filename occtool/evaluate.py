@@ -370,7 +370,9 @@ def robot_frame_polygon(polygon: BaseGeometry, pose: Pose) -> BaseGeometry:
     return shapely.transform(polygon, lambda xy: robot_frame_points(xy, pose))
 
 
-def returns_within_body(features: Features, polygon: BaseGeometry, robot: Robot, level: float = 0.6) -> NDArray[np.bool_]:
+def returns_within_body(
+    features: Features, polygon: BaseGeometry, robot: Robot, level: float = 0.6
+) -> NDArray[np.bool_]:
     """Which returns of a position's own data the robot's body would touch somewhere in its polygon.
 
     A return (evidence at or above ``level``, inside the body's height band, beyond the

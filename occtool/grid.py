@@ -133,7 +133,9 @@ def first_unobserved(
     distance = np.full(angles.shape[0], np.inf)
     cells_per_ray = 2 * int(max_range / resolution) + 2
     for lo, hi in _chunks(angles.shape[0], max(1, _SEGMENTS_PER_CHUNK // cells_per_ray)):
-        ends = np.column_stack([max_range * np.cos(angles[lo:hi]), max_range * np.sin(angles[lo:hi]), np.zeros(hi - lo)])
+        ends = np.column_stack(
+            [max_range * np.cos(angles[lo:hi]), max_range * np.sin(angles[lo:hi]), np.zeros(hi - lo)]
+        )
         seg = traverse(np.zeros(3), ends, resolution)
         ij = seg.cell[:, :2] - offset
         inside = ((ij >= 0) & (ij < columns)).all(axis=1)
@@ -483,7 +485,9 @@ class OccupancyGrid:
         cells_per_ray = 2 * int(max_range / self.resolution) + 2
         per_chunk = max(1, _SEGMENTS_PER_CHUNK // (cells_per_ray * max(1, heights.shape[0])))
         for lo, hi in _chunks(angles.shape[0], per_chunk):
-            ends = np.column_stack([max_range * np.cos(angles[lo:hi]), max_range * np.sin(angles[lo:hi]), np.zeros(hi - lo)])
+            ends = np.column_stack(
+                [max_range * np.cos(angles[lo:hi]), max_range * np.sin(angles[lo:hi]), np.zeros(hi - lo)]
+            )
             seg = traverse(np.zeros(3), ends, self.resolution)
             ij = seg.cell[:, :2] - self.offset[:2]
             column_inside = ((ij >= 0) & (ij < columns)).all(axis=1)
@@ -540,11 +544,14 @@ def floor_reach(sensor: SensorModel | None) -> float:
     return 1.0 if sensor is None else float(max(sensor.near_positions))
 
 
-def ray_plan(features: Features, robot: Robot, sensor: SensorModel | None) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+def ray_plan(
+    features: Features, robot: Robot, sensor: SensorModel | None
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Which features cast a ray, and which of those run it to the feature (as a hit).
 
-    The sensor model treats floor features as it does for the parametric fit: ``"free"`` keeps only the free space in front of them (up to the
-    last near sample), ``"drop"`` ignores them, ``"obstacle"`` uses them like any other.
+    The sensor model treats floor features as it does for the parametric fit: ``"free"``
+    keeps only the free space in front of them (up to the last near sample), ``"drop"``
+    ignores them, ``"obstacle"`` uses them like any other.
     Features with evidence 0 (a beam that returned nothing) are free rays in every mode.
     """
     n = len(features)

@@ -133,7 +133,9 @@ class LinearProgramResult:
         return _MESSAGES.get(self.status, "unknown")
 
 
-def split_bounds(bounds: Sequence[tuple[float | None, float | None]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def split_bounds(
+    bounds: Sequence[tuple[float | None, float | None]],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``linprog``-style ``[(lower, upper), ...]`` (None for unbounded) as two arrays with +-inf."""
     lower = np.array([-np.inf if lo is None else float(lo) for lo, _ in bounds], dtype=float)
     upper = np.array([np.inf if hi is None else float(hi) for _, hi in bounds], dtype=float)
@@ -181,7 +183,7 @@ def solve_lp(
         raise ValueError("bounds must not be NaN, a lower bound +inf or an upper bound -inf")
     if max_iterations is None:
         max_iterations = 200 + 50 * d
-    if any(l > u for l, u in zip(lo, hi)):
+    if any(low > up for low, up in zip(lo, hi)):
         return LinearProgramResult(INFEASIBLE, None, None, 0)
 
     # The rows, transposed (a matrix-vector product is fastest that way round) and of unit

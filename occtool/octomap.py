@@ -319,7 +319,9 @@ def build_octomap(
         free = float(logit(params.clamping_thres_min)) * 10.0
         tree.updateNodes(centres, free, lazy_eval=True)
         tree.updateInnerOccupancy()
-    return OctoMapModel(tree=tree, resolution=float(resolution), footprint=float(robot.radius) if footprint_prior else 0.0)
+    return OctoMapModel(
+        tree=tree, resolution=float(resolution), footprint=float(robot.radius) if footprint_prior else 0.0
+    )
 
 
 def _insertions(
@@ -332,7 +334,9 @@ def _insertions(
     points = features.points
     hits = points[use & full]
     # Only free rays (all floor, or beams that returned nothing): nothing to split.
-    inserts = [(part, -1.0) for part in np.array_split(hits, min(int(scans), len(hits))) if len(part)] if len(hits) else []
+    inserts = (
+        [(part, -1.0) for part in np.array_split(hits, min(int(scans), len(hits))) if len(part)] if len(hits) else []
+    )
     floor = points[use & ~full]
     if len(floor):
         r = np.sqrt(np.einsum("ij,ij->i", floor, floor))

@@ -480,7 +480,9 @@ def _cross(ax: FloatArray | float, ay: FloatArray | float, bx: FloatArray | floa
     return ax * by - ay * bx
 
 
-def cast_rays(scene: Scene, directions: ArrayLike, *, max_range: float = np.inf) -> tuple[FloatArray, NDArray[np.int64]]:
+def cast_rays(
+    scene: Scene, directions: ArrayLike, *, max_range: float = np.inf
+) -> tuple[FloatArray, NDArray[np.int64]]:
     """Cast rays from the sensor against the scene's prisms and the floor.
 
     Parameters

@@ -21,7 +21,9 @@ def log_csv(tmp_path_factory) -> str:
     z = rng.uniform(-0.9, 0.5, n)
     f = Features.from_xyz(1.6 * np.cos(a), 1.6 * np.sin(a), z, 0.9)
     path = tmp_path_factory.mktemp("log") / "features.csv"
-    rows = "\n".join(f"{float(x)!r},{float(y)!r},{float(zz)!r},{float(m)!r}" for (x, y, zz), m in zip(f.points, f.evidence))
+    rows = "\n".join(
+        f"{float(x)!r},{float(y)!r},{float(zz)!r},{float(m)!r}" for (x, y, zz), m in zip(f.points, f.evidence)
+    )
     path.write_text("x,y,z,m\n" + rows + "\n")
     return str(path)
 

@@ -18,8 +18,8 @@ from occtool.cli.main import cli  # noqa: E402
 from occtool.features import Pose, Position, RangeLog  # noqa: E402
 from occtool.fit import OccupancyRegressor  # noqa: E402
 from occtool.io import write_csv  # noqa: E402
-from occtool.io.model import save_model  # noqa: E402
 from occtool.io.geojson import write_navigation, write_navigation_set  # noqa: E402
+from occtool.io.model import save_model  # noqa: E402
 from occtool.navigation import navigation_map  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
 from occtool.simulate import simulate_scene  # noqa: E402
@@ -137,13 +137,23 @@ def test_nav_of_a_model_set_file_places_each_map_at_its_position(scene_files, tm
 
 
 def test_compare_report_with_bench_renders(tmp_path):
-    report = {"features": 400,
-              "models": {"parametric": {"samples": 2000, "build_s": 0.3, "extract_s": 0.02, "memory_bytes": 5000,
-                                        "file_bytes": 3000},
-                         "grid": {"samples": 50000, "build_s": 2.0, "extract_s": 0.2, "memory_bytes": 2**22,
-                                  "file_bytes": 2**20}},
-              "polygons": {"parametric": {"type": "Polygon", "coordinates": [[[1, 0], [0, 1], [-1, 0], [0, -1], [1, 0]]]},
-                           "grid": {"type": "Polygon", "coordinates": [[[1, 1], [-1, 1], [-1, -1], [1, -1], [1, 1]]]}}}
+    report = {
+        "features": 400,
+        "models": {
+            "parametric": {
+                "samples": 2000,
+                "build_s": 0.3,
+                "extract_s": 0.02,
+                "memory_bytes": 5000,
+                "file_bytes": 3000,
+            },
+            "grid": {"samples": 50000, "build_s": 2.0, "extract_s": 0.2, "memory_bytes": 2**22, "file_bytes": 2**20},
+        },
+        "polygons": {
+            "parametric": {"type": "Polygon", "coordinates": [[[1, 0], [0, 1], [-1, 0], [0, -1], [1, 0]]]},
+            "grid": {"type": "Polygon", "coordinates": [[[1, 1], [-1, 1], [-1, -1], [1, -1], [1, 1]]]},
+        },
+    }
     bench = {"scaling": [{"scale": s, "features": 500 * s,
                           "models": {"parametric": {"build_s": 0.1 * s, "memory_bytes": 4000},
                                      "grid": {"build_s": 0.5 * s * s, "memory_bytes": 2**20 * s}}} for s in (1, 2, 4)]}

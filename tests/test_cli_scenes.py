@@ -83,8 +83,16 @@ def write_navigation(path, geometry, **properties) -> None:
         "type": "FeatureCollection",
         "properties": {"frame_id": "base_link", "units": "m", **properties},
         "features": [
-            {"type": "Feature", "properties": {"kind": "navigation"}, "geometry": json.loads(shapely.to_geojson(geometry))},
-            {"type": "Feature", "properties": {"kind": "exploration"}, "geometry": {"type": "Point", "coordinates": [1, 0]}},
+            {
+                "type": "Feature",
+                "properties": {"kind": "navigation"},
+                "geometry": json.loads(shapely.to_geojson(geometry)),
+            },
+            {
+                "type": "Feature",
+                "properties": {"kind": "exploration"},
+                "geometry": {"type": "Point", "coordinates": [1, 0]},
+            },
         ],
     }
     path.write_text(json.dumps(collection))

@@ -141,7 +141,9 @@ def test_the_grids_see_the_round_room(round_room_report: dict) -> None:
     # Both grids stay inside it, free most of it and agree with each other. (The
     # parametric model's own quality is tested with the fit.)
     reachable = shapely.Point(0, 0).buffer(1.2 - 0.25 + 0.02, quad_segs=64)
-    polygons = {name: shapely.geometry.shape(round_room_report["polygons"][name]) for name in round_room_report["models"]}
+    polygons = {
+        name: shapely.geometry.shape(round_room_report["polygons"][name]) for name in round_room_report["models"]
+    }
     for name in ("grid", "octomap"):
         assert polygons[name].within(reachable), name
         assert polygons[name].area > 0.5 * np.pi * (1.2 - 0.25) ** 2, name

@@ -165,8 +165,8 @@ def test_a_failed_write_leaves_no_file(nav, tmp_path):
         ('{"type": "Feature", "properties": {"kind": "slice"}, "geometry": null}', "height"),
         ('{"type": "Feature", "properties": {"kind": "exploration"}, "geometry": {"type": "Point", "coordinates": []}}',
          "no coordinates"),
-        ('{"type": "Feature", "properties": {"kind": "navigation"}, "geometry": {"type": "Polygon", "coordinates": []}}\n'
-         '{"type": "Feature", "properties": {"kind": "navigation"}, "geometry": {"type": "Polygon", "coordinates": []}}',
+        ('{"type": "Feature", "properties": {"kind": "navigation"}, "geometry": {"type": "Polygon", "coordinates": []}}\n'  # noqa: E501
+         '{"type": "Feature", "properties": {"kind": "navigation"}, "geometry": {"type": "Polygon", "coordinates": []}}',  # noqa: E501
          "found 2"),
     ],
 )

@@ -94,7 +94,9 @@ def test_single_ray_gives_misses_then_one_hit() -> None:
     features = Features.from_xyz([1.03], [0.02], [0.03], 1.0)
     grid = build_grid(features, resolution=0.1, footprint_prior=False)
     along = np.array([[x, 0.02, 0.03] for x in np.arange(0.05, 1.0, 0.1)])
-    np.testing.assert_allclose(grid.log_odds[tuple((np.floor(along / 0.1).astype(int) - grid.offset).T)], MISS, rtol=1e-6)
+    np.testing.assert_allclose(
+        grid.log_odds[tuple((np.floor(along / 0.1).astype(int) - grid.offset).T)], MISS, rtol=1e-6
+    )
     np.testing.assert_allclose(grid.occupancy([[1.03, 0.02, 0.03]]), 0.7, rtol=1e-6)
     assert grid.samples == 11
     assert grid.observed_cells == 11
@@ -188,7 +190,9 @@ def test_inverse_range_broadcasts_and_respects_max_range() -> None:
 def test_grid_is_equivariant_to_quarter_turns(quarter: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     n = 60
-    features = Features.from_xyz(rng.uniform(-3, 3, n), rng.uniform(-3, 3, n), rng.uniform(-1, 1, n), rng.uniform(0.3, 1, n))
+    features = Features.from_xyz(
+        rng.uniform(-3, 3, n), rng.uniform(-3, 3, n), rng.uniform(-1, 1, n), rng.uniform(0.3, 1, n)
+    )
     yaw = quarter * np.pi / 2
     grid = build_grid(features, resolution=0.1, sensor=SensorModel())
     turned = build_grid(features.rotated(yaw), resolution=0.1, sensor=SensorModel())
@@ -226,7 +230,9 @@ def test_bounds_crop_the_grid_but_keep_the_cells_inside() -> None:
     assert cropped.nbytes < full.nbytes
     assert cropped.samples < full.samples
     rng = np.random.default_rng(1)
-    inside = np.column_stack([rng.uniform(-0.95, 2.45, 300), rng.uniform(-0.95, 0.95, 300), rng.uniform(-0.95, 0.45, 300)])
+    inside = np.column_stack(
+        [rng.uniform(-0.95, 2.45, 300), rng.uniform(-0.95, 0.95, 300), rng.uniform(-0.95, 0.45, 300)]
+    )
     np.testing.assert_allclose(cropped.occupancy(inside), full.occupancy(inside), atol=1e-6)
     assert cropped.occupancy([[2.05, 1.5, 0.0]])[0] == 0.5
     with pytest.raises(InputError, match="bounds"):
@@ -294,13 +300,17 @@ def test_unknown_free_passes_the_gap_and_occupied_stops_at_it() -> None:
     # Free: the gap's prior 0.5 is below the level; the wall blocks in its own layer only.
     assert free[0, 0] == pytest.approx(1.5)
     assert np.isinf(free[1:]).all()
-    assert np.array_equal(free, _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="free"), HEIGHTS))
+    assert np.array_equal(
+        free, _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="free"), HEIGHTS)
+    )
     # Occupied: the gap's columns were observed at no height: every height stops there.
     occupied = _horizontal(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied"), HEIGHTS)
     np.testing.assert_allclose(occupied, 0.8)
     # Behind the laser the grid ends at x = -0.2; outside it nothing was observed.
     assert np.isinf(grid.inverse_range(np.pi, 0.05, 0.6, max_range=2.5))
-    assert _horizontal(grid.inverse_range(np.pi, 0.05, 0.6, max_range=2.5, unknown="occupied"), 0.05) == pytest.approx(0.2)
+    assert _horizontal(grid.inverse_range(np.pi, 0.05, 0.6, max_range=2.5, unknown="occupied"), 0.05) == pytest.approx(
+        0.2
+    )
 
 
 def test_a_column_observed_at_one_height_of_the_band_counts_at_all() -> None:
@@ -314,7 +324,9 @@ def test_a_column_observed_at_one_height_of_the_band_counts_at_all() -> None:
     band = (-0.3, -0.05)
     assert not grid.observed_columns(band).any()
     assert grid.observed_columns((0.0, 0.0)).sum() == 20 * 4
-    np.testing.assert_allclose(grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied", band=band), np.abs(HEIGHTS))
+    np.testing.assert_allclose(
+        grid.inverse_range(0.0, HEIGHTS, 0.6, max_range=2.5, unknown="occupied", band=band), np.abs(HEIGHTS)
+    )
     # ...but for the robot's footprint, which it stands on: columns within half a cell of
     # its disk count as observed (the first beyond 0.22 + 0.05 m starts at 0.3 m).
     standing = replace(grid, footprint=0.22)

@@ -63,7 +63,9 @@ def test_robotlaser1_records(tmp_path):
     position = read_log(path).single()
     angles = np.array([-0.5, 0.0, 0.5])
     r = np.array([1.0, 2.0, 3.0])
-    np.testing.assert_allclose(position.features.points, np.column_stack([r * np.cos(angles), r * np.sin(angles), 0 * r]))
+    np.testing.assert_allclose(
+        position.features.points, np.column_stack([r * np.cos(angles), r * np.sin(angles), 0 * r])
+    )
     assert position.pose == Pose(1.0, 2.0, 0.0, 0.0)
     assert position.stamp == 7.0
 

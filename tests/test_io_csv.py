@@ -148,7 +148,9 @@ finite = st.floats(min_value=-50, max_value=50, allow_nan=False, allow_subnormal
 
 
 @given(
-    points=st.lists(st.tuples(finite, finite, finite).filter(lambda p: any(v != 0 for v in p)), min_size=1, max_size=30),
+    points=st.lists(
+        st.tuples(finite, finite, finite).filter(lambda p: any(v != 0 for v in p)), min_size=1, max_size=30
+    ),
     evidence=st.floats(min_value=0, max_value=1),
 )
 def test_write_then_read_round_trips_exactly(tmp_path_factory, points, evidence):

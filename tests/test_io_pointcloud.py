@@ -67,7 +67,8 @@ def test_binary_pcd_and_viewpoint(tmp_path):
     path.write_bytes(binary_pcd(points, f"1 0 0 {c} 0 0 {c}"))
     position = read_log(path).single()
     assert (position.pose.x, position.pose.yaw) == pytest.approx((1.0, np.pi / 2))
-    np.testing.assert_allclose(position.features.points, [[3.0, -1.0, -1.0]], atol=1e-6)  # (1,0,0) is the origin: dropped
+    # (1,0,0) is the origin: dropped
+    np.testing.assert_allclose(position.features.points, [[3.0, -1.0, -1.0]], atol=1e-6)
     truncated = tmp_path / "short.pcd"
     truncated.write_bytes(binary_pcd(points)[:-5])
     with pytest.raises(InputError, match="truncated"):
@@ -79,7 +80,8 @@ def test_ply_ascii_and_binary(fixtures_dir, tmp_path):
     np.testing.assert_array_equal(features.points, np.eye(3))
     np.testing.assert_allclose(features.evidence, [0.5, 0.6, 0.7], rtol=1e-6)
     points = np.array([[1.5, -2.0, 0.25], [0.0, 0.0, 4.0]])
-    header = b"ply\nformat binary_big_endian 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nend_header\n"
+    header = (b"ply\nformat binary_big_endian 1.0\nelement vertex 2\n"
+              b"property double x\nproperty double y\nproperty double z\nend_header\n")
     path = tmp_path / "cloud.ply"
     path.write_bytes(header + points.astype(">f8").tobytes())
     assert detect_format(path) == "ply"

@@ -11,7 +11,14 @@ from occtool.errors import ModelFormatError
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
 from occtool.io.model import (
-    FORMAT_VERSION, MODEL_FORMAT, load_inverse, load_model, model_to_dict, read_any, save_inverse, save_model,
+    FORMAT_VERSION,
+    MODEL_FORMAT,
+    load_inverse,
+    load_model,
+    model_to_dict,
+    read_any,
+    save_inverse,
+    save_model,
 )
 
 

@@ -603,8 +603,9 @@ def test_the_ray_cast_finds_what_every_ray_against_every_edge_finds(monkeypatch,
         vertices = np.asarray(region.exterior.coords)
         for angles in (pan_angles(360), rng.uniform(-10, 10, 40), np.arctan2(vertices[:, 1], vertices[:, 0]),
                        np.array([0.0, np.pi, -np.pi, np.pi / 2])):
-            np.testing.assert_allclose(ray_boundary_distances(region, angles), every_ray_against_every_edge(region, angles),
-                                       rtol=1e-12)
+            np.testing.assert_allclose(
+                ray_boundary_distances(region, angles), every_ray_against_every_edge(region, angles), rtol=1e-12
+            )
             np.testing.assert_allclose(ray_boundary_distances(region, angles, within=1.0),
                                        every_ray_against_every_edge(region, angles, within=1.0), rtol=1e-12)
             checked += 1

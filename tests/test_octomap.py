@@ -39,7 +39,9 @@ def test_one_update_per_cell_and_scan() -> None:
     one_scan = build_octomap(same, resolution=0.1, footprint_prior=False)
     three_scans = build_octomap(same, resolution=0.1, footprint_prior=False, scans=3)
     assert one_scan.occupancy([[1.03, 0.02, 0.03]])[0] == pytest.approx(0.7)
-    assert three_scans.occupancy([[1.03, 0.02, 0.03]])[0] == pytest.approx(float(1 / (1 + np.exp(-3 * logit(0.7)))), rel=1e-5)
+    assert three_scans.occupancy([[1.03, 0.02, 0.03]])[0] == pytest.approx(
+        float(1 / (1 + np.exp(-3 * logit(0.7)))), rel=1e-5
+    )
     assert octomap_updates(same, 0.1, scans=3) == 3 * octomap_updates(same, 0.1)
     # Past the upper clamping threshold the cell stays at it.
     many = Features.from_xyz(np.full(6, 1.03), np.full(6, 0.02), np.full(6, 0.03), 1.0)

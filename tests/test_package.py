@@ -43,6 +43,7 @@ def test_the_facade_is_lazy_and_complete() -> None:
 
     assert OccupancyRegressor is defined
     assert all(callable(f) for f in (navigation_map, read_log, load_model, save_model))
+    assert set(occtool.__all__) == {"__version__", *occtool._LAZY}
     assert set(occtool.__all__) <= set(dir(occtool))
     with pytest.raises(AttributeError, match="no attribute 'nonsense'"):
         occtool.nonsense  # noqa: B018

@@ -116,7 +116,11 @@ def plain_range(inverse: InverseTree, alpha, h, m) -> np.ndarray:
 SWEEPS = {
     "angles x heights": (np.linspace(-np.pi, np.pi, 90)[None, :], np.linspace(-0.9, 0.1, 13)[:, None], 0.6),
     "heights x angles": (np.linspace(-np.pi, np.pi, 90)[:, None], np.linspace(-0.9, 0.1, 13)[None, :], 0.4),
-    "levels x heights x angles": (np.linspace(-3, 3, 40), np.linspace(-1, 0, 7)[:, None], np.array([0.2, 0.9])[:, None, None]),
+    "levels x heights x angles": (
+        np.linspace(-3, 3, 40),
+        np.linspace(-1, 0, 7)[:, None],
+        np.array([0.2, 0.9])[:, None, None],
+    ),
     "levels along the angles": (np.linspace(-3, 3, 40), np.linspace(-1, 0, 7)[:, None], np.linspace(0, 1, 40)),
     "angles at one height": (np.linspace(-3, 3, 50), -0.5, 0.6),
     "one angle, many heights": (0.3, np.linspace(-1, 0.5, 30)[:, None], np.array([0.1, 0.6, 2.0])),
@@ -160,7 +164,9 @@ def test_the_inverse_in_blocks_and_flattened(monkeypatch, block):
         (np.linspace(-3, 3, 100)[None, :], -0.5, np.array([[0.2], [0.7]])),  # rows longer than a block
         (rng.uniform(-3, 3, (3, 1, 20)), rng.uniform(-1, 0, (1, 4, 1)), rng.uniform(0, 1, (3, 4, 1))),
     ]:
-        np.testing.assert_allclose(inverse.range(alpha, h, m), plain_range(inverse, alpha, h, m), rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(
+            inverse.range(alpha, h, m), plain_range(inverse, alpha, h, m), rtol=1e-13, atol=1e-13
+        )
 
 
 def test_the_inverse_is_the_same_from_several_threads():

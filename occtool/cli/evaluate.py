@@ -76,7 +76,9 @@ def evaluate(navigation: str, truth: str, robot_radius: float | None, max_range:
     if result.obstacle_accuracy is not None:
         table.add_row("obstacle points", f"{result.obstacle_accuracy:.4f}", "share facing a true obstacle in range")
     if result.exploration_accuracy is not None:
-        table.add_row("exploration points", f"{result.exploration_accuracy:.4f}", "share facing open space to max range")
+        table.add_row(
+            "exploration points", f"{result.exploration_accuracy:.4f}", "share facing open space to max range"
+        )
     table.add_row("area", f"{result.area:.3f} m²", "navigation polygon")
     table.add_row("truth area", f"{result.truth_area:.3f} m²", "reachable in a straight line")
     table.add_row("robot radius", f"{result.robot_radius:g} m", "")

@@ -63,7 +63,9 @@ def _model_summary(path: str, model, show_pieces: bool):
     table.add_row("tree", f"depth {tree.depth()}: {tree.describe()}")
     table.add_row("constraints", f"c >= {model.c_min:g}, |dF/dalpha| <= {model.a_max:g}, |b| <= {model.b_max:g}")
     table.add_row("slope bounds", ", ".join(f"{k} {v:.4g}" for k, v in model.slope_bounds_.items()))
-    table.add_row("fit error", f"RMSE {model.rmse_:.4f}, loss {model.loss_:.5f} ({model.loss} loss), {model.n_sweeps_} sweeps")
+    table.add_row(
+        "fit error", f"RMSE {model.rmse_:.4f}, loss {model.loss_:.5f} ({model.loss} loss), {model.n_sweeps_} sweeps"
+    )
     counts = ", ".join(f"{k} {v}" for k, v in model.sample_counts_.items() if v)
     table.add_row("training", f"{model.n_features_} features -> {model.n_samples_} samples ({counts})")
     table.add_row("input sha256", model.features_digest_)
@@ -81,7 +83,9 @@ def _model_summary(path: str, model, show_pieces: bool):
                   f"{robot.body_height:g} m, clearance {robot.ground_clearance:g} m")
     run = getattr(model, "run_", {})
     if run:
-        table.add_row("run", ", ".join(f"{k} {v}" for k, v in run.items() if k in ("seconds", "date", "occtool_version", "host")))
+        table.add_row(
+            "run", ", ".join(f"{k} {v}" for k, v in run.items() if k in ("seconds", "date", "occtool_version", "host"))
+        )
     return Group(table, _pieces_table(tree, "pieces")) if show_pieces else table
 
 

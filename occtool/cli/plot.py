@@ -175,7 +175,8 @@ def compare(report: str, bench: str | None, output: str, overwrite: bool, dpi: f
             title: str | None) -> None:
     """The grid comparison REPORT from occtool compare-grid --json.
 
-    Each model's navigation polygon side by side; time and memory against scene scale and feature count come from --bench, on log axes.
+    Each model's navigation polygon side by side; time and memory against scene scale
+    and feature count come from --bench, on log axes.
     """
     figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.plot import compare_figure, read_json

@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import shapely
 from shapely.geometry import Polygon, shape
-from shapely.geometry.polygon import orient
 from shapely.geometry.base import BaseGeometry
+from shapely.geometry.polygon import orient
 
 from occtool.errors import InputError
 from occtool.features import Pose

@@ -17,7 +17,9 @@ if TYPE_CHECKING:  # pragma: no cover
     pass
 
 
-def evaluate_on_floor_grid(model: Any, height: float, extent: float, resolution: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+def evaluate_on_floor_grid(
+    model: Any, height: float, extent: float, resolution: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Evaluate ``F`` on a square x, y grid around the robot at one sensor-frame height.
 
     Parameters
