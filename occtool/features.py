@@ -8,7 +8,9 @@ robot :class:`Position`, each with its pose in the world frame when the log has 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -146,7 +148,7 @@ class Pose:
         return {"x": float(self.x), "y": float(self.y), "z": float(self.z), "yaw": float(self.yaw)}
 
     @classmethod
-    def from_dict(cls, data: dict[str, float]) -> Pose:
+    def from_dict(cls, data: Mapping[str, Any]) -> Pose:
         return cls(**{k: float(data[k]) for k in ("x", "y", "z", "yaw") if k in data})
 
 

@@ -879,7 +879,7 @@ class _Fitter:
                 if result.status == 0:
                     break
             if result.status == 0:
-                q = result.x[:k]
+                q = result.x[:k]  # type: ignore[index]  # status 0: solved, x is set
             else:
                 q = np.zeros(rows.shape[1])
                 q[0] = float(target.min())
@@ -995,7 +995,7 @@ class _Fitter:
     def alternate(self, W: FloatArray, members: list[list[int]]) -> tuple[MinMaxTree, list[float]]:
         root = Op("max", tuple(Op("min", tuple(g)) if len(g) > 1 else g[0] for g in members))
         if len(members) == 1:
-            root = root.children[0]
+            root = root.children[0]  # type: ignore[assignment]  # one group: its min (or lone piece)
         if not self.p.max_sweeps:
             # No sweeps (the default): only the loss is wanted, from the tree's own
             # evaluation (rows per piece), not the (samples x pieces) matrix the sweeps need.

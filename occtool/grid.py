@@ -359,7 +359,7 @@ class OccupancyGrid:
     @property
     def lower(self) -> FloatArray:
         """Lower corner of the grid, metres."""
-        return self.offset * self.resolution
+        return (self.offset * self.resolution).astype(np.float64, copy=False)
 
     @property
     def upper(self) -> FloatArray:
@@ -401,7 +401,7 @@ class OccupancyGrid:
         """Array indices of the cells holding ``(N, 3)`` points, and which lie in the grid."""
         pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
         index = np.floor(pts / self.resolution).astype(np.int64) - self.offset
-        inside = ((index >= 0) & (index < np.asarray(self.shape))).all(axis=1)
+        inside: NDArray[np.bool_] = np.all((index >= 0) & (index < np.asarray(self.shape)), axis=1)
         return index, inside
 
     def occupancy(self, points: ArrayLike) -> FloatArray:
@@ -490,7 +490,7 @@ class OccupancyGrid:
             )
             seg = traverse(np.zeros(3), ends, self.resolution)
             ij = seg.cell[:, :2] - self.offset[:2]
-            column_inside = ((ij >= 0) & (ij < columns)).all(axis=1)
+            column_inside: NDArray[np.bool_] = np.all((ij >= 0) & (ij < columns), axis=1)
             ij = np.clip(ij, 0, columns - 1)
             values = self.log_odds[ij[:, 0, None], ij[:, 1, None], layer_index[None, :]]
             hit = np.where(column_inside[:, None] & layer_inside[None, :], values >= threshold, blocked_beyond)

@@ -933,7 +933,7 @@ def visible_from_origin(region: Polygon, angles: FloatArray, reach: float) -> Po
         np.arctan2(ring[backward, 1], ring[backward, 0]),  # ... and its larger
     )
     # Only the rays bounding a shadowed gap need casting.
-    cast = np.flatnonzero(shadowed | _previous(shadowed))
+    cast = np.flatnonzero(shadowed | _previous(shadowed))  # type: ignore[operator]  # _previous keeps the bool dtype
     near_edges = np.flatnonzero(near)
     distance, edge, where = _first_hits(ring[near_edges], step[near_edges], rays[cast])
     hits = np.minimum(distance, outside)

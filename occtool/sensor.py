@@ -39,6 +39,8 @@ from occtool.robot import Robot
 FloatArray = NDArray[np.float64]
 
 #: Codes of :attr:`Samples.kind`.
+#: alpha, h, r, m, weight and the sample kind (one for the block, or one per sample).
+_SampleBlock = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, "int | NDArray[np.int64]"]
 SAMPLE_KINDS: dict[str, int] = {"hit": 0, "near": 1, "robot": 2, "floor": 3, "footprint": 4, "background": 5, "frontier": 6}
 
 FLOOR_MODES = ("free", "drop", "obstacle")
@@ -241,7 +243,7 @@ class SensorModel:
         obstacle = ~(on_floor & (self.floor == "drop")) & ~free_only & ~on_robot
         rays = obstacle | free_only
 
-        parts: list[tuple[FloatArray, ...]] = []
+        parts: list[_SampleBlock] = []
         e = self.depth_error
         a_obs, h_obs, r_obs, m_obs = alpha[obstacle], h[obstacle], r[obstacle], m[obstacle]
         for scale in (1.0 - e, 1.0 + e):
@@ -290,7 +292,7 @@ class SensorModel:
         """Whether features at sensor-frame heights ``h`` lie below the ground clearance."""
         return np.asarray(h, dtype=np.float64) < robot.floor_h + robot.ground_clearance
 
-    def _footprint(self, robot: Robot) -> tuple[FloatArray, ...]:
+    def _footprint(self, robot: Robot) -> _SampleBlock:
         # A fixed lattice over the body cylinder (angle x height x radius), so the
         # samples are identical for every run and the body is covered evenly.
         n = self.footprint_samples
@@ -306,7 +308,7 @@ class SensorModel:
         R = np.hypot(D, H)
         return (A, H, R, np.zeros_like(R), np.full_like(R, self.footprint_weight), SAMPLE_KINDS["footprint"])
 
-    def _background(self, robot: Robot, rng: np.random.Generator) -> tuple[FloatArray, ...]:
+    def _background(self, robot: Robot, rng: np.random.Generator) -> _SampleBlock:
         n = self.background_samples
         low, high = robot.body_band
         angles = rng.uniform(-np.pi, np.pi, n)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -242,15 +242,9 @@ def load_truth(path: str | os.PathLike[str]) -> Scene:
     InputError
         If the file is not JSON or not a valid scene truth; the message names the file.
     """
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text (UTF-8) file") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    from occtool.io.json import read_json
+
+    data = read_json(path, error=InputError)
     try:
         return Scene.from_dict(data)
     except InputError as exc:
@@ -477,7 +471,7 @@ def build_scene(name: str, *, robot: Robot | None = None, yaw: float = 0.0) -> S
 
 def _cross(ax: FloatArray | float, ay: FloatArray | float, bx: FloatArray | float,
            by: FloatArray | float) -> FloatArray:
-    return ax * by - ay * bx
+    return ax * by - ay * bx  # type: ignore[return-value]  # an array whenever one argument is
 
 
 def cast_rays(
@@ -667,14 +661,15 @@ def simulate_scene(
     return features, scene
 
 
-def save_features_csv(features: Features, path: str | os.PathLike[str], comments: list[str] = ()) -> None:
-    """Write features as CSV with header ``x,y,z,m`` after ``#`` comment lines (atomically)."""
-    table = np.column_stack([features.points, features.evidence])
-    with atomic_write(path, "w") as handle:
-        for line in comments:
-            handle.write(f"# {line}\n")
-        handle.write("x,y,z,m\n")
-        np.savetxt(handle, table, fmt=["%.4f", "%.4f", "%.4f", "%.3f"], delimiter=",")
+def save_features_csv(features: Features, path: str | os.PathLike[str], comments: Sequence[str] = ()) -> None:
+    """Write features as CSV with header ``x,y,z,m`` after ``#`` comment lines (atomically).
+
+    Coordinates to 0.1 mm and evidence to 3 decimals: :func:`occtool.io.csv.write_csv`
+    with ``decimals=(4, 3)``.
+    """
+    from occtool.io.csv import write_csv
+
+    write_csv(features, path, comments=comments, decimals=(4, 3))
 
 
 __all__ = [

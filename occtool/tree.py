@@ -261,9 +261,9 @@ class _PieceTree:
     def __eq__(self, other: object) -> bool:
         return (
             type(other) is type(self)
-            and self.basis == other.basis  # type: ignore[attr-defined]
-            and self.root == other.root  # type: ignore[attr-defined]
-            and np.array_equal(self.coefficients, other.coefficients)  # type: ignore[attr-defined]
+            and self.basis == other.basis
+            and self.root == other.root
+            and np.array_equal(self.coefficients, other.coefficients)
         )
 
     def __repr__(self) -> str:
@@ -483,8 +483,9 @@ class InverseTree(_PieceTree):
         program = self._program(tuple(columns))
         step = max(1, INVERSE_BLOCK // (size // rows))
         # Parts of inputs that do not change along the first axis are formed once.
-        angle_part = self._angle_part(alpha, constant) if alpha.shape[0] == 1 else None
-        rest_part = self._rest_part(program, rest_inputs) if all(v.shape[0] == 1 for v in rest_inputs) else None
+        # (mypy: numpy's stubs keep the () shape of the flattened branch above.)
+        angle_part = self._angle_part(alpha, constant) if alpha.shape[0] == 1 else None  # type: ignore[misc]
+        rest_part = self._rest_part(program, rest_inputs) if all(v.shape[0] == 1 for v in rest_inputs) else None  # type: ignore[misc]
         scratch = _scratch_buffers(program.n_buffers - 1, (min(step, rows),) + out.shape[1:])
         for first in range(0, rows, step):
             block = slice(first, first + step)
@@ -492,7 +493,7 @@ class InverseTree(_PieceTree):
             buffers = [target] + [buffer[:len(target)] for buffer in scratch]
             angles = angle_part if angle_part is not None else self._angle_part(alpha[block], constant)
             rest = rest_part if rest_part is not None else self._rest_part(
-                program, [v[block] if v.shape[0] > 1 else v for v in rest_inputs])
+                program, [v[block] if v.shape[0] > 1 else v for v in rest_inputs])  # type: ignore[misc]
             self._run(program, angles, rest, buffers)
         return out.reshape(shape)
 

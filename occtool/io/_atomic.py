@@ -40,7 +40,8 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
         raise IsADirectoryError(errno.EISDIR, "Is a directory (name an output file)", str(target))
     if target.exists() and not target.is_file():
         # A device or pipe (/dev/null, /dev/stdout, a FIFO): write into it, never replace it.
-        with open(target, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": "\n"})) as handle:
+        # (mypy: ``mode`` is a runtime string, text or binary, so no overload of open() matches.)
+        with open(target, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": "\n"})) as handle:  # type: ignore[call-overload]
             yield handle
         return
     directory = target.parent if str(target.parent) else Path(".")
@@ -52,7 +53,7 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
     os.umask(umask)
     os.chmod(tmp_name, 0o666 & ~umask)
     try:
-        with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": "\n"})) as handle:
+        with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": "\n"})) as handle:  # type: ignore[call-overload]
             yield handle
             handle.flush()
             os.fsync(handle.fileno())

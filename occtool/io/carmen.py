@@ -51,7 +51,7 @@ OTHER_RECORDS = ("ODOM", "PARAM", "NEFF", "SYNC", "TRUEPOS", "RAWLASER1", "RAWLA
 
 def _beam_angles(count: int) -> NDArray[np.float64]:
     delta = np.pi / (count - 1) if count % 2 == 1 and count > 1 else np.pi / max(count, 1)
-    return -np.pi / 2 + delta * np.arange(count)
+    return -np.pi / 2 + delta * np.arange(count)  # type: ignore[return-value]  # float64 at run time
 
 
 class _Problem(Exception):
@@ -89,7 +89,7 @@ def _parse_laser(
             if len(fields) < base + 6:
                 raise _Problem(f"ROBOTLASER1 announces {count} readings and {remissions} remissions but is too short")
             x, y, theta = (float(v) for v in fields[base : base + 3])
-            angles = start + resolution * np.arange(count)
+            angles = start + resolution * np.arange(count)  # type: ignore[assignment]  # float64 at run time
             stamp_index = base + 11
         stamp = float(fields[stamp_index]) if len(fields) > stamp_index else None
     except (ValueError, IndexError) as exc:
@@ -213,8 +213,8 @@ def read_carmen(
     else:
         if no_return:
             where = where or " (infinite readings)"
-            reach = np.concatenate(free_ranges)
-            low, high = float(reach.min()), float(reach.max())
+            reach = np.concatenate(free_ranges)  # type: ignore[assignment]  # the reach of every free ray
+            low, high = float(reach.min()), float(reach.max())  # type: ignore[attr-defined]
             at = f"{low:g} m" if low == high else f"{low:g} to {high:g} m"
             notes.append(
                 f"kept {no_return} of {all_ranges.size} readings with no return{where} as free rays "

@@ -245,7 +245,8 @@ def read_csv(
 
     columns = {c: data[:, k] for k, c in enumerate(layout.used)}
     points = np.column_stack([columns[c] for c in layout.xyz])
-    m = columns[layout.evidence] if layout.evidence is not None else np.full(data.shape[0], float(evidence))
+    # (mypy: without an evidence column the layout has a constant evidence, checked in _find_layout.)
+    m = columns[layout.evidence] if layout.evidence is not None else np.full(data.shape[0], float(evidence))  # type: ignore[arg-type]
     bad_reason = np.zeros(data.shape[0], dtype=np.int8)
     not_finite = ~np.isfinite(data).all(axis=1)
     outside = ~not_finite & ((m < 0.0) | (m > 1.0))
@@ -353,7 +354,13 @@ def _group_rows(
     return RangeLog(positions=positions, source=name, notes=notes)
 
 
-def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.PathLike[str]) -> None:
+def write_csv(
+    features_or_log: Features | RangeLog | Position,
+    path: str | os.PathLike[str],
+    *,
+    comments: Sequence[str] = (),
+    decimals: tuple[int, int] | None = None,
+) -> None:
     """Write features (or every position of a log) as CSV, atomically.
 
     A :class:`RangeLog` with several positions or with poses gets a ``position``
@@ -369,6 +376,11 @@ def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.Pa
         What to write.
     path
         Output file, or ``"-"`` for standard output.
+    comments
+        Lines written first, each after ``# `` (readers skip them).
+    decimals
+        Fixed decimals of the coordinates and of the evidence (``(4, 3)`` for a compact
+        synthetic log); the shortest round-trip text when None.
     """
     from occtool.io._atomic import atomic_write
 
@@ -399,15 +411,18 @@ def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.Pa
             pose = position.pose or Pose()
             columns.append(np.tile([pose.x, pose.y, pose.z, pose.yaw], (len(f), 1)))
         if with_stamp:
-            columns.append(np.full((len(f), 1), float(position.stamp)))
+            columns.append(np.full((len(f), 1), float(position.stamp)))  # type: ignore[arg-type]  # with_stamp: every stamp is set
         blocks.append(np.hstack(columns))
     table = np.vstack(blocks) if blocks else np.empty((0, len(header)))
     # repr of a Python float is the shortest text that reads back to the same double.
+    point = ["{!r}"] * 4 if decimals is None else [f"{{:.{decimals[0]}f}}"] * 3 + [f"{{:.{decimals[1]}f}}"]
     template = ",".join(
-        ["{!r}"] * 4 + (["{:.0f}"] if with_position else []) + (["{!r}"] * 4 if with_pose else [])
+        point + (["{:.0f}"] if with_position else []) + (["{!r}"] * 4 if with_pose else [])
         + (["{!r}"] if with_stamp else [])
     )
     with atomic_write(path, "w") as handle:
+        for line in comments:
+            handle.write(f"# {line}\n")
         handle.write(",".join(header) + "\n")
         rows = table.tolist()
         for start in range(0, len(rows), 65536):

@@ -73,8 +73,8 @@ def map_properties(nav: NavigationMap) -> dict[str, Any]:
         properties[name] = value if math.isfinite(value) else None
     if nav.pose is not None:
         properties["pose"] = nav.pose.to_dict()
-    for key, value in nav.extra.items():
-        properties.setdefault(key, value)
+    for key, extra in nav.extra.items():
+        properties.setdefault(key, extra)
     return properties
 
 
@@ -432,7 +432,10 @@ def read_navigation(path: str | os.PathLike[str], position: int | None = None) -
         properties.update({k: v for p in per_position for k, v in p.items() if k != "position"})
     elif isinstance(properties.get("positions"), list):
         raise InputError(f"{source}: holds the maps of several positions; choose one (position=)")
-    navigation, obstacles, exploration, slices = [], [], [], []
+    navigation: list[BaseGeometry] = []
+    obstacles: list[tuple[float, float]] = []
+    exploration: list[tuple[float, float]] = []
+    slices: list[Slice] = []
     for number, feature in enumerate(features, start=1):
         if not isinstance(feature, Mapping) or feature.get("type") != "Feature":
             raise InputError(f"{source}: feature {number} is not a GeoJSON Feature")

@@ -429,7 +429,7 @@ def _decode_laserscan(message: Any, options: _Options, where: str) -> _Decoded:
         missing = np.isposinf(ranges) | (np.isfinite(ranges) & (ranges > top))
     evidence = _scan_evidence(message.intensities or None, ranges.size, valid, options, where)
     reach = min(options.no_return_range, top) if options.no_return_range is not None else np.inf
-    points, evidence = _scan_points(ranges, angles, valid, missing, reach, evidence, options)
+    points, evidence = _scan_points(ranges, angles, valid, missing, reach, evidence, options)  # type: ignore[arg-type]  # angles are float64
     header = message.header
     return _Decoded(points, evidence, _strip_frame(header.frame_id), _stamp_seconds(header.stamp), _IDENTITY)
 
@@ -566,7 +566,7 @@ class _Reader:
             self.reader = make_reader(self.handle, decoder_factories=_decoder_factories())
             self.reader.get_header()
             self.summary = self.reader.get_summary()
-        except (*_mcap_errors(), OSError) as exc:  # OSError: a seek to a corrupt summary offset
+        except (*_mcap_errors(), OSError) as exc:  # type: ignore[misc]  # OSError: a seek to a corrupt summary offset
             self.handle.close()
             raise self.corrupt(exc) from None
         return self
@@ -765,7 +765,7 @@ def read_mcap(
                 continue
             where = f"{name}, topic {topic}, message {mcap_message.sequence or scan_count}"
             try:
-                decoded = _DECODERS[kinds[topic]](message, options, where)
+                decoded = _DECODERS[kinds[topic]](message, options, where)  # type: ignore[index]  # chosen topics have a kind
             except (AttributeError, TypeError, KeyError, ValueError) as exc:
                 if isinstance(exc, InputError):
                     raise

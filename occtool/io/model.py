@@ -202,7 +202,7 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
     model.slope_bounds_ = slope_bounds(tree)
     model.inverse_ = tree.inverse()
     model.guard_ = _guard_from(data, source)
-    model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}
+    model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}  # type: ignore[attr-defined]  # set by fit
     return model
 
 

@@ -56,9 +56,9 @@ def _open_binary(path: str | os.PathLike[str]) -> io.BufferedIOBase:
 
     name = str(path)
     if name.endswith(".gz"):
-        return gzip.open(name, "rb")  # type: ignore[return-value]
+        return gzip.open(name, "rb")
     if name.endswith(".bz2"):
-        return bz2.open(name, "rb")  # type: ignore[return-value]
+        return bz2.open(name, "rb")
     return open(name, "rb")
 
 
@@ -226,7 +226,9 @@ def _read_pcd(path: str | os.PathLike[str], name: str, evidence_field: str, cons
                 raise InputError(f"{name}: PCD field '{f}' has unsupported TYPE {kind} SIZE {size}")
             codes.append(f"<{letter}{size}")
         # Column (ascii) and byte (binary) offsets of each field's first element.
-        columns, offsets, col, off = {}, {}, 0, 0
+        columns: dict[str, tuple[int, str]] = {}
+        offsets: dict[str, tuple[int, str]] = {}
+        col, off = 0, 0
         for f, code, count in zip(fields, codes, field_counts):
             columns.setdefault(f, (col, code))
             offsets.setdefault(f, (off, code))

@@ -401,7 +401,7 @@ def compare_figure(
         if isinstance(report.get("models"), Mapping) else {}
     if not (polygons or variables or models):
         raise ModelFormatError(f"{source or 'the report'} has no models, polygons or scaling results to draw")
-    settings = report.get("settings") if isinstance(report.get("settings"), Mapping) else {}
+    settings: Mapping[str, Any] = report["settings"] if isinstance(report.get("settings"), Mapping) else {}
     cost_panels = 2 * len(variables) if variables else (3 if models else 0)
     columns = max(len(polygons), cost_panels, 1)
     rows = int(bool(polygons)) + int(bool(cost_panels))
@@ -461,8 +461,8 @@ def _draw_report_polygons(figure: Figure, cells: Any, report: Mapping[str, Any],
     extents = [max(abs(v) for v in g.bounds) for g in polygons.values() if not g.is_empty]
     half = 1.1 * max(extents + ([max_range] if math.isfinite(max_range) else []) + [radius * 2])
     reference = polygons.get("parametric")
-    agreement = report.get("agreement") if isinstance(report.get("agreement"), Mapping) else {}
-    truth = report.get("truth") if isinstance(report.get("truth"), Mapping) else {}
+    agreement: Mapping[str, Any] = report["agreement"] if isinstance(report.get("agreement"), Mapping) else {}
+    truth: Mapping[str, Any] = report["truth"] if isinstance(report.get("truth"), Mapping) else {}
     shared = None
     for index, (name, geometry) in enumerate(polygons.items()):
         ax = figure.add_subplot(cells[0, index], sharex=shared, sharey=shared)
@@ -482,7 +482,7 @@ def _draw_report_polygons(figure: Figure, cells: Any, report: Mapping[str, Any],
         iou = agreement.get(name, {}).get("iou") if isinstance(agreement.get(name), Mapping) else None
         if isinstance(iou, (int, float)):
             lines.append(f"IoU with parametric {iou:.2f}")
-        scores = truth.get(name) if isinstance(truth.get(name), Mapping) else {}
+        scores: Mapping[str, Any] = truth[name] if isinstance(truth.get(name), Mapping) else {}
         if isinstance(scores.get("iou"), (int, float)) and isinstance(scores.get("violation"), (int, float)):
             lines.append(f"truth IoU {scores['iou']:.2f}, violation {scores['violation']:.3f} m²")
         _finish_metric_axes(ax, "\n".join(lines))

@@ -49,7 +49,7 @@ def _floor_grid(height: float, extent: float, resolution: int) -> tuple[FloatArr
     if resolution < 2:
         raise InputError(f"resolution must be at least 2 cells, got {resolution}")
     step = 2.0 * extent / resolution
-    axis = -extent + step * (np.arange(resolution) + 0.5)
+    axis: FloatArray = -extent + step * (np.arange(resolution, dtype=np.float64) + 0.5)
     gx, gy = np.meshgrid(axis, axis)
     alpha = np.arctan2(gy, gx).ravel()
     h = np.full(alpha.shape, float(height))
