@@ -1,3 +1,4 @@
 from occtool.cli.main import main
 
-main()
+if __name__ == "__main__":
+    main()

@@ -40,7 +40,7 @@ import shapely
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features
+from occtool.features import Features, polar
 from occtool.robot import Robot
 
 if TYPE_CHECKING:
@@ -555,7 +555,7 @@ def compare_grid(
     )
     logger.info("parametric: fit %.3f s, extract %.4f s, %d pieces", fit_s, extract_s, model.tree_.n_pieces)
     scores["parametric"] = tuple(  # type: ignore[assignment]
-        np.asarray(model.predict(*_polar(p)), dtype=np.float64) for p in (occupied_points, free_points)
+        np.asarray(model.predict(*polar(p)), dtype=np.float64) for p in (occupied_points, free_points)
     )
 
     # --- the baselines, alike
@@ -663,14 +663,6 @@ def compare_grid(
         report["readings"] = readings
     report["polygons"] = {name: json.loads(shapely.to_geojson(result.polygon)) for name, result in results.items()}
     return report
-
-
-def _polar(points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    return (
-        np.arctan2(points[:, 1], points[:, 0]),
-        points[:, 2].copy(),
-        np.sqrt(np.einsum("ij,ij->i", points, points)),
-    )
 
 
 def report_json(report: Mapping[str, Any], *, indent: int | None = 2) -> str:

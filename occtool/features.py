@@ -20,6 +20,36 @@ from occtool.errors import InputError
 FloatArray = NDArray[np.float64]
 
 
+def polar(points: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The paper's robot-centred coordinates ``(alpha, h, r)`` of ``(N, 3)`` points.
+
+    ``alpha = atan2(y, x)`` in (-pi, pi], ``h = z`` and ``r = |p|``.
+
+    Examples
+    --------
+    >>> alpha, h, r = polar([[0.0, 3.0, -4.0]])
+    >>> float(alpha[0]), float(h[0]), float(r[0])
+    (1.5707963267948966, -4.0, 5.0)
+    """
+    xyz = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return (
+        np.arctan2(xyz[:, 1], xyz[:, 0]),
+        xyz[:, 2].copy(),
+        np.sqrt(np.einsum("ij,ij->i", xyz, xyz)),
+    )
+
+
+def wrap_angle(alpha: ArrayLike) -> FloatArray:
+    """Angles wrapped into [-pi, pi), radians.
+
+    Examples
+    --------
+    >>> wrap_angle([3.5 * np.pi, -np.pi, np.pi]) / np.pi
+    array([-0.5, -1. , -1. ])
+    """
+    return np.mod(np.asarray(alpha) + np.pi, 2.0 * np.pi) - np.pi
+
+
 @dataclass(frozen=True, eq=False)
 class Features:
     """Range features registered from one robot position.
@@ -100,8 +130,8 @@ class Features:
         return np.sqrt(np.einsum("ij,ij->i", self.points, self.points))
 
     def polar(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Return ``(alpha, h, r)``, the paper's robot-centred coordinates."""
-        return self.alpha, self.height, self.range
+        """Return ``(alpha, h, r)``, the paper's robot-centred coordinates (:func:`polar`)."""
+        return polar(self.points)
 
     def select(self, mask: ArrayLike) -> Features:
         """The features where ``mask`` is true (or at the given indices)."""

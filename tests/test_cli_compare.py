@@ -27,6 +27,7 @@ def _run(*args: str) -> object:
 
 
 def test_table_and_json_report(small_log: Path, fixtures_dir: Path, tmp_path: Path) -> None:
+    pytest.importorskip("pyoctomap")
     report_path = tmp_path / "report.json"
     result = _run(
         "compare-grid", str(small_log), "--resolution", "0.1", "--pieces", "8", "--octomap",
@@ -107,6 +108,7 @@ def test_config_file_sets_defaults_and_the_command_line_wins(small_log: Path, tm
 
 @pytest.mark.slow
 def test_the_octomap_scan(shared_data: Path, tmp_path: Path) -> None:
+    pytest.importorskip("pyoctomap")
     scan = shared_data / "octomap_scan" / "scan.dat.bz2"
     if not scan.exists():
         pytest.skip("the OctoMap scan is not in ../shared/data")
@@ -138,6 +140,7 @@ def test_no_overwrite_refuses_an_existing_report(tmp_path, fixtures_dir):
 
 
 def test_unknown_option_round_trips_in_the_json(small_log: Path, tmp_path: Path) -> None:
+    pytest.importorskip("pyoctomap")
     common = ("compare-grid", str(small_log), "--resolution", "0.2", "-L", "6", "--angles", "90", "--octomap")
     default = json.loads(_run(*common, "--json", "-").stdout)
     assert default["settings"]["unknown"] == "free"

@@ -27,6 +27,8 @@ TRUTH = FIXTURES / "office" / "truth.json"
 
 
 def run(*args: object):
+    if args and args[0] == "plot":
+        pytest.importorskip("matplotlib")  # the plot extra
     return CliRunner().invoke(cli, [str(a) for a in args])
 
 

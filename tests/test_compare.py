@@ -101,6 +101,7 @@ def test_holdout_out_of_range_is_an_input_error() -> None:
 
 @pytest.fixture(scope="module")
 def round_room_report() -> dict:
+    pytest.importorskip("pyoctomap")
     features = _round_room()
     return compare_grid(
         features,
@@ -215,6 +216,7 @@ def test_unknown_space_is_recorded(round_room_report: dict) -> None:
 
 
 def test_unknown_occupied_closes_what_the_laser_did_not_see() -> None:
+    pytest.importorskip("pyoctomap")
     robot = Robot(sensor_height=0.3, body_height=0.4)
     features = _planar_scan()
     reports = {

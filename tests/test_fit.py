@@ -384,16 +384,6 @@ def dense_segment_near_runs(profile, far, n_segments, max_length):
     return segments[::-1]
 
 
-def segment_cost(profile: np.ndarray, first: int, end: int) -> float:
-    """Squared error of the best line through a (circular) run of the profile."""
-    y = profile[np.mod(np.arange(first, end), profile.shape[0])]
-    if y.size < 3:
-        return 0.0
-    x = np.arange(y.size, dtype=np.float64)
-    coefficients = np.polyfit(x, y, 1)
-    return float(np.sum((np.polyval(coefficients, x) - y) ** 2))
-
-
 @settings(max_examples=200, deadline=None)
 @given(st.integers(3, 120), st.integers(1, 9), st.integers(1, 130), st.integers(0, 2**32 - 1))
 def test_banded_segmentation_equals_the_dense_dynamic_programme(n, n_segments, max_length, seed):

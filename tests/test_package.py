@@ -57,3 +57,50 @@ def test_version_has_one_source(tmp_path) -> None:
     result = CliRunner().invoke(cli, ["--version"])
     assert result.exit_code == 0
     assert result.output.strip() == f"occtool, version {occtool.__version__}"
+
+
+# --- one home per concept ---------------------------------------------------------------
+
+
+def _keywords(function) -> dict[str, object]:
+    import inspect
+
+    return {name: p.default for name, p in inspect.signature(function).parameters.items()
+            if p.kind is inspect.Parameter.KEYWORD_ONLY}
+
+
+def test_the_reader_keywords_are_named_and_defaulted_once() -> None:
+    from typing import get_type_hints
+
+    from occtool.io import read_log
+    from occtool.io.carmen import read_carmen
+    from occtool.io.csv import read_csv
+    from occtool.io.mcap import read_mcap
+    from occtool.io.pointcloud import read_pointcloud
+    from occtool.io.read_options import ReadOptions
+
+    shared = _keywords(read_log)
+    assert set(shared) == set(get_type_hints(ReadOptions))
+    # CARMEN's constant evidence is resolved by read_log (0.9 when None); max_range is its own.
+    own = {read_carmen: {"max_range", "evidence"}}
+    for reader in (read_csv, read_mcap, read_carmen, read_pointcloud):
+        keywords = {k: v for k, v in _keywords(reader).items() if k not in own.get(reader, set())}
+        assert keywords.items() <= shared.items(), reader.__name__
+
+
+def test_one_angle_wrap_and_one_polar_conversion() -> None:
+    import numpy as np
+
+    from occtool.features import Features, polar, wrap_angle
+
+    rng = np.random.default_rng(0)
+    alpha = rng.uniform(-20.0, 20.0, 1000)
+    wrapped = wrap_angle(alpha)
+    assert np.all((wrapped >= -np.pi) & (wrapped < np.pi))
+    np.testing.assert_allclose(np.cos(wrapped), np.cos(alpha), atol=1e-12)
+    np.testing.assert_allclose(np.sin(wrapped), np.sin(alpha), atol=1e-12)
+    features = Features(rng.uniform(-3.0, 3.0, (50, 3)), rng.uniform(0.0, 1.0, 50))
+    for mine, theirs in zip(features.polar(), (features.alpha, features.height, features.range)):
+        assert np.array_equal(mine, theirs)
+    alpha, h, r = polar(features.points)
+    np.testing.assert_allclose(r * np.cos(alpha) * np.sqrt(1 - (h / r) ** 2), features.points[:, 0], atol=1e-12)

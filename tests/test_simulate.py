@@ -269,3 +269,20 @@ def test_rays_stop_at_the_first_surface(x, y, w, d, z_min, tall, seed) -> None:
     # A ray that hits nothing goes up or reaches the floor beyond the 20 m limit.
     down = unit[~hit, 2] < 0
     assert (-1.0 / unit[~hit][down, 2] > 20.0).all()
+
+
+def test_a_simulated_log_is_written_as_compact_csv_that_reads_back(tmp_path) -> None:
+    from occtool.io import read_log
+    from occtool.simulate import save_features_csv, simulate_scene
+
+    features, _ = simulate_scene("office", n_features=300, seed=2)
+    path = tmp_path / "features.csv"
+    save_features_csv(features, path, ["occtool simulate office", "second line"])
+    lines = path.read_text().splitlines()
+    assert lines[:3] == ["# occtool simulate office", "# second line", "x,y,z,m"]
+    # 0.1 mm coordinates and 3-decimal evidence, the synthetic logs' documented precision.
+    assert all(len(value.split(".")[1]) == (3 if k == 3 else 4)
+               for line in lines[3:] for k, value in enumerate(line.split(",")))
+    back = read_log(path).single().features
+    np.testing.assert_allclose(back.points, features.points, atol=0.5e-4 + 1e-12)
+    np.testing.assert_allclose(back.evidence, features.evidence, atol=0.5e-3 + 1e-12)

@@ -36,6 +36,7 @@ from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
 
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
+    from occtool.io.read_options import ReadOptions
 
 __all__ = ["FORMATS", "check_no_return_range", "detect_format", "read_log", "describe_log", "write_csv", "write_mcap"]
 
@@ -223,7 +224,7 @@ def read_log(
     if topics and fmt != "mcap":
         raise InputError(f"--topic applies to MCAP logs only, and {path} is {fmt}")
     no_return_range = check_no_return_range(no_return_range)
-    options = dict(
+    options: ReadOptions = dict(
         topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
         sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
         skip_invalid=skip_invalid, no_return_range=no_return_range,
@@ -240,7 +241,7 @@ def read_log(
         raise InputError(f"{path} cannot be read: {exc}") from None
 
 
-def _read_format(path: str | os.PathLike[str], fmt: str, options: dict[str, Any]) -> RangeLog:
+def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -> RangeLog:
     topics = options["topics"]
     evidence_field = options["evidence_field"]
     evidence = options["evidence"]
