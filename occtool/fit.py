@@ -860,8 +860,10 @@ class _Fitter:
             # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
             # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
             objective = -(rows[chosen] / cap[chosen, None] ** 2).sum(axis=0)
-            A_ub = np.vstack([rows, rows[chosen]])
-            b_ub = np.concatenate([target, cap[chosen]])
+            # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
+            # each, bounded by the smaller.
+            A_ub = rows
+            b_ub = np.where(emphasis, np.minimum(target, cap), target)
             # Keep the crossing off the robot's body wherever the obstacle allows: at the
             # floor, a crossing a few centimetres too near in r is a body in collision.
             # Only this centre's part of the band: the group's crossing is the farthest of its
@@ -1123,8 +1125,8 @@ SIGHT_HEIGHT_SHARE = 0.02
 #: Rays per bin tested against each feature at most (an even subsample beyond that), so
 #: the test stays linear in the number of features.
 SIGHT_MAX_RAYS = 128
-#: Feature-ray pairs of the line-of-sight test evaluated at once.
-SIGHT_BLOCK = 1 << 15
+#: Features of the line-of-sight test evaluated at once.
+SIGHT_BLOCK = 1 << 16
 
 
 def contradicted_features(features: Features, origin: float = 0.0,
@@ -1152,33 +1154,67 @@ def contradicted_features(features: Features, origin: float = 0.0,
     distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
     bins = angle_bins(alpha - origin, SIGHT_BINS)
     order = np.argsort(bins, kind="stable")
-    bounds = np.searchsorted(bins[order], np.arange(SIGHT_BINS + 1))
-    for first, last in zip(bounds[:-1], bounds[1:]):  # a loop over bins; points are vectorised
-        members = order[first:last]
-        if members.size < 3:
+    counts = np.bincount(bins, minlength=SIGHT_BINS)
+    starts = np.cumsum(counts) - counts
+    # Each bin's rays: all its features, or an even subsample of them.
+    step = np.maximum(1, counts // SIGHT_MAX_RAYS)
+    n_rays = np.where(counts > 0, -(-counts // step), 0)
+    ray_bin = np.repeat(np.arange(SIGHT_BINS), n_rays)
+    slot = np.arange(ray_bin.size) - np.repeat(np.cumsum(n_rays) - n_rays, n_rays)
+    rays = order[starts[ray_bin] + slot * step[ray_bin]]
+    tested = np.flatnonzero(counts[bins] >= 3)
+    if candidates is not None:
+        tested = tested[candidates[tested]]
+    if tested.size == 0:
+        return contradicted
+    # A ray passes a feature when it ends beyond it (d > D + window) and its height at the
+    # feature's distance, z D / d, lies within `within` of the feature's: an interval of
+    # the ray's elevation z / d. With the rays sorted by bin, then elevation (as an angle,
+    # so the key is bounded), each feature's candidate rays are one run; the exact test is
+    # made on those pairs alone (trying every ray of the bin: 2.3x the time at 10k and
+    # 100k features, the same answer). Rays ending near the feature, which can save it,
+    # are a run of the rays sorted by bin, then distance.
+    d_ray, z_ray = distance[rays], h[rays]
+    ahead = d_ray > 0
+    elevation_key = 4.0 * ray_bin[ahead] + np.arctan2(z_ray[ahead], d_ray[ahead])
+    by_elevation = np.argsort(elevation_key, kind="stable")
+    by_elevation = (elevation_key[by_elevation], rays[ahead][by_elevation])
+    lane = 2.0 * float(distance.max()) + 1.0
+    by_distance = np.lexsort((d_ray, ray_bin))
+    by_distance = (ray_bin[by_distance] * lane + d_ray[by_distance], rays[by_distance])
+    for first in range(0, tested.size, SIGHT_BLOCK):  # blocks of features bound the pairs' memory
+        block = tested[first:first + SIGHT_BLOCK]
+        D, H = distance[block], h[block]
+        window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
+        within = tolerance[0] + tolerance[1] * D
+        D_safe = np.maximum(D, 1e-12)
+        owner, pair_ray = _runs(*by_elevation, 4.0 * bins[block] + np.arctan((H - within) / D_safe) - 1e-9,
+                                4.0 * bins[block] + np.arctan((H + within) / D_safe) + 1e-9)
+        d, z, D_pair = distance[pair_ray], h[pair_ray], D[owner]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            passes = (d > D_pair + window[owner]) & (np.abs(z * D_pair / d - H[owner]) < within[owner])
+        beyond = np.bincount(owner, weights=passes, minlength=block.size)
+        maybe = np.flatnonzero(beyond >= ratio)
+        if maybe.size == 0:
             continue
-        rays = members[:: max(1, members.size // SIGHT_MAX_RAYS)]
-        if candidates is not None:
-            members = members[candidates[members]]
-            if members.size == 0:
-                continue
-        d, z = distance[None, rays], h[None, rays]
-        # Blocks of features against the bin's rays: (block x rays) temporaries stay in
-        # cache (whole bins at 1M features took 12x the time of 100k for 10x the work).
-        block = max(1, SIGHT_BLOCK // max(1, rays.size))
-        for start in range(0, members.size, block):
-            tested = members[start:start + block]
-            D, H = distance[tested, None], h[tested, None]
-            window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
-            within = tolerance[0] + tolerance[1] * D
-            with np.errstate(divide="ignore", invalid="ignore"):
-                height_there = z * D / d
-            passes = (d > D + window) & (np.abs(height_there - H) < within)
-            ends_near = (np.abs(d - D) <= window) & (np.abs(z - H) < within)
-            beyond = passes.sum(axis=1)
-            near = np.maximum(ends_near.sum(axis=1), 1)
-            contradicted[tested] = beyond >= np.maximum(ratio, ratio * near)
+        D, H, window, within, beyond = D[maybe], H[maybe], window[maybe], within[maybe], beyond[maybe]
+        owner, pair_ray = _runs(*by_distance, bins[block[maybe]] * lane + (D - window) - 1e-9,
+                                bins[block[maybe]] * lane + (D + window) + 1e-9)
+        ends_near = (np.abs(distance[pair_ray] - D[owner]) <= window[owner]) & (
+            np.abs(h[pair_ray] - H[owner]) < within[owner])
+        near = np.maximum(np.bincount(owner, weights=ends_near, minlength=maybe.size), 1)
+        contradicted[block[maybe]] = beyond >= np.maximum(ratio, ratio * near)
     return contradicted
+
+
+def _runs(keys: FloatArray, items: NDArray[np.intp], low: FloatArray,
+          high: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Every pair (query ``i``, item) whose key lies in ``[low[i], high[i]]``, for ``keys``
+    sorted ascending: the query's index and the item, one row per pair."""
+    first = np.searchsorted(keys, low, side="left")
+    span = np.maximum(np.searchsorted(keys, high, side="right") - first, 0)
+    owner = np.repeat(np.arange(span.size), span)
+    return owner, items[np.repeat(first - np.cumsum(span) + span, span) + np.arange(owner.size)]
 
 
 def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int,
