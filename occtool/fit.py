@@ -33,8 +33,10 @@ for every piece at every step, since each candidate piece is projected onto them
 from __future__ import annotations
 
 import hashlib
+import inspect
 import logging
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -47,7 +49,7 @@ from occtool import guard as guard_module
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
 from occtool.guard import (
-    GUARD_BINS, Support, build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count,
+    GUARD_BINS, ReturnGuard, Support, build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count,
 )
 from occtool.linear_program import solve_lp
 from occtool.robot import Robot
@@ -185,9 +187,26 @@ class OccupancyRegressor:
         radius from (:meth:`guarded_returns` says which). The tree does not bend to
         single returns: that cost IoU (0.738 -> 0.715 at 10k features) for no safety the
         guard does not give.
-    progress
-        Optional ``callback(done, total)`` called after each group is built and after
-        each refit sweep.
+
+    Attributes
+    ----------
+    tree_ : MinMaxTree
+        The fitted tree; ``inverse_`` its inverse (:meth:`invert`).
+    guard_ : ReturnGuard or None
+        The return guard (``guard=True``).
+    sensor_, robot_
+        The sensor model and robot the fit used (the defaults where none was given).
+    n_features_, n_samples_, sample_counts_
+        Features fitted, samples made from them, and samples by kind.
+    rmse_, loss_, loss_history_, n_sweeps_
+        Weighted RMSE and loss of the tree at the samples (over an even subsample of at
+        most :data:`LOSS_SAMPLES` of them), the loss after each sweep, and the sweeps run.
+    slope_bounds_
+        The pieces' actual weight extremes (:func:`slope_bounds`).
+    features_digest_
+        sha256 of the fitted features (:func:`features_digest`).
+    fit_seconds_
+        Wall time of :meth:`fit`, seconds (nan for a model read from a file).
 
     Examples
     --------
@@ -199,6 +218,7 @@ class OccupancyRegressor:
 
     def __init__(
         self,
+        *,
         pieces: int = DEFAULT_PIECES,
         basis: str = DEFAULT_BASIS,
         c_min: float = 0.25,
@@ -220,7 +240,6 @@ class OccupancyRegressor:
         focus: bool = True,
         focus_range: float = DEFAULT_FOCUS_RANGE,
         guard: bool = True,
-        progress: ProgressCallback | None = None,
     ) -> None:
         self.pieces = pieces
         self.basis = basis
@@ -243,12 +262,38 @@ class OccupancyRegressor:
         self.focus = focus
         self.focus_range = focus_range
         self.guard = guard
-        self.progress = progress
 
     # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict[str, Any]:
-        """The constructor arguments (scikit-learn style)."""
-        return {name: getattr(self, name) for name in _PARAM_NAMES}
+    @classmethod
+    def _get_param_names(cls) -> tuple[str, ...]:
+        """The constructor's keyword names, in order: the one list of parameters."""
+        return tuple(name for name in inspect.signature(cls.__init__).parameters if name != "self")
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The constructor arguments (the scikit-learn estimator contract; ``deep`` adds
+        ``name__key`` entries for parameters that have ``get_params`` themselves)."""
+        params = {name: getattr(self, name) for name in self._get_param_names()}
+        if deep:
+            for name, value in list(params.items()):
+                if hasattr(value, "get_params") and not isinstance(value, type):
+                    params.update({f"{name}__{key}": item for key, item in value.get_params().items()})
+        return params
+
+    def set_params(self, **params: Any) -> OccupancyRegressor:
+        """Set constructor arguments by name; returns ``self``."""
+        names = self._get_param_names()
+        for name, value in params.items():
+            if name not in names:
+                raise InputError(f"OccupancyRegressor has no parameter {name!r} (parameters: {', '.join(names)})")
+            setattr(self, name, value)
+        return self
+
+    def __repr__(self) -> str:
+        defaults = {name: parameter.default
+                    for name, parameter in inspect.signature(type(self).__init__).parameters.items() if name != "self"}
+        changed = [f"{name}={value!r}" for name, value in self.get_params(deep=False).items()
+                   if not _same_default(value, defaults[name])]
+        return f"{type(self).__name__}({', '.join(changed)})"
 
     def _validate(self) -> None:
         if isinstance(self.pieces, bool) or int(self.pieces) != self.pieces or self.pieces < 1:
@@ -276,13 +321,16 @@ class OccupancyRegressor:
             raise InputError(f"max sweeps must be a whole number >= 0, got {self.max_sweeps}")
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, features: Features) -> OccupancyRegressor:
+    def fit(self, features: Features, *, progress: ProgressCallback | None = None) -> OccupancyRegressor:
         """Fit the tree to the features of one robot position.
 
         Parameters
         ----------
         features
             Range features in the sensor-centred robot frame.
+        progress
+            Optional ``callback(done, total)`` called after each group is built and after
+            each refit sweep.
 
         Returns
         -------
@@ -294,6 +342,7 @@ class OccupancyRegressor:
         InputError
             If a parameter is invalid or there are no usable features.
         """
+        started = time.perf_counter()
         self._validate()
         sensor = self.sensor if self.sensor is not None else SensorModel()
         robot = self.robot if self.robot is not None else Robot()
@@ -320,7 +369,8 @@ class OccupancyRegressor:
             focused = focus_samples(turned, robot, self.focus_range, floor_is_obstacle=sensor.floor == "obstacle")
             turned = join_samples(focused, frontier)
         fitter = _Fitter(self, turned, robot, self._profile_returns(usable, sensor, robot, origin),
-                         floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error)
+                         floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
+                         progress=progress)
         tree, loss_history = fitter.run()
         if origin:
             tree = fitter.turned_tree(tree, origin)
@@ -336,21 +386,36 @@ class OccupancyRegressor:
         samples = turned
         rows = fitter.loss_rows
         residual = fitter.prediction - samples.m[rows]
+        self._set_fitted(
+            tree, sensor=sensor, robot=robot, guard=guard, n_features=len(features), n_samples=len(samples),
+            sample_counts={kind: samples.count(kind) for kind in SAMPLE_KINDS},
+            rmse=float(np.sqrt(np.average(residual**2, weights=samples.weight[rows]))),
+            loss_history=[float(v) for v in loss_history], n_sweeps=len(loss_history) - 1,
+            features_digest=features_digest(features), seconds=time.perf_counter() - started,
+        )
+        return self
+
+    def _set_fitted(self, tree: MinMaxTree, *, sensor: SensorModel, robot: Robot, guard: ReturnGuard | None,
+                    n_features: int, n_samples: int, sample_counts: dict[str, int], rmse: float,
+                    loss_history: list[float], n_sweeps: int, features_digest: str, seconds: float,
+                    loss: float | None = None) -> None:
+        """Every fitted attribute, from a fit or a model file (``loss`` defaults to the
+        last of ``loss_history``)."""
         self.tree_ = tree
         self.sensor_ = sensor
         self.robot_ = robot
-        self.n_features_ = len(features)
-        self.n_samples_ = len(samples)
-        self.sample_counts_ = {kind: samples.count(kind) for kind in SAMPLE_KINDS}
-        self.rmse_ = float(np.sqrt(np.average(residual**2, weights=samples.weight[rows])))
-        self.loss_ = float(loss_history[-1])
-        self.loss_history_ = [float(v) for v in loss_history]
-        self.n_sweeps_ = len(loss_history) - 1
-        self.features_digest_ = features_digest(features)
+        self.n_features_ = n_features
+        self.n_samples_ = n_samples
+        self.sample_counts_ = sample_counts
+        self.rmse_ = rmse
+        self.loss_history_ = loss_history
+        self.loss_ = float(loss_history[-1]) if loss is None else loss
+        self.n_sweeps_ = n_sweeps
+        self.features_digest_ = features_digest
         self.slope_bounds_ = slope_bounds(tree)
         self.inverse_ = tree.inverse()
         self.guard_ = guard
-        return self
+        self.fit_seconds_ = seconds
 
     def _profile_returns(self, features: Features, sensor: SensorModel, robot: Robot,
                          origin: float) -> tuple[FloatArray, FloatArray]:
@@ -520,10 +585,12 @@ class OccupancyRegressor:
         }
 
 
-_PARAM_NAMES = (
-    "pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
-    "sensor", "robot", "seed", "focus", "focus_range", "guard", "progress",
-)
+def _same_default(value: Any, default: Any) -> bool:
+    """Whether a parameter still has its default (for the repr)."""
+    try:
+        return bool(value == default) and type(value) is type(default)
+    except (TypeError, ValueError):
+        return False
 
 
 def slope_bounds(tree: MinMaxTree) -> dict[str, float]:
@@ -574,8 +641,10 @@ class _Fitter:
 
     def __init__(self, params: OccupancyRegressor, samples: Samples, robot: Robot,
                  returns: tuple[FloatArray, FloatArray], *,
-                 floor_is_obstacle: bool = False, depth_error: float = 0.0) -> None:
+                 floor_is_obstacle: bool = False, depth_error: float = 0.0,
+                 progress: ProgressCallback | None = None) -> None:
         self.p = params
+        self.progress = progress
         #: Pan angle (turned) and horizontal distance of the obstacle returns in the body band.
         self.returns = returns
         self.depth_error = depth_error
@@ -781,8 +850,8 @@ class _Fitter:
                     group.append(len(pieces))
                     pieces.append(side)
             members.append(group)
-            if p.progress is not None:
-                p.progress(g + 1, len(segments) + int(p.max_sweeps))
+            if self.progress is not None:
+                self.progress(g + 1, len(segments) + int(p.max_sweeps))
         W = np.array(pieces)
         self.progress_offset = len(segments)
         return self.alternate(W, members)
@@ -1061,9 +1130,9 @@ class _Fitter:
                         loss = new_loss
                         break
             history.append(loss)
-            if self.p.progress is not None:
+            if self.progress is not None:
                 offset = getattr(self, "progress_offset", 0)
-                self.p.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
+                self.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
             if before - loss <= self.p.tol * max(before, 1e-12):
                 break
         self.prediction = F
