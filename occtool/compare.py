@@ -515,7 +515,7 @@ def compare_grid(
     navigation["robot"] = robot
     sensor = regressor.sensor if regressor.sensor is not None else SensorModel()
     # Every model sees the same robot and sensor model; the caller's regressor is left as it is.
-    settings = {**regressor.get_params(), "robot": robot, "sensor": sensor}
+    settings = {**regressor.get_params(deep=False), "robot": robot, "sensor": sensor}
     max_range = float(navigation.get("max_range", 1.5))
     # Rays are read past the max range by the robot radius before the shrink, plus a cell.
     read_range = max_range + robot.radius + resolution

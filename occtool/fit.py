@@ -33,8 +33,10 @@ for every piece at every step, since each candidate piece is projected onto them
 from __future__ import annotations
 
 import hashlib
+import inspect
 import logging
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -47,7 +49,7 @@ from occtool import guard as guard_module
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
 from occtool.guard import (
-    GUARD_BINS, Support, build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count,
+    GUARD_BINS, ReturnGuard, Support, build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count,
 )
 from occtool.linear_program import solve_lp
 from occtool.robot import Robot
@@ -86,6 +88,10 @@ PROFILE_FULL_DENSITY = 9000
 PROFILE_HEIGHTS = 9
 #: Samples whose loss is summed at once.
 LOSS_CHUNK = 1 << 16
+#: Samples of a segment the slope of its crossing is estimated from, at most.
+SLOPE_SAMPLES = 8192
+#: Samples the reported loss and RMSE are computed over, at most (an even subsample).
+LOSS_SAMPLES = 300_000
 
 
 def features_digest(features: Features) -> str:
@@ -181,9 +187,26 @@ class OccupancyRegressor:
         radius from (:meth:`guarded_returns` says which). The tree does not bend to
         single returns: that cost IoU (0.738 -> 0.715 at 10k features) for no safety the
         guard does not give.
-    progress
-        Optional ``callback(done, total)`` called after each group is built and after
-        each refit sweep.
+
+    Attributes
+    ----------
+    tree_ : MinMaxTree
+        The fitted tree; ``inverse_`` its inverse (:meth:`invert`).
+    guard_ : ReturnGuard or None
+        The return guard (``guard=True``).
+    sensor_, robot_
+        The sensor model and robot the fit used (the defaults where none was given).
+    n_features_, n_samples_, sample_counts_
+        Features fitted, samples made from them, and samples by kind.
+    rmse_, loss_, loss_history_, n_sweeps_
+        Weighted RMSE and loss of the tree at the samples (over an even subsample of at
+        most :data:`LOSS_SAMPLES` of them), the loss after each sweep, and the sweeps run.
+    slope_bounds_
+        The pieces' actual weight extremes (:func:`slope_bounds`).
+    features_digest_
+        sha256 of the fitted features (:func:`features_digest`).
+    fit_seconds_
+        Wall time of :meth:`fit`, seconds (nan for a model read from a file).
 
     Examples
     --------
@@ -195,6 +218,7 @@ class OccupancyRegressor:
 
     def __init__(
         self,
+        *,
         pieces: int = DEFAULT_PIECES,
         basis: str = DEFAULT_BASIS,
         c_min: float = 0.25,
@@ -216,7 +240,6 @@ class OccupancyRegressor:
         focus: bool = True,
         focus_range: float = DEFAULT_FOCUS_RANGE,
         guard: bool = True,
-        progress: ProgressCallback | None = None,
     ) -> None:
         self.pieces = pieces
         self.basis = basis
@@ -239,12 +262,38 @@ class OccupancyRegressor:
         self.focus = focus
         self.focus_range = focus_range
         self.guard = guard
-        self.progress = progress
 
     # ------------------------------------------------------------------ parameters
-    def get_params(self) -> dict[str, Any]:
-        """The constructor arguments (scikit-learn style)."""
-        return {name: getattr(self, name) for name in _PARAM_NAMES}
+    @classmethod
+    def _get_param_names(cls) -> tuple[str, ...]:
+        """The constructor's keyword names, in order: the one list of parameters."""
+        return tuple(name for name in inspect.signature(cls.__init__).parameters if name != "self")
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The constructor arguments (the scikit-learn estimator contract; ``deep`` adds
+        ``name__key`` entries for parameters that have ``get_params`` themselves)."""
+        params = {name: getattr(self, name) for name in self._get_param_names()}
+        if deep:
+            for name, value in list(params.items()):
+                if hasattr(value, "get_params") and not isinstance(value, type):
+                    params.update({f"{name}__{key}": item for key, item in value.get_params().items()})
+        return params
+
+    def set_params(self, **params: Any) -> OccupancyRegressor:
+        """Set constructor arguments by name; returns ``self``."""
+        names = self._get_param_names()
+        for name, value in params.items():
+            if name not in names:
+                raise InputError(f"OccupancyRegressor has no parameter {name!r} (parameters: {', '.join(names)})")
+            setattr(self, name, value)
+        return self
+
+    def __repr__(self) -> str:
+        defaults = {name: parameter.default
+                    for name, parameter in inspect.signature(type(self).__init__).parameters.items() if name != "self"}
+        changed = [f"{name}={value!r}" for name, value in self.get_params(deep=False).items()
+                   if not _same_default(value, defaults[name])]
+        return f"{type(self).__name__}({', '.join(changed)})"
 
     def _validate(self) -> None:
         if isinstance(self.pieces, bool) or int(self.pieces) != self.pieces or self.pieces < 1:
@@ -272,13 +321,16 @@ class OccupancyRegressor:
             raise InputError(f"max sweeps must be a whole number >= 0, got {self.max_sweeps}")
 
     # ------------------------------------------------------------------ fitting
-    def fit(self, features: Features) -> OccupancyRegressor:
+    def fit(self, features: Features, *, progress: ProgressCallback | None = None) -> OccupancyRegressor:
         """Fit the tree to the features of one robot position.
 
         Parameters
         ----------
         features
             Range features in the sensor-centred robot frame.
+        progress
+            Optional ``callback(done, total)`` called after each group is built and after
+            each refit sweep.
 
         Returns
         -------
@@ -290,6 +342,7 @@ class OccupancyRegressor:
         InputError
             If a parameter is invalid or there are no usable features.
         """
+        started = time.perf_counter()
         self._validate()
         sensor = self.sensor if self.sensor is not None else SensorModel()
         robot = self.robot if self.robot is not None else Robot()
@@ -316,7 +369,8 @@ class OccupancyRegressor:
             focused = focus_samples(turned, robot, self.focus_range, floor_is_obstacle=sensor.floor == "obstacle")
             turned = join_samples(focused, frontier)
         fitter = _Fitter(self, turned, robot, self._profile_returns(usable, sensor, robot, origin),
-                         floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error)
+                         floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
+                         progress=progress)
         tree, loss_history = fitter.run()
         if origin:
             tree = fitter.turned_tree(tree, origin)
@@ -330,22 +384,40 @@ class OccupancyRegressor:
         # one evaluation takes half a second).
         assert fitter.prediction is not None
         samples = turned
-        residual = fitter.prediction - samples.m
+        rows = fitter.loss_rows
+        residual = fitter.prediction - samples.m[rows]
+        self._set_fitted(
+            tree, sensor=sensor, robot=robot, guard=guard, n_features=len(features), n_samples=len(samples),
+            sample_counts={kind: samples.count(kind) for kind in SAMPLE_KINDS},
+            rmse=float(np.sqrt(np.average(residual**2, weights=samples.weight[rows]))),
+            loss_history=[float(v) for v in loss_history], n_sweeps=len(loss_history) - 1,
+            features_digest=features_digest(features), seconds=time.perf_counter() - started,
+        )
+        return self
+
+    def _set_fitted(self, tree: MinMaxTree, *, sensor: SensorModel, robot: Robot, guard: ReturnGuard | None,
+                    n_features: int, n_samples: int, sample_counts: dict[str, int], rmse: float,
+                    loss_history: list[float], n_sweeps: int, features_digest: str, seconds: float,
+                    loss: float | None = None) -> None:
+        """Every fitted attribute, from a fit or a model file (``loss`` defaults to the
+        last of ``loss_history``)."""
         self.tree_ = tree
         self.sensor_ = sensor
         self.robot_ = robot
-        self.n_features_ = len(features)
-        self.n_samples_ = len(samples)
-        self.sample_counts_ = {kind: samples.count(kind) for kind in SAMPLE_KINDS}
-        self.rmse_ = float(np.sqrt(np.average(residual**2, weights=samples.weight)))
-        self.loss_ = float(loss_history[-1])
-        self.loss_history_ = [float(v) for v in loss_history]
-        self.n_sweeps_ = len(loss_history) - 1
-        self.features_digest_ = features_digest(features)
+        self.n_features_ = n_features
+        self.n_samples_ = n_samples
+        self.sample_counts_ = sample_counts
+        self.rmse_ = rmse
+        self.loss_history_ = loss_history
+        self.loss_ = float(loss_history[-1]) if loss is None else loss
+        self.n_sweeps_ = n_sweeps
+        self.features_digest_ = features_digest
         self.slope_bounds_ = slope_bounds(tree)
         self.inverse_ = tree.inverse()
         self.guard_ = guard
-        return self
+        self.fit_seconds_ = seconds
+        #: A model file's run details (the model reader fills them in).
+        self.run_: dict[str, Any] = {}
 
     def _profile_returns(self, features: Features, sensor: SensorModel, robot: Robot,
                          origin: float) -> tuple[FloatArray, FloatArray]:
@@ -515,10 +587,12 @@ class OccupancyRegressor:
         }
 
 
-_PARAM_NAMES = (
-    "pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
-    "sensor", "robot", "seed", "focus", "focus_range", "guard", "progress",
-)
+def _same_default(value: Any, default: Any) -> bool:
+    """Whether a parameter still has its default (for the repr)."""
+    try:
+        return bool(value == default) and type(value) is type(default)
+    except (TypeError, ValueError):
+        return False
 
 
 def slope_bounds(tree: MinMaxTree) -> dict[str, float]:
@@ -569,8 +643,10 @@ class _Fitter:
 
     def __init__(self, params: OccupancyRegressor, samples: Samples, robot: Robot,
                  returns: tuple[FloatArray, FloatArray], *,
-                 floor_is_obstacle: bool = False, depth_error: float = 0.0) -> None:
+                 floor_is_obstacle: bool = False, depth_error: float = 0.0,
+                 progress: ProgressCallback | None = None) -> None:
         self.p = params
+        self.progress = progress
         #: Pan angle (turned) and horizontal distance of the obstacle returns in the body band.
         self.returns = returns
         self.depth_error = depth_error
@@ -599,6 +675,8 @@ class _Fitter:
         self.delta = params.huber_delta if params.loss == "huber" else np.inf
         #: The final tree's values at the samples, set by :meth:`alternate`.
         self.prediction: FloatArray | None = None
+        #: The samples ``prediction`` is at.
+        self.loss_rows = slice(None)
         # Hit and near samples grouped by profile bin, and the bins' bounds (built on first use).
         self._ray_groups: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
 
@@ -663,16 +741,19 @@ class _Fitter:
         a = np.abs(residual)
         return weights * np.minimum(1.0, self.delta / np.maximum(a, 1e-300))
 
-    def total_loss(self, prediction: FloatArray) -> float:
+    def total_loss(self, prediction: FloatArray, rows: slice = slice(None)) -> float:
+        """The weighted loss of ``prediction`` at the samples ``rows``, per unit weight."""
+        m, w, w_safe = self.m[rows], self.w[rows], self.w_safe[rows]
+        hit = self.hit[rows]
         # In chunks: at 2M samples whole-array temporaries (16 MB each, fresh pages every
         # time) made this 0.23 s, 160x its cost at 200k samples.
         total = 0.0
         for first in range(0, prediction.size, LOSS_CHUNK):
             part = slice(first, first + LOSS_CHUNK)
-            residual = prediction[part] - self.m[part]
-            weights = np.where(self.hit[part] & (residual < 0), self.w_safe[part], self.w[part])
+            residual = prediction[part] - m[part]
+            weights = np.where(hit[part] & (residual < 0), w_safe[part], w[part])
             total += float(np.dot(weights, huber_loss(residual, self.delta)))
-        return total / self.w_total
+        return total / (self.w_total if rows == slice(None) else float(w.sum()))
 
     # ---------------------------------------------------------------- initial tree
     def range_profile(self, n_bins: int) -> FloatArray:
@@ -772,8 +853,8 @@ class _Fitter:
                     group.append(len(pieces))
                     pieces.append(side)
             members.append(group)
-            if p.progress is not None:
-                p.progress(g + 1, len(segments) + int(p.max_sweeps))
+            if self.progress is not None:
+                self.progress(g + 1, len(segments) + int(p.max_sweeps))
         W = np.array(pieces)
         self.progress_offset = len(segments)
         return self.alternate(W, members)
@@ -860,8 +941,10 @@ class _Fitter:
             # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
             # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
             objective = -(rows[chosen] / cap[chosen, None] ** 2).sum(axis=0)
-            A_ub = np.vstack([rows, rows[chosen]])
-            b_ub = np.concatenate([target, cap[chosen]])
+            # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
+            # each, bounded by the smaller.
+            A_ub = rows
+            b_ub = np.where(emphasis, np.minimum(target, cap), target)
             # Keep the crossing off the robot's body wherever the obstacle allows: at the
             # floor, a crossing a few centimetres too near in r is a body in collision.
             # Only this centre's part of the band: the group's crossing is the farthest of its
@@ -919,7 +1002,10 @@ class _Fitter:
         return np.concatenate([grouped[bounds[start]:], grouped[:bounds[start + length - n_bins]]])
 
     def crossing_slope(self, rows: NDArray[np.intp], distance: float) -> float:
-        """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples."""
+        """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples
+        (an even subsample of at most :data:`SLOPE_SAMPLES` of them: one number needs no
+        more, and at a million features the full segments took 1.3 s of a 6 s fit)."""
+        rows = rows[:: max(1, -(-rows.size // SLOPE_SAMPLES))]
         s = self.samples
         r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
         x = s.r[rows] - r_star
@@ -999,9 +1085,13 @@ class _Fitter:
         if not self.p.max_sweeps:
             # No sweeps (the default): only the loss is wanted, from the tree's own
             # evaluation (rows per piece), not the (samples x pieces) matrix the sweeps need.
+            # Over an even subsample of at most LOSS_SAMPLES samples: the loss and RMSE are
+            # reported, not optimised (at a million features all 2.5M samples took 1.4 s).
             tree = MinMaxTree(self.basis, W, root)
-            self.prediction = tree.predict(self.samples.alpha, self.samples.h, self.samples.r)
-            return tree, [self.total_loss(self.prediction)]
+            self.loss_rows = slice(None, None, max(1, -(-self.samples.r.size // LOSS_SAMPLES)))
+            s = self.samples
+            self.prediction = tree.predict(s.alpha[self.loss_rows], s.h[self.loss_rows], s.r[self.loss_rows])
+            return tree, [self.total_loss(self.prediction, self.loss_rows)]
         X, m = self.X, self.m
         n = X.shape[0]
         V = X @ W.T
@@ -1043,9 +1133,9 @@ class _Fitter:
                         loss = new_loss
                         break
             history.append(loss)
-            if self.p.progress is not None:
+            if self.progress is not None:
                 offset = getattr(self, "progress_offset", 0)
-                self.p.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
+                self.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
             if before - loss <= self.p.tol * max(before, 1e-12):
                 break
         self.prediction = F
@@ -1123,8 +1213,8 @@ SIGHT_HEIGHT_SHARE = 0.02
 #: Rays per bin tested against each feature at most (an even subsample beyond that), so
 #: the test stays linear in the number of features.
 SIGHT_MAX_RAYS = 128
-#: Feature-ray pairs of the line-of-sight test evaluated at once.
-SIGHT_BLOCK = 1 << 15
+#: Features of the line-of-sight test evaluated at once.
+SIGHT_BLOCK = 1 << 16
 
 
 def contradicted_features(features: Features, origin: float = 0.0,
@@ -1152,33 +1242,67 @@ def contradicted_features(features: Features, origin: float = 0.0,
     distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
     bins = angle_bins(alpha - origin, SIGHT_BINS)
     order = np.argsort(bins, kind="stable")
-    bounds = np.searchsorted(bins[order], np.arange(SIGHT_BINS + 1))
-    for first, last in zip(bounds[:-1], bounds[1:]):  # a loop over bins; points are vectorised
-        members = order[first:last]
-        if members.size < 3:
+    counts = np.bincount(bins, minlength=SIGHT_BINS)
+    starts = np.cumsum(counts) - counts
+    # Each bin's rays: all its features, or an even subsample of them.
+    step = np.maximum(1, counts // SIGHT_MAX_RAYS)
+    n_rays = np.where(counts > 0, -(-counts // step), 0)
+    ray_bin = np.repeat(np.arange(SIGHT_BINS), n_rays)
+    slot = np.arange(ray_bin.size) - np.repeat(np.cumsum(n_rays) - n_rays, n_rays)
+    rays = order[starts[ray_bin] + slot * step[ray_bin]]
+    tested = np.flatnonzero(counts[bins] >= 3)
+    if candidates is not None:
+        tested = tested[candidates[tested]]
+    if tested.size == 0:
+        return contradicted
+    # A ray passes a feature when it ends beyond it (d > D + window) and its height at the
+    # feature's distance, z D / d, lies within `within` of the feature's: an interval of
+    # the ray's elevation z / d. With the rays sorted by bin, then elevation (as an angle,
+    # so the key is bounded), each feature's candidate rays are one run; the exact test is
+    # made on those pairs alone (trying every ray of the bin: 2.3x the time at 10k and
+    # 100k features, the same answer). Rays ending near the feature, which can save it,
+    # are a run of the rays sorted by bin, then distance.
+    d_ray, z_ray = distance[rays], h[rays]
+    ahead = d_ray > 0
+    elevation_key = 4.0 * ray_bin[ahead] + np.arctan2(z_ray[ahead], d_ray[ahead])
+    order = np.argsort(elevation_key, kind="stable")
+    by_elevation = (elevation_key[order], rays[ahead][order])
+    lane = 2.0 * float(distance.max()) + 1.0
+    order = np.lexsort((d_ray, ray_bin))
+    by_distance = (ray_bin[order] * lane + d_ray[order], rays[order])
+    for first in range(0, tested.size, SIGHT_BLOCK):  # blocks of features bound the pairs' memory
+        block = tested[first:first + SIGHT_BLOCK]
+        D, H = distance[block], h[block]
+        window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
+        within = tolerance[0] + tolerance[1] * D
+        D_safe = np.maximum(D, 1e-12)
+        owner, pair_ray = _runs(*by_elevation, 4.0 * bins[block] + np.arctan((H - within) / D_safe) - 1e-9,
+                                4.0 * bins[block] + np.arctan((H + within) / D_safe) + 1e-9)
+        d, z, D_pair = distance[pair_ray], h[pair_ray], D[owner]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            passes = (d > D_pair + window[owner]) & (np.abs(z * D_pair / d - H[owner]) < within[owner])
+        beyond = np.bincount(owner, weights=passes, minlength=block.size)
+        maybe = np.flatnonzero(beyond >= ratio)
+        if maybe.size == 0:
             continue
-        rays = members[:: max(1, members.size // SIGHT_MAX_RAYS)]
-        if candidates is not None:
-            members = members[candidates[members]]
-            if members.size == 0:
-                continue
-        d, z = distance[None, rays], h[None, rays]
-        # Blocks of features against the bin's rays: (block x rays) temporaries stay in
-        # cache (whole bins at 1M features took 12x the time of 100k for 10x the work).
-        block = max(1, SIGHT_BLOCK // max(1, rays.size))
-        for start in range(0, members.size, block):
-            tested = members[start:start + block]
-            D, H = distance[tested, None], h[tested, None]
-            window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
-            within = tolerance[0] + tolerance[1] * D
-            with np.errstate(divide="ignore", invalid="ignore"):
-                height_there = z * D / d
-            passes = (d > D + window) & (np.abs(height_there - H) < within)
-            ends_near = (np.abs(d - D) <= window) & (np.abs(z - H) < within)
-            beyond = passes.sum(axis=1)
-            near = np.maximum(ends_near.sum(axis=1), 1)
-            contradicted[tested] = beyond >= np.maximum(ratio, ratio * near)
+        D, H, window, within, beyond = D[maybe], H[maybe], window[maybe], within[maybe], beyond[maybe]
+        owner, pair_ray = _runs(*by_distance, bins[block[maybe]] * lane + (D - window) - 1e-9,
+                                bins[block[maybe]] * lane + (D + window) + 1e-9)
+        ends_near = (np.abs(distance[pair_ray] - D[owner]) <= window[owner]) & (
+            np.abs(h[pair_ray] - H[owner]) < within[owner])
+        near = np.maximum(np.bincount(owner, weights=ends_near, minlength=maybe.size), 1)
+        contradicted[block[maybe]] = beyond >= np.maximum(ratio, ratio * near)
     return contradicted
+
+
+def _runs(keys: FloatArray, items: NDArray[np.intp], low: NDArray[np.floating[Any]],
+          high: NDArray[np.floating[Any]]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Every pair (query ``i``, item) whose key lies in ``[low[i], high[i]]``, for ``keys``
+    sorted ascending: the query's index and the item, one row per pair."""
+    first = np.searchsorted(keys, low, side="left")
+    span = np.maximum(np.searchsorted(keys, high, side="right") - first, 0)
+    owner = np.repeat(np.arange(span.size), span)
+    return owner, items[np.repeat(first - np.cumsum(span) + span, span) + np.arange(owner.size)]
 
 
 def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int,

@@ -112,7 +112,7 @@ def design_matrix(basis: str, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> F
 
 
 #: Points evaluated at once: a (pieces x points) block of a few megabytes.
-EVALUATION_CHUNK = 1 << 14
+EVALUATION_CHUNK = 1 << 13
 
 
 def _evaluate(node: Node, values: FloatArray) -> FloatArray:
@@ -177,10 +177,20 @@ class _PieceTree:
         terms = sorted(zip([*angle_terms(self.basis, alpha), h, x], self.coefficients[:, :-1].T),
                        key=lambda term: term[0].size)
         values: FloatArray = self.coefficients[:, -1].reshape(lead)
+        full_size = (self.n_pieces, *shape)
+        buffer: FloatArray | None = None
         for column, weights in terms:
-            values = values + weights.reshape(lead) * column
-        values = np.broadcast_to(values, (self.n_pieces, *shape)).reshape(self.n_pieces, -1)
-        return values, shape
+            if buffer is None and values.shape == full_size and values.base is None:
+                # Full size and our own array: the remaining terms in place, through one
+                # scratch buffer (the same sums in the same order, without two temporaries
+                # of pieces x points per term).
+                buffer = np.empty(full_size)
+            if buffer is None:
+                values = values + weights.reshape(lead) * column
+            else:
+                values += np.multiply(weights.reshape(lead), column, out=buffer)
+        full = np.broadcast_to(values, full_size)
+        return full.reshape(self.n_pieces, -1), shape
 
     def _chunked(self, reduce: Any, alpha: ArrayLike, h: ArrayLike, x: ArrayLike) -> NDArray[Any]:
         alpha, h, x = (np.asarray(v, dtype=np.float64) for v in (alpha, h, x))

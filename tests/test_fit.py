@@ -20,6 +20,7 @@ from occtool.fit import (
 )
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
+from occtool.simulate import simulate_scene
 
 ROBOT = Robot()
 
@@ -419,3 +420,36 @@ def test_near_mismatches_need_more_support_than_a_near_box_has():
 
     crate = shapely.box(0.45, -0.3, 0.9, 0.3)
     assert model.navigation_map().polygon.intersection(crate.buffer(model.robot_.radius * 0.98)).is_empty
+
+
+def test_estimator_contract_get_set_params_repr():
+    model = OccupancyRegressor(pieces=16, focus_range=3.0)
+    params = model.get_params()
+    assert params["pieces"] == 16 and params["focus_range"] == 3.0 and "progress" not in params
+    assert list(params) == list(OccupancyRegressor._get_param_names())
+    assert model.set_params(pieces=8) is model and model.pieces == 8
+    with pytest.raises(InputError, match="no parameter 'piece'"):
+        model.set_params(piece=3)
+    assert repr(model) == "OccupancyRegressor(pieces=8, focus_range=3.0)"
+    assert repr(OccupancyRegressor()) == "OccupancyRegressor()"
+    with pytest.raises(TypeError):
+        OccupancyRegressor(16)  # keyword-only, as scikit-learn estimators
+
+
+def test_sklearn_clone_gives_an_unfitted_twin_that_fits_the_same():
+    base = pytest.importorskip("sklearn.base")
+    features, _ = simulate_scene("office", n_features=1500, seed=4)
+    model = OccupancyRegressor(pieces=12, seed=3).fit(features)
+    twin = base.clone(model)
+    assert twin.get_params(deep=False).keys() == model.get_params(deep=False).keys()
+    assert not hasattr(twin, "tree_")
+    twin.fit(features)
+    assert twin.tree_ == model.tree_
+    assert model.fit_seconds_ > 0
+
+
+def test_progress_is_a_fit_argument_called_per_group():
+    calls = []
+    features, _ = simulate_scene("office", n_features=1500, seed=4)
+    OccupancyRegressor(pieces=12).fit(features, progress=lambda done, total: calls.append((done, total)))
+    assert calls and calls[-1][0] == calls[-1][1] and [c[0] for c in calls] == list(range(1, len(calls) + 1))

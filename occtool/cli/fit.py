@@ -88,11 +88,9 @@ def fit(log_path: str, output: str | None, overwrite: bool, position: int | None
 def _fit_one(template, features, logger):
     """Fit a copy of the template estimator, with a progress bar on an interactive stderr."""
     import sys
-    import time
 
     from occtool.fit import OccupancyRegressor
 
-    params = template.get_params()
     progress_bar = None
     if sys.stderr.isatty():
         from rich.console import Console
@@ -100,18 +98,13 @@ def _fit_one(template, features, logger):
 
         progress_bar = Progress(TextColumn("fitting"), BarColumn(), TextColumn("step {task.completed}/{task.total}"),
                                 TimeElapsedColumn(), console=Console(stderr=True), transient=True)
-    start = time.perf_counter()
+    model = OccupancyRegressor(**template.get_params(deep=False))
     if progress_bar is None:
-        model = OccupancyRegressor(**params).fit(features)
-    else:
-        with progress_bar:
-            task = progress_bar.add_task("fit", total=None)
+        return model.fit(features)
+    with progress_bar:
+        task = progress_bar.add_task("fit", total=None)
 
-            def report(sweep: int, total: int) -> None:
-                progress_bar.update(task, completed=sweep, total=total)
+        def report(sweep: int, total: int) -> None:
+            progress_bar.update(task, completed=sweep, total=total)
 
-            params["progress"] = report
-            model = OccupancyRegressor(**params).fit(features)
-            model.progress = None
-    model.fit_seconds_ = time.perf_counter() - start
-    return model
+        return model.fit(features, progress=report)

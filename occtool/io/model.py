@@ -43,8 +43,12 @@ FRAME = {
 }
 UNITS = {"alpha": "rad", "h": "m", "r": "m", "m": "occupancy in [0, 1]"}
 
-_FIT_PARAMS = ("pieces", "basis", "c_min", "a_max", "b_max", "c_max", "level", "c_floor", "construction", "loss", "huber_delta", "safety", "groups", "max_sweeps", "tol",
-               "seed", "focus", "focus_range", "guard")
+def _fit_params() -> tuple[str, ...]:
+    """The estimator's parameters a model file records (its constructor's keywords, in
+    order, but the sensor model and robot, which have sections of their own)."""
+    from occtool.fit import OccupancyRegressor
+
+    return tuple(name for name in OccupancyRegressor._get_param_names() if name not in ("sensor", "robot"))
 
 
 def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
@@ -62,7 +66,7 @@ def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
         "slope_bounds": dict(model.slope_bounds_),
         "sensor_model": model.sensor_.to_dict(),
         "robot": _robot_dict(model.robot_),
-        "fit": {name: getattr(model, name) for name in _FIT_PARAMS},
+        "fit": {name: getattr(model, name) for name in _fit_params()},
         "training": model.training_summary(),
     }
     if getattr(model, "guard_", None) is not None:
@@ -158,7 +162,7 @@ def _check_header(data: Any, expected: str, path: str | os.PathLike[str]) -> Non
 
 def model_from_dict(data: Any, source: str = "model") -> Any:
     """Rebuild a fitted :class:`OccupancyRegressor` from :func:`model_to_dict` output."""
-    from occtool.fit import OccupancyRegressor, slope_bounds
+    from occtool.fit import OccupancyRegressor
 
     _check_header(data, MODEL_FORMAT, source)
     for key in ("constraints", "sensor_model", "robot", "fit", "training"):
@@ -171,7 +175,8 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
     try:
         sensor = SensorModel.from_dict(data["sensor_model"])
         robot = Robot(**{k: float(v) for k, v in data["robot"].items()})
-        fit_params = {k: v for k, v in data["fit"].items() if k in _FIT_PARAMS}
+        names = _fit_params()
+        fit_params = {k: v for k, v in data["fit"].items() if k in names}
         constraints = {k: float(data["constraints"][k]) for k in ("c_min", "a_max", "b_max")}
     except (InputError, TypeError, ValueError, KeyError, AttributeError) as exc:
         raise ModelFormatError(f"{source}: invalid settings: {exc}") from None
@@ -183,26 +188,21 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
     model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
     training = data["training"]
     try:
-        model.n_features_ = int(training["n_features"])
-        model.n_samples_ = int(training["n_samples"])
-        model.sample_counts_ = {str(k): int(v) for k, v in training.get("samples_by_kind", {}).items()}
-        model.rmse_ = float(training["rmse"])
         loss = training.get("loss")
-        model.loss_ = math.nan if loss is None else float(loss)
-        model.n_sweeps_ = int(training.get("sweeps", 0))
-        model.features_digest_ = str(training["features_sha256"])
+        n_features, n_samples = int(training["n_features"]), int(training["n_samples"])
+        sample_counts = {str(k): int(v) for k, v in training.get("samples_by_kind", {}).items()}
+        rmse = float(training["rmse"])
+        n_sweeps = int(training.get("sweeps", 0))
+        digest = str(training["features_sha256"])
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ModelFormatError(f"{source}: incomplete training summary ({exc})") from None
-    if not math.isfinite(model.rmse_):
+    if not math.isfinite(rmse):
         raise ModelFormatError(f"{source}: the training summary's rmse is not a finite number")
-    model.loss_history_ = []
-    model.tree_ = tree
-    model.sensor_ = sensor
-    model.robot_ = robot
-    model.slope_bounds_ = slope_bounds(tree)
-    model.inverse_ = tree.inverse()
-    model.guard_ = _guard_from(data, source)
-    model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}  # type: ignore[attr-defined]  # set by fit
+    model._set_fitted(tree, sensor=sensor, robot=robot, guard=_guard_from(data, source), n_features=n_features,
+                      n_samples=n_samples, sample_counts=sample_counts, rmse=rmse, loss_history=[],
+                      loss=math.nan if loss is None else float(loss), n_sweeps=n_sweeps, features_digest=digest,
+                      seconds=math.nan)
+    model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}
     return model
 
 
