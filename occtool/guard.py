@@ -14,9 +14,14 @@ least it needs to rule that out: per pan-angle bin (:data:`GUARD_BINS` over
   radius), and
 * for 3D data, not clearly passed through by other rays (:func:`occtool.fit.contradicted_features`
   with a tight tolerance) and confirmed by returns on neighbouring rays at nearly its
-  range (:class:`Support`), taken two ray spacings nearer (a surface seen from above is
-  first hit behind its front face); a *planar* scan's returns are all guarded as measured,
+  range (:class:`Support`); a *planar* scan's returns are all guarded as measured,
   since its beams pass beside each other, never through the same spot twice.
+
+For 3D data a guarded return also holds the bins within half a ray spacing of its pan
+angle (the surface between it and the next ray, which no ray saw), and one that may lie
+on a surface seen from above (a table top: its first return lies up to a ray spacing or
+two behind its front edge; :meth:`Support.seen_from_above`) is taken two ray spacings
+nearer. A wall's or a leg's first return is its front, and is kept as measured.
 
 The navigation map (:func:`occtool.navigation.navigation_map`) caps every ray's free
 distance by the guard's distances around it, before the shrink by the robot's radius:
@@ -206,7 +211,8 @@ class Support:
         # scaled by the same step (at a million features the full set took 6.5 s of the fit).
         self.step = max(1, -(-support.shape[0] // SUPPORT_SAMPLE))
         self.spacing = float(spacing)
-        self.tree = cKDTree(self._embedded(support[::self.step]))
+        self.points = support[::self.step]
+        self.tree = cKDTree(self._embedded(self.points))
 
     def _embedded(self, p: FloatArray) -> FloatArray:
         # Unit direction scaled so the angular reach is 1, log range so the range share is 1.
@@ -229,15 +235,54 @@ class Support:
         return within >= needed
 
 
+    def seen_from_above(self, points: ArrayLike) -> NDArray[np.bool_]:
+        """Whether each of ``points`` may lie on a surface seen from above (a table or
+        crate top, a beam), whose first return can lie a ray spacing or two behind its
+        front edge.
+
+        A return on a wall or a leg has returns of its own surface straight above or
+        below it: at least :data:`STEEP_NEIGHBOURS` of its neighbours (within the support's
+        reach) lie a ray row or more higher or lower, at a horizontal distance that changes
+        by at most :data:`STEEP_SLOPE` of the height. Its first return is then its front.
+        Any other return, or one with too few neighbours to tell, counts as seen from
+        above: the safe side.
+        """
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if points.shape[0] == 0 or self.tree.n == 0:
+            return np.ones(points.shape[0], dtype=bool)
+        k = int(min(STEEP_CANDIDATES, self.tree.n))
+        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        found = np.isfinite(np.asarray(distance).reshape(points.shape[0], k))
+        neighbours = self.points[np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)]
+        horizontal = np.hypot(points[:, 0], points[:, 1])
+        rise = np.abs(neighbours[..., 2] - points[:, None, 2])
+        run = np.abs(np.hypot(neighbours[..., 0], neighbours[..., 1]) - horizontal[:, None])
+        row = 0.5 * self.spacing * np.linalg.norm(points, axis=1)
+        steep = found & (rise >= row[:, None]) & (run <= STEEP_SLOPE * rise)
+        return steep.sum(axis=1) < STEEP_NEIGHBOURS
+
+
+#: Neighbours searched for returns of the same steep surface (:meth:`Support.seen_from_above`).
+STEEP_CANDIDATES = 16
+#: Returns above or below on the same steep surface that make a return a wall's or a leg's.
+STEEP_NEIGHBOURS = 2
+#: Largest change of horizontal distance per metre of height between two returns of one
+#: steep surface (a face within about 27 degrees of vertical).
+STEEP_SLOPE = 0.5
+
+
 def supported_returns(points: ArrayLike, support: ArrayLike, count: ArrayLike, spacing: float) -> NDArray[np.bool_]:
     """:meth:`Support.confirmed` of ``points`` among ``support`` in one call."""
     return Support(support, spacing).confirmed(points, count)
 
 
-#: A guarded return of 3D data stands this many ray spacings nearer than measured (see
-#: :func:`ray_spacing`): a surface seen from above (a crate's top, a pallet) is first hit
-#: up to a ray spacing behind its front face.
+#: A guarded return of 3D data on a surface seen from above (a crate's top, a pallet) stands
+#: this many ray spacings nearer than measured (see :func:`ray_spacing`): such a surface is
+#: first hit up to a ray spacing behind its front edge.
 SPACING_FACTOR = 2.0
+#: A guarded return of 3D data also holds the guard's bins within this many ray spacings
+#: of its pan angle (:func:`build_guard`'s ``reach``).
+SPREAD_SHARE = 0.5
 #: Features whose nearest neighbours measure the ray spacing, at most (an even subsample).
 SPACING_SAMPLE = 2000
 
@@ -261,13 +306,28 @@ def ray_spacing(points: ArrayLike) -> float:
     return float(2.0 * np.median(angle) / math.sqrt(step))
 
 
-def build_guard(alpha: ArrayLike, distance: ArrayLike, level: float, bins: int = GUARD_BINS) -> ReturnGuard:
-    """The guard of returns at pan angles ``alpha`` and horizontal distances ``distance``."""
+def build_guard(alpha: ArrayLike, distance: ArrayLike, level: float, bins: int = GUARD_BINS, *,
+                reach: float = 0.0) -> ReturnGuard:
+    """The guard of returns at pan angles ``alpha`` and horizontal distances ``distance``.
+
+    Each return holds its own bin and every bin within ``reach`` radians of its pan angle:
+    between two rays of sparse 3D data lies surface no ray saw, and a return stands for
+    its share of it (half a ray spacing either side).
+    """
     alpha = np.asarray(alpha, dtype=np.float64)
     distance = np.asarray(distance, dtype=np.float64)
     nearest = np.full(bins, np.inf)
-    index = np.mod(np.floor((alpha + math.pi) * (bins / (2.0 * math.pi))).astype(np.int64), bins)
-    np.minimum.at(nearest, index, distance)
+    width = 2.0 * math.pi / bins
+    position = (alpha + math.pi) / width
+    index = np.floor(position).astype(np.int64)
+    np.minimum.at(nearest, np.mod(index, bins), distance)
+    span = reach / width
+    for offset in range(1, int(math.ceil(span)) + 1):  # a loop over a few bins; points are vectorised
+        # The bin `offset` places on is held when it starts within `reach` of the return.
+        ahead = (index + offset) - position <= span
+        behind = position - (index - offset + 1) <= span
+        np.minimum.at(nearest, np.mod(index[ahead] + offset, bins), distance[ahead])
+        np.minimum.at(nearest, np.mod(index[behind] - offset, bins), distance[behind])
     # Down to whole millimetres (a hair below, so x / 1000 read back is never farther than
     # the return): the guard in memory is the guard a model file gives back.
     finite = np.isfinite(nearest)

@@ -16,7 +16,7 @@ from occtool.errors import ModelFormatError
 from occtool.evaluate import returns_within_body
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
-from occtool.guard import GUARD_BINS, ReturnGuard, build_guard, is_planar_scan
+from occtool.guard import GUARD_BINS, ReturnGuard, Support, build_guard, is_planar_scan
 from occtool.io.model import load_model, save_model
 from occtool.navigation import NavigationWarning, pan_angles
 from occtool.robot import Robot
@@ -186,3 +186,45 @@ def navigation_map_of(navigable, guard: bool = True):
     if not guard:
         options["guard"] = None
     return navigation_map(navigable.inverse_range, robot=navigable.robot, **options)
+
+
+@given(alpha=st.floats(-math.pi, math.pi - 1e-9), reach=st.floats(0.0, 0.2), distance=st.floats(0.1, 10.0))
+def test_a_return_holds_exactly_the_bins_within_its_reach(alpha, reach, distance):
+    guard = build_guard([alpha], [distance], 0.6, reach=reach)
+    width = 2.0 * math.pi / GUARD_BINS
+    starts = np.arange(GUARD_BINS) * width - math.pi
+    inside = (starts <= alpha) & (alpha < starts + width)
+
+    def around(x):
+        return np.abs(np.mod(x + math.pi, 2 * math.pi) - math.pi)
+
+    # Angle from the return to each bin (0 in its own), going round the circle.
+    gap = np.where(inside, 0.0, np.minimum(around(starts - alpha), around(starts + width - alpha)))
+    held = np.isfinite(guard.distance)
+    assert held[gap < reach - 1e-9].all()
+    assert not held[gap > reach + 1e-9].any()
+    assert np.all(guard.distance[held] <= distance)
+
+
+def _patch(kind: str) -> np.ndarray:
+    """Returns of one surface at about 1 m, 0.02 rad between rays."""
+    pan = np.linspace(-0.1, 0.1, 11)
+    if kind == "wall":  # a vertical face 1 m ahead, rows of rays from 0.5 m below the sensor up
+        tilt = np.linspace(-0.5, -0.2, 16)
+        P, T = np.meshgrid(pan, tilt)
+        d = 1.0 / np.cos(P)
+        return np.column_stack([(d * np.cos(P)).ravel(), (d * np.sin(P)).ravel(), (np.tan(T) * d).ravel()])
+    # a table top 0.3 m below the sensor, seen from above: rows of rays 2-5 cm apart on it
+    distance = np.linspace(1.0, 1.4, 16)
+    P, D = np.meshgrid(pan, distance)
+    return np.column_stack([(D * np.cos(P)).ravel(), (D * np.sin(P)).ravel(), np.full(D.size, -0.3)])
+
+
+def test_returns_on_a_wall_are_not_taken_as_seen_from_above_and_a_table_top_is():
+    for kind, expected in (("wall", False), ("top", True)):
+        points = _patch(kind)
+        support = Support(points, 0.02)
+        middle = points[len(points) // 2 - 5: len(points) // 2 + 5]
+        assert (support.seen_from_above(middle) == expected).all(), kind
+    # A lone return tells nothing: the safe side.
+    assert Support(np.array([[1.0, 0.0, -0.3]]), 0.02).seen_from_above([[1.0, 0.0, -0.3]]).all()
