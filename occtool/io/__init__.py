@@ -59,7 +59,8 @@ def _head(path: Path, size: int = 4096) -> bytes:
     except (OSError, EOFError) as exc:
         raise InputError(f"{path}: the compressed file is corrupt ({exc})") from None
     with open(path, "rb") as handle:
-        return handle.read(size)
+        head = handle.read(size)
+    return head[3:] if head.startswith(b"\xef\xbb\xbf") else head  # a UTF-8 byte-order mark
 
 
 def detect_format(path: str | os.PathLike[str]) -> str:

@@ -13,8 +13,6 @@ slower pass run, to name the offending line or, with ``skip_invalid``, to drop i
 
 from __future__ import annotations
 
-import bz2
-import gzip
 import logging
 import os
 import warnings
@@ -37,13 +35,10 @@ STAMP_ALIASES = ("stamp", "time", "t")
 
 
 def open_text(path: str | os.PathLike[str]) -> IO[str]:
-    """Open a text file for reading, decompressing ``.gz`` and ``.bz2`` transparently."""
-    name = str(path)
-    if name.endswith(".gz"):
-        return gzip.open(name, "rt", encoding="utf-8", errors="replace")
-    if name.endswith(".bz2"):
-        return bz2.open(name, "rt", encoding="utf-8", errors="replace")
-    return open(name, encoding="utf-8", errors="replace", newline=None)
+    """Open a text file for reading, decompressing gzip and bzip2 (told by content) transparently."""
+    from occtool.io._open import open_input
+
+    return open_input(path, "r")
 
 
 def _content(line: str) -> str:

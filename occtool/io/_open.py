@@ -1,0 +1,86 @@
+"""Open an input file whatever its compression, with the decompressed size bounded.
+
+Compression is told by the file's first bytes (gzip ``1f 8b``, bzip2 ``BZh``), not its
+name, so a gzip file saved as ``scan.csv`` is read as the text it holds. A compressed
+file may expand without limit (a few megabytes of zeros become gigabytes); readers
+stop at :data:`MAX_DECOMPRESSED_BYTES` with an :class:`~occtool.errors.InputError`
+instead of filling the memory. Text is UTF-8; a byte-order mark is skipped.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import io
+import os
+from typing import IO
+
+from occtool.errors import InputError
+
+# Far more than any range log occtool is meant for (the largest shared log expands to
+# ~150 MB); readers hold the text in memory, several times over while parsing.
+MAX_DECOMPRESSED_BYTES = 2**30
+
+GZIP_MAGIC = b"\x1f\x8b"
+BZIP2_MAGIC = b"BZh"
+
+
+def compression_of(path: str | os.PathLike[str]) -> str | None:
+    """``"gzip"``, ``"bzip2"`` or ``None``, from the file's first bytes."""
+    with open(path, "rb") as handle:
+        start = handle.read(3)
+    if start[:2] == GZIP_MAGIC:
+        return "gzip"
+    if start == BZIP2_MAGIC:
+        return "bzip2"
+    return None
+
+
+class _Bounded(io.RawIOBase):
+    """A read-only stream that raises InputError past ``limit`` bytes of ``inner``."""
+
+    def __init__(self, inner: IO[bytes], name: str, limit: int) -> None:
+        self.inner = inner
+        self.name_for_errors = name
+        self.limit = limit
+        self.count = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer: bytearray | memoryview) -> int:  # type: ignore[override]
+        data = self.inner.read(len(buffer))
+        self.count += len(data)
+        if self.count > self.limit:
+            raise InputError(
+                f"{self.name_for_errors} expands to more than {self.limit:,} bytes when decompressed "
+                "(a decompression bomb, or a log too large to read whole): decompress and split it first"
+            )
+        buffer[: len(data)] = data
+        return len(data)
+
+    def close(self) -> None:
+        self.inner.close()
+        super().close()
+
+
+def open_input(path: str | os.PathLike[str], mode: str = "r", *,
+               limit: int = MAX_DECOMPRESSED_BYTES) -> IO:
+    """Open ``path`` for reading as text (``"r"``) or bytes (``"rb"``), decompressed.
+
+    Raises
+    ------
+    InputError
+        While reading, when a compressed file expands past ``limit`` bytes.
+    """
+    name = str(path)
+    kind = compression_of(path)
+    if kind is None:
+        if "b" in mode:
+            return open(name, "rb")
+        return open(name, encoding="utf-8-sig", errors="replace", newline=None)
+    inner = gzip.open(name, "rb") if kind == "gzip" else bz2.open(name, "rb")
+    stream = io.BufferedReader(_Bounded(inner, name, limit))  # type: ignore[arg-type]
+    if "b" in mode:
+        return stream
+    return io.TextIOWrapper(stream, encoding="utf-8-sig", errors="replace", newline=None)
