@@ -14,12 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
+from occtool.limits import MAX_COORDINATE
 
 FloatArray = NDArray[np.float64]
-
-# A coordinate farther than this from the sensor is no range measurement (1,000 km), and
-# squares of coordinates near 1e154 overflow to infinity in every range computation.
-MAX_COORDINATE = 1e6
 
 
 @dataclass(frozen=True, eq=False)

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
+from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.features import Features
 from occtool.robot import Robot
 
@@ -148,11 +149,15 @@ class SensorModel:
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise InputError(f"{name.replace('_', ' ')} must be a whole number >= 0, got {value}")
+            if value > MAX_BODY_SAMPLES:
+                raise InputError(f"{name} must be at most {MAX_BODY_SAMPLES:,}, got {value:,}")
             object.__setattr__(self, name, int(value))
         for name in ("footprint_weight", "background_weight", "background_range"):
             value = float(getattr(self, name))
             if not (np.isfinite(value) and value > 0.0):
                 raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value}")
+            if name == "background_range" and value > MAX_DISTANCE:
+                raise InputError(f"background_range must be at most {MAX_DISTANCE:g} m, got {value}")
             object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ serialisation

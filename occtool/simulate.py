@@ -27,6 +27,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
+from occtool.limits import MAX_FEATURES
 from occtool.features import Features
 from occtool.io._atomic import atomic_write
 from occtool.robot import Robot
@@ -622,6 +623,8 @@ def simulate_scene(
         scene = build_scene(name, robot=robot)
     if not isinstance(n_features, (int, np.integer)) or n_features < 0:
         raise InputError(f"the number of features must be a whole number >= 0, got {n_features!r}")
+    if n_features > MAX_FEATURES:
+        raise InputError(f"n_features must be at most {MAX_FEATURES:,}, got {n_features:,}")
     if not (np.isfinite(range_noise) and range_noise >= 0):
         raise InputError(f"range noise must be a finite number >= 0, got {range_noise}")
     if not 0.0 <= outlier_rate <= 1.0:

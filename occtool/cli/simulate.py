@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from occtool.cli.options import config_option, overwrite_option, refuse_existing, seed_option
+from occtool.limits import MAX_FEATURES
 
 
 def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
@@ -21,7 +22,7 @@ def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
 @click.argument("scene", callback=_scene_name, metavar="SCENE")
 @click.option("-o", "--output", "output", required=True, type=click.Path(file_okay=False),
               help="Folder to write features.csv and truth.json into (created if missing).")
-@click.option("--features", type=click.IntRange(min=1), default=10000, show_default=True,
+@click.option("--features", type=click.IntRange(min=1, max=MAX_FEATURES), default=10000, show_default=True,
               help="Number of features to register.")
 @seed_option
 @click.option("--noise", type=click.FloatRange(min=0.0), default=0.01, show_default=True,

@@ -3,7 +3,7 @@
 Compression is told by the file's first bytes (gzip ``1f 8b``, bzip2 ``BZh``), not its
 name, so a gzip file saved as ``scan.csv`` is read as the text it holds. A compressed
 file may expand without limit (a few megabytes of zeros become gigabytes); readers
-stop at :data:`MAX_DECOMPRESSED_BYTES` with an :class:`~occtool.errors.InputError`
+stop at :data:`occtool.limits.MAX_DECOMPRESSED_BYTES` with an :class:`~occtool.errors.InputError`
 instead of filling the memory. Text is UTF-8; a byte-order mark is skipped.
 """
 
@@ -16,10 +16,8 @@ import os
 from typing import IO
 
 from occtool.errors import InputError
+from occtool import limits
 
-# Far more than any range log occtool is meant for (the largest shared log expands to
-# ~150 MB); readers hold the text in memory, several times over while parsing.
-MAX_DECOMPRESSED_BYTES = 2**30
 
 GZIP_MAGIC = b"\x1f\x8b"
 BZIP2_MAGIC = b"BZh"
@@ -65,15 +63,17 @@ class _Bounded(io.RawIOBase):
 
 
 def open_input(path: str | os.PathLike[str], mode: str = "r", *,
-               limit: int = MAX_DECOMPRESSED_BYTES) -> IO:
+               limit: int | None = None) -> IO:
     """Open ``path`` for reading as text (``"r"``) or bytes (``"rb"``), decompressed.
 
     Raises
     ------
     InputError
-        While reading, when a compressed file expands past ``limit`` bytes.
+        While reading, when a compressed file expands past ``limit`` bytes (by default
+        :data:`occtool.limits.MAX_DECOMPRESSED_BYTES`).
     """
     name = str(path)
+    limit = limits.MAX_DECOMPRESSED_BYTES if limit is None else limit
     kind = compression_of(path)
     if kind is None:
         if "b" in mode:

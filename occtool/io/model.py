@@ -128,14 +128,42 @@ def _dumps(data: dict[str, Any]) -> str:
     return text
 
 
+#: Longest integer literal a model file may hold: counts and versions have a few digits,
+#: and a 400-digit coefficient overflows every float conversion.
+MAX_INTEGER_DIGITS = 20
+#: Deepest tree of MIN/MAX nodes read (occtool writes depth 2: MAX over MIN over pieces).
+MAX_TREE_DEPTH = 64
+
+
+def _parse_int(text: str) -> int:
+    if len(text.lstrip("-")) > MAX_INTEGER_DIGITS:
+        raise ModelFormatError(f"an integer of {len(text.lstrip('-'))} digits ({text[:12]}...) is no model value")
+    return int(text)
+
+
 def _read_json(path: str | os.PathLike[str]) -> Any:
     try:
         with open(path, encoding="utf-8") as handle:
-            return json.load(handle)
+            return json.load(handle, parse_int=_parse_int)
     except json.JSONDecodeError as exc:
         raise ModelFormatError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
     except UnicodeDecodeError:
         raise ModelFormatError(f"{path}: not a text (UTF-8 JSON) file") from None
+    except ModelFormatError as exc:
+        raise ModelFormatError(f"{path}: {exc}") from None
+    except RecursionError:
+        raise ModelFormatError(f"{path}: JSON nested too deeply to be a model") from None
+
+
+def _check_tree_depth(tree: Any, source: str) -> None:
+    """Refuse a tree nested deeper than :data:`MAX_TREE_DEPTH` before anything recurses into it."""
+    level = [tree]
+    for _ in range(MAX_TREE_DEPTH + 1):
+        level = [child for node in level if isinstance(node, dict)
+                 for child in (node.get("children") if isinstance(node.get("children"), list) else [])]
+        if not level:
+            return
+    raise ModelFormatError(f"{source}: the tree is nested deeper than {MAX_TREE_DEPTH} levels")
 
 
 def _check_header(data: Any, expected: str, path: str | os.PathLike[str]) -> None:
@@ -164,23 +192,29 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
     for key in ("constraints", "sensor_model", "robot", "fit", "training"):
         if not isinstance(data.get(key), dict):
             raise ModelFormatError(f"{source}: '{key}' is missing or not an object")
+    _check_tree_depth(data.get("tree"), source)
     try:
         tree = MinMaxTree.from_dict(data)
     except ModelFormatError as exc:
         raise ModelFormatError(f"{source}: {exc}") from None
+    except OverflowError:
+        raise ModelFormatError(f"{source}: a piece coefficient is too large for a number") from None
     try:
         sensor = SensorModel.from_dict(data["sensor_model"])
         robot = Robot(**{k: float(v) for k, v in data["robot"].items()})
         fit_params = {k: v for k, v in data["fit"].items() if k in _FIT_PARAMS}
         constraints = {k: float(data["constraints"][k]) for k in ("c_min", "a_max", "b_max")}
-    except (InputError, TypeError, ValueError, KeyError, AttributeError) as exc:
+    except (InputError, TypeError, ValueError, KeyError, AttributeError, OverflowError) as exc:
         raise ModelFormatError(f"{source}: invalid settings: {exc}") from None
     for key, value in constraints.items():
         if not (math.isfinite(value) and value > 0):
             raise ModelFormatError(f"{source}: constraint {key} must be a finite number > 0, got {value}")
     fit_params.update(constraints)
     _check_constraints(tree, constraints, source)
-    model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
+    try:
+        model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
+    except (InputError, TypeError, ValueError) as exc:
+        raise ModelFormatError(f"{source}: invalid fit settings: {exc}") from None
     training = data["training"]
     try:
         model.n_features_ = int(training["n_features"])
@@ -191,7 +225,7 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
         model.loss_ = math.nan if loss is None else float(loss)
         model.n_sweeps_ = int(training.get("sweeps", 0))
         model.features_digest_ = str(training["features_sha256"])
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise ModelFormatError(f"{source}: incomplete training summary ({exc})") from None
     if not math.isfinite(model.rmse_):
         raise ModelFormatError(f"{source}: the training summary's rmse is not a finite number")
@@ -281,10 +315,13 @@ def load_inverse(path: str | os.PathLike[str]) -> InverseTree:
     """Read an inverse file written by :func:`save_inverse`; :class:`ModelFormatError` if malformed."""
     data = _read_json(path)
     _check_header(data, INVERSE_FORMAT, path)
+    _check_tree_depth(data.get("tree"), str(path))
     try:
         inverse = InverseTree.from_dict(data)
     except ModelFormatError as exc:
         raise ModelFormatError(f"{path}: {exc}") from None
+    except OverflowError:
+        raise ModelFormatError(f"{path}: a piece coefficient is too large for a number") from None
     if not (inverse.coefficients[:, -2] > 0).all():
         raise ModelFormatError(f"{path}: every inverse piece needs a positive weight on m")
     return inverse
@@ -370,7 +407,7 @@ def read_navigable(path: str | os.PathLike[str]) -> Navigable:
     robot = data.get("robot")
     try:
         robot = Robot(**{k: float(v) for k, v in robot.items()}) if isinstance(robot, dict) else None
-    except (InputError, TypeError, ValueError):
+    except (InputError, TypeError, ValueError, OverflowError):
         robot = None
     return Navigable(inverse_range, item.horizontal_lower_bound, dict(bounds) if isinstance(bounds, dict) else None,
                      robot, _guard_from(data, str(path)))
