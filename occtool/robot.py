@@ -15,6 +15,13 @@ from occtool.errors import InputError
 from occtool.limits import MAX_ROBOT_SIZE
 
 
+#: Defaults for a planar (2D) laser scanner, as in CARMEN logs: such a laser sits low on
+#: a small robot, and its plane must lie inside the body band, not at its top edge as with
+#: the general defaults (sensor 1 m up, body 1 m tall).
+PLANAR_LASER_SENSOR_HEIGHT = 0.3
+PLANAR_LASER_BODY_HEIGHT = 0.5
+
+
 @dataclass(frozen=True)
 class Robot:
     """A cylindrical robot carrying its range sensor.

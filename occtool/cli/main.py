@@ -15,6 +15,7 @@ import logging
 import os
 import signal
 import sys
+import warnings
 from typing import Any
 
 import click
@@ -65,6 +66,8 @@ class LazyGroup(click.Group):
             return super().invoke(ctx)
         except OcctoolError as exc:
             raise click.ClickException(str(exc)) from exc
+        except KeyboardInterrupt as exc:
+            raise click.ClickException("interrupted by SIGINT (Ctrl-C)") from exc
         except BrokenPipeError as exc:
             # The reader of standard output went away (`| head`, a closed pipe).
             _detach_stdout()
@@ -111,8 +114,15 @@ def cli(ctx: click.Context, verbosity: int, quietness: int) -> None:
         handlers=[RichHandler(console=Console(stderr=True), show_time=False, show_path=False)],
         force=True,
     )
+    # A numpy RuntimeWarning (or any other) is one log line, not a source line on stderr.
+    warnings.showwarning = _log_warning
     ctx.ensure_object(dict)
     ctx.obj["verbosity"] = verbosity - quietness
+
+
+def _log_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                 file: Any = None, line: str | None = None) -> None:
+    logging.getLogger("occtool").warning("%s: %s", category.__name__, str(message).splitlines()[0] if str(message) else "")
 
 
 class Interrupted(BaseException):
@@ -163,7 +173,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         cli.main(args=argv, prog_name="occtool")
     except Interrupted as exc:
-        print(f"Error: interrupted by {signal.Signals(exc.signum).name}; no output was written", file=sys.stderr)
+        print(f"Error: interrupted by {signal.Signals(exc.signum).name}", file=sys.stderr)
         sys.exit(128 + exc.signum)
 
 

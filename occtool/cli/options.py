@@ -319,6 +319,42 @@ def fit_from_kwargs(kwargs: dict[str, Any], *, seed: int = 0) -> Any:
     values = {name: kwargs.pop(name) for name in FIT_OPTION_NAMES if name in kwargs}
     return OccupancyRegressor(**{k: v for k, v in values.items() if v is not None}, sensor=sensor, robot=robot, seed=seed)
 
+def fit_template_for_log(template: Any, log: RangeLog, positions: list[Any]) -> Any:
+    """Adapt the fit to the log's sensor and warn where the data and the geometry disagree.
+
+    A log whose returns all lie in one plane (a 2D laser, as CARMEN logs) gets a planar
+    scanner's robot (:data:`occtool.robot.PLANAR_LASER_SENSOR_HEIGHT`, ``..._BODY_HEIGHT``)
+    unless --sensor-height or --body-height was given (on the command line or in --config).
+    Then each finding of :func:`occtool.sensor.geometry_findings` is a one-line warning
+    (the first position's, with a count of the others that have findings too).
+    """
+    import logging
+    from dataclasses import replace
+
+    from click.core import ParameterSource
+
+    from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT
+    from occtool.sensor import geometry_findings, is_planar
+
+    logger = logging.getLogger("occtool.fit")
+    ctx = click.get_current_context(silent=True)
+    given = ctx is not None and any(
+        ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None) for name in ("sensor_height", "body_height"))
+    robot = template.robot
+    if not given and positions and all(is_planar(p.features) for p in positions):
+        robot = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT, body_height=PLANAR_LASER_BODY_HEIGHT)
+        template = type(template)(**{**template.get_params(), "robot": robot})
+        logger.info("a planar laser log: sensor height %g m, body height %g m (--sensor-height, --body-height "
+                    "change them)", robot.sensor_height, robot.body_height)
+    flagged = [(p, findings) for p in positions if (findings := geometry_findings(p.features, robot))]
+    if flagged:
+        position, findings = flagged[0]
+        where = f"position {position.index}: " if len(positions) > 1 else ""
+        more = f" (and {len(flagged) - 1} more position(s))" if len(flagged) > 1 else ""
+        for finding in findings:
+            logger.warning("%s%s%s", where, finding, more)
+    return template
+
 # --- navigation extraction (owner: navigation) ----------------------------------------
 
 ROBOT_OPTION_NAMES = ("robot_radius", "sensor_height", "body_height", "ground_clearance")
