@@ -412,7 +412,8 @@ def _densest_layer(heights: np.ndarray, thickness: float = 0.06) -> tuple[float,
     share = float(counts[k]) / heights.size
     if share < FINDING_SHARE:
         return None
-    return float(0.5 * (edges[k] + edges[k + 1])), share
+    layer = heights[(heights >= edges[k] - step) & (heights <= edges[k + 1] + step)]
+    return float(np.median(layer)), share
 
 
 __all__ = ["SAMPLE_KINDS", "FLOOR_MODES", "Samples", "SensorModel", "geometry_findings", "is_planar"]

@@ -785,8 +785,8 @@ def read_mcap(
 
         frames = _FrameTree()
         if static_topics:
-            for _, _, _, message in reader.messages(static_topics):
-                for parent, child, rigid in _transforms_of(message, f"{name}, {topic}"):
+            for _, static_channel, _, message in reader.messages(static_topics):
+                for parent, child, rigid in _transforms_of(message, f"{name}, {static_channel.topic}"):
                     frames.add(parent, child, rigid)
         base = _strip_frame(base_frame) if base_frame else None
         if base is not None and base not in frames and not tf_topics and not odom_topics and sensor_frame is None:
