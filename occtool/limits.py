@@ -26,7 +26,8 @@ MAX_COORDINATE = 1e6
 #: Largest robot dimension (radius, heights), metres: a robot is not bigger than a building,
 #: and lengths near 1e154 overflow when squared.
 MAX_ROBOT_SIZE = 100.0
-#: Largest distance option (max range, focus range, background range), metres.
+#: Largest distance option (max range, focus range, background range, a simulated sensor's
+#: range, a laser's no-return range), metres.
 MAX_DISTANCE = 1e4
 #: Most bytes a compressed input may expand to; readers hold the text in memory, several
 #: times over while parsing (the largest shared log expands to 9.5 MB).
@@ -38,3 +39,5 @@ MAX_WEIGHT = 1e6
 MAX_SWEEPS = 1000
 #: Most repetitions or scan splits of `compare-grid`.
 MAX_REPEATS = 1000
+#: Largest simulated range noise, metres per metre squared (the default is 0.01).
+MAX_RANGE_NOISE = 10.0

@@ -574,6 +574,8 @@ def navigation_map(
     requested = default_heights(robot) if heights is None else np.asarray(heights, dtype=np.float64).ravel()
     if requested.size == 0:
         raise InputError("at least one height is needed")
+    if requested.size > MAX_SLICES:
+        raise InputError(f"heights holds {requested.size:,} heights, more than {MAX_SLICES:,}")
     if not np.isfinite(requested).all():
         raise InputError(f"heights must be finite numbers, got {requested.tolist()}")
     if (requested <= robot.floor_h).any():

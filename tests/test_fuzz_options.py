@@ -10,6 +10,7 @@ from __future__ import annotations
 import traceback
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from hypothesis import given, settings
@@ -165,3 +166,27 @@ def test_simulate_and_evaluate_refuse_by_keyword():
 def test_the_robot_refuses_lengths_beyond_its_range(name, value):
     with pytest.raises(InputError, match=rf"robot {name} must lie in \[0, 100\]"):
         Robot(**{name: value})
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--sensor-range", "1e308"), ("--noise", "1e308"), ("--radius", "1e308"),
+                                             ("--sensor-height", "1e308"), ("--body-height", "1e308")])
+def test_simulate_refuses_absurd_geometry(tmp_path, flag, value):
+    assert_refused(run("simulate", "office", "-o", tmp_path / "s", "--features", 100, flag, value), flag)
+    assert not (tmp_path / "s").exists()
+
+
+def test_library_distances_are_bounded_by_keyword():
+    from occtool.io import check_no_return_range
+    from occtool.navigation import navigation_map
+    from occtool.simulate import simulate_scene
+
+    with pytest.raises(InputError, match="sensor_range must be at most"):
+        simulate_scene("office", n_features=10, sensor_range=1e308)
+    with pytest.raises(InputError, match="range_noise must be at most"):
+        simulate_scene("office", n_features=10, range_noise=1e308)
+    with pytest.raises(InputError, match="no-return range must be at most"):
+        check_no_return_range(1e308)
+    with pytest.raises(InputError, match="max_range must be at most"):
+        navigation_map(lambda a, h, level: a * 0 + 1.0, robot=Robot(), max_range=1e308)
+    with pytest.raises(InputError, match="more than 10,000"):
+        navigation_map(lambda a, h, level: a * 0 + 1.0, robot=Robot(), heights=-0.5 + 1e-5 * np.arange(10_001))

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
+from occtool.limits import MAX_DISTANCE
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
 
 if TYPE_CHECKING:
@@ -126,6 +127,8 @@ def check_no_return_range(value: float | None) -> float | None:
         raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}") from None
     if not (number > 0.0 and number < float("inf")):
         raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}")
+    if number > MAX_DISTANCE:
+        raise InputError(f"no-return range must be at most {MAX_DISTANCE:g} m, got {value!r}")
     return number
 
 

@@ -226,7 +226,7 @@ def _checked_rigid(rotation: Any, translation: Any, what: str) -> _Rigid:
     q = tuple(float(_get(rotation, k, 0.0 if k != "w" else 1.0)) for k in ("x", "y", "z", "w")) if rotation is not None else (0.0, 0.0, 0.0, 1.0)
     t = _vector(translation)
     if not (np.isfinite(q).all() and np.isfinite(t).all()):
-        raise InputError(f"{what} is not finite (rotation {q}, translation {tuple(t)})")
+        raise InputError(f"{what} is not finite (rotation {q}, translation {tuple(float(v) for v in t)})")
     if not any(q):
         raise InputError(f"{what} has the zero quaternion (0, 0, 0, 0), which is no rotation")
     return _Rigid(_rotation_from_quaternion(rotation), t)
