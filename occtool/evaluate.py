@@ -25,9 +25,9 @@ from numpy.typing import ArrayLike, NDArray
 from shapely.geometry.base import BaseGeometry
 
 from occtool.errors import InputError
-from occtool.limits import MAX_RAYS
 from occtool.features import Features, Pose
 from occtool.guard import guard_candidates
+from occtool.limits import MAX_RAYS
 from occtool.robot import Robot
 from occtool.simulate import Obstacle, Scene
 

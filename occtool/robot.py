@@ -14,7 +14,6 @@ import numpy as np
 from occtool.errors import InputError
 from occtool.limits import MAX_ROBOT_SIZE
 
-
 #: Defaults for a planar (2D) laser scanner, as in CARMEN logs: such a laser sits low on
 #: a small robot, and its plane must lie inside the body band, not at its top edge as with
 #: the general defaults (sensor 1 m up, body 1 m tall).

@@ -33,8 +33,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.features import Features
+from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -416,4 +416,4 @@ def _densest_layer(heights: np.ndarray, thickness: float = 0.06) -> tuple[float,
     return float(np.median(layer)), share
 
 
-__all__ = ["SAMPLE_KINDS", "FLOOR_MODES", "Samples", "SensorModel", "geometry_findings", "is_planar"]
+__all__ = ["FLOOR_MODES", "SAMPLE_KINDS", "Samples", "SensorModel", "geometry_findings", "is_planar"]

@@ -27,9 +27,9 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.limits import MAX_DISTANCE, MAX_FEATURES, MAX_RANGE_NOISE
 from occtool.features import Features
 from occtool.io._atomic import atomic_write
+from occtool.limits import MAX_DISTANCE, MAX_FEATURES, MAX_RANGE_NOISE
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]

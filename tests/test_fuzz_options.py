@@ -135,8 +135,8 @@ def test_navigation_map_refuses_too_many_angles_by_keyword(value):
 @settings(max_examples=10)
 @given(value=st.integers(limits.MAX_PIECES + 1, 10**12))
 def test_the_regressor_refuses_too_many_pieces_by_keyword(value):
-    from occtool.fit import OccupancyRegressor
     from occtool.features import Features
+    from occtool.fit import OccupancyRegressor
 
     with pytest.raises(InputError, match="pieces must be at most"):
         OccupancyRegressor(pieces=value).fit(Features([[1.0, 0.0, 0.0]], [0.9]))

@@ -7,7 +7,6 @@ from typing import Any
 
 import click
 
-from occtool.limits import MAX_REPEATS
 from occtool.cli.options import (
     config_option,
     extract_options,
@@ -17,6 +16,7 @@ from occtool.cli.options import (
     refuse_existing,
     seed_option,
 )
+from occtool.limits import MAX_REPEATS
 
 
 def _unique_params(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -100,7 +100,11 @@ def compare_grid(
     import logging
 
     refuse_existing(overwrite, json_path, plot_path)
-    from occtool.cli.options import extract_from_kwargs, fit_from_kwargs, read_log_from_kwargs
+    from occtool.cli.options import (
+        extract_from_kwargs,
+        fit_from_kwargs,
+        read_log_from_kwargs,
+    )
     from occtool.compare import compare_grid as run_comparison
     from occtool.compare import report_json
     from occtool.io._atomic import atomic_write

@@ -32,13 +32,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
-from occtool.limits import MAX_DISTANCE
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
+from occtool.limits import MAX_DISTANCE
 
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
 
-__all__ = ["FORMATS", "check_no_return_range", "detect_format", "read_log", "describe_log", "write_csv", "write_mcap"]
+__all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "read_log", "write_csv", "write_mcap"]
 
 FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply")
 MCAP_MAGIC = b"\x89MCAP0\r\n"

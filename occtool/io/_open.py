@@ -15,9 +15,8 @@ import io
 import os
 from typing import IO
 
-from occtool.errors import InputError
 from occtool import limits
-
+from occtool.errors import InputError
 
 GZIP_MAGIC = b"\x1f\x8b"
 BZIP2_MAGIC = b"BZh"
@@ -79,7 +78,7 @@ def open_input(path: str | os.PathLike[str], mode: str = "r", *,
         if "b" in mode:
             return open(name, "rb")
         return open(name, encoding="utf-8-sig", errors="replace", newline=None)
-    inner = gzip.open(name, "rb") if kind == "gzip" else bz2.open(name, "rb")
+    inner = gzip.open(name, "rb") if kind == "gzip" else bz2.open(name, "rb")  # noqa: SIM115 (returned open)
     stream = io.BufferedReader(_Bounded(inner, name, limit))  # type: ignore[arg-type]
     if "b" in mode:
         return stream
