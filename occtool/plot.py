@@ -30,6 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, MissingDependencyError, ModelFormatError, OcctoolError
 from occtool.features import Features, Pose, RangeLog
+from occtool.io import _json as safe_json
 from occtool.robot import Robot
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -243,13 +244,13 @@ def read_navigation_maps(path: str | os.PathLike[str]) -> list[tuple[int | None,
 def _tagged_positions(text: str) -> list[int]:
     """The ``position`` numbers a navigation GeoJSON's features carry (collection or sequence)."""
     try:
-        documents = [json.loads(text)]
+        documents = [safe_json.loads(text)]
     except json.JSONDecodeError:
         documents = []
         for line in text.splitlines():
             line = line.strip().lstrip("\x1e").strip()
             try:
-                documents.append(json.loads(line)) if line else None
+                documents.append(safe_json.loads(line)) if line else None
             except json.JSONDecodeError:
                 return []  # not ours to diagnose: the reader names the file and line
     features: list[Any] = []
@@ -856,7 +857,7 @@ def read_json(path: str | os.PathLike[str], what: str) -> Any:
     """Read a JSON document, with a one-line error naming the file when it is malformed."""
     text = Path(path).read_text(encoding="utf-8")
     try:
-        return json.loads(text)
+        return safe_json.loads(text)
     except json.JSONDecodeError as exc:
         raise ModelFormatError(f"{os.fspath(path)} is not a valid {what} (line {exc.lineno}: {exc.msg})") from None
 

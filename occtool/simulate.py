@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features
+from occtool.io import _json as safe_json
 from occtool.io._atomic import atomic_write
 from occtool.limits import MAX_DISTANCE, MAX_FEATURES, MAX_RANGE_NOISE
 from occtool.robot import Robot
@@ -249,7 +250,7 @@ def load_truth(path: str | os.PathLike[str]) -> Scene:
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text (UTF-8) file") from None
     try:
-        data = json.loads(text)
+        data = safe_json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
     try:

@@ -94,7 +94,7 @@ def test_a_400_digit_coefficient_is_a_format_error(files, tmp_path):
     data = json.loads(files["model"].read_text())
     path = tmp_path / "model.json"
     path.write_text(_dump(_set(data, ("pieces", 0, "a1"), "@BIG@"), 10**399))
-    with pytest.raises(ModelFormatError, match="400 digits"):
+    with pytest.raises(ModelFormatError, match="400 digits.*too long"):
         load_model(path)
     assert_one_line_error(run("extract", path, "-o", tmp_path / "n.geojson"))
 
@@ -144,3 +144,33 @@ def test_the_bytes_written_do_not_change(files, tmp_path):
     out = tmp_path / "again.json"
     save_model(model, out, run=model.run_)
     assert out.read_bytes() == files["model"].read_bytes()
+
+
+# --- every JSON a user hands in: navigation maps, scene truths --------------------------------------
+
+
+@settings(max_examples=40)
+@given(depth=st.integers(1, 20_000), digits=st.integers(1, 1000))
+def test_user_json_is_bounded_in_nesting_and_integer_length(depth, digits):
+    from occtool.io import _json
+
+    for text in ("[" * depth + "]" * depth, "[" + "7" * digits + "]"):
+        try:
+            value = _json.loads(text)
+        except json.JSONDecodeError as exc:
+            assert "nested too deeply" in exc.msg or "too long" in exc.msg
+        else:
+            assert value is not None
+
+
+@pytest.mark.parametrize("damage", ["deep", "big"])
+def test_a_damaged_navigation_map_or_truth_is_one_line_for_evaluate(files, tmp_path, damage):
+    truth = FIXTURES / "office" / "truth.json"
+    nav = tmp_path / "nav.geojson"
+    assert run("extract", files["model"], "-o", nav, "--angles", "36").exit_code == 0
+    for target, source in (("nav", nav), ("truth", truth)):
+        text = source.read_text()
+        broken = tmp_path / f"broken-{target}.json"
+        broken.write_text("[" * 5000 + "]" * 5000 if damage == "deep" else text.replace("{", '{"n": ' + "9" * 400 + ", ", 1))
+        args = ["evaluate", broken, truth] if target == "nav" else ["evaluate", nav, broken]
+        assert_one_line_error(run(*args))

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from occtool.errors import InputError, ModelFormatError
+from occtool.io import _json as safe_json
 from occtool.io._atomic import atomic_write
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
@@ -128,31 +129,18 @@ def _dumps(data: dict[str, Any]) -> str:
     return text
 
 
-#: Longest integer literal a model file may hold: counts and versions have a few digits,
-#: and a 400-digit coefficient overflows every float conversion.
-MAX_INTEGER_DIGITS = 20
 #: Deepest tree of MIN/MAX nodes read (occtool writes depth 2: MAX over MIN over pieces).
 MAX_TREE_DEPTH = 64
-
-
-def _parse_int(text: str) -> int:
-    if len(text.lstrip("-")) > MAX_INTEGER_DIGITS:
-        raise ModelFormatError(f"an integer of {len(text.lstrip('-'))} digits ({text[:12]}...) is no model value")
-    return int(text)
 
 
 def _read_json(path: str | os.PathLike[str]) -> Any:
     try:
         with open(path, encoding="utf-8") as handle:
-            return json.load(handle, parse_int=_parse_int)
+            return safe_json.loads(handle.read())
     except json.JSONDecodeError as exc:
         raise ModelFormatError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
     except UnicodeDecodeError:
         raise ModelFormatError(f"{path}: not a text (UTF-8 JSON) file") from None
-    except ModelFormatError as exc:
-        raise ModelFormatError(f"{path}: {exc}") from None
-    except RecursionError:
-        raise ModelFormatError(f"{path}: JSON nested too deeply to be a model") from None
 
 
 def _check_tree_depth(tree: Any, source: str) -> None:
