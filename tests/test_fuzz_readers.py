@@ -135,7 +135,7 @@ def test_an_xyz_file_with_1e308_is_an_error_not_an_empty_model(tmp_path):
     path = tmp_path / "big.xyz"
     path.write_text("1e308 1e308 1e308\n1 2 0\n1 0 0\n")
     out = tmp_path / "m.json"
-    assert_one_line_error(run("fit", path, "-o", out, "--pieces", "8"), "farther than")
+    assert_one_line_error(run("fit", path, "-o", out, "--pieces", "8"), "big.xyz", "farther than")
     assert not out.exists()
 
 
@@ -354,3 +354,13 @@ def test_describe_log_of_a_gzip_csv_under_a_plain_name(tmp_path):
     path = tmp_path / "g.csv"
     path.write_bytes(gzip.compress(CSV.encode()))
     assert describe_log(path) is not None
+
+
+@pytest.mark.parametrize(("name", "text"), [("far.csv", "x,y,z,m\n1,1,1,0.9\n1e308,0,0,0.9\n"),
+                                            ("far.xyz", "1 1 1\n1e308 0 0\n")])
+def test_readers_name_the_file_of_a_far_point_and_skip_it_when_asked(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(InputError, match=rf"{name}.*farther than"):
+        read_log(path)
+    assert len(read_log(path, skip_invalid=True).single().features) == 1

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
+from occtool.limits import MAX_COORDINATE
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, assign_positions, to_reference_frame
 
 logger = logging.getLogger(__name__)
@@ -245,6 +246,8 @@ def read_csv(
     not_finite = ~np.isfinite(data).all(axis=1)
     outside = ~not_finite & ((m < 0.0) | (m > 1.0))
     at_origin = ~not_finite & ~(np.abs(points) > 0.0).any(axis=1)
+    too_far = ~not_finite & ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
+    bad_reason[too_far] = 4
     bad_reason[at_origin] = 3
     bad_reason[outside] = 2
     bad_reason[not_finite] = 1
@@ -259,6 +262,7 @@ def read_csv(
                 1: "a value is NaN or infinite",
                 2: f"evidence {float(m[first])!r} lies outside [0, 1]",
                 3: "the point lies at the sensor origin (0, 0, 0) and has no direction",
+                4: f"the point lies farther than {MAX_COORDINATE:g} m from the sensor: not range data",
             }[int(bad_reason[first])]
             problems.append((int(line_numbers[first]), reason))
         line, problem = min(problems)

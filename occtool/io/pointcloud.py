@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
+from occtool.limits import MAX_COORDINATE
 from occtool.io.csv import open_text
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
 
@@ -115,6 +116,14 @@ def _checked(
     origin = ~(np.abs(points) > 0.0).any(axis=1)
     counts["origin"] += int(origin.sum())
     points, evidence = points[~origin], evidence[~origin]
+    far = ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
+    if far.any():
+        if not skip_invalid:
+            i = int(np.argmax(far))
+            raise InputError(f"{name}: point {i} lies at {tuple(float(v) for v in points[i])}, farther than "
+                             f"{MAX_COORDINATE:g} m from the sensor: not range data (pass --skip-invalid to drop such points)")
+        counts["invalid"] += int(far.sum())
+        points, evidence = points[~far], evidence[~far]
     bad = ~np.isfinite(evidence) | (evidence < 0.0) | (evidence > 1.0)
     if bad.any():
         if not skip_invalid:
@@ -135,7 +144,8 @@ def _notes(counts: dict[str, int]) -> list[str]:
     if counts["origin"]:
         notes.append(f"dropped {counts['origin']} point(s) at the sensor origin (no return)")
     if counts["invalid"]:
-        notes.append(f"skipped {counts['invalid']} point(s) with evidence outside [0, 1]")
+        notes.append(f"skipped {counts['invalid']} point(s) with evidence outside [0, 1] or farther than "
+                     f"{MAX_COORDINATE:g} m")
     if counts.get("scans"):
         notes.append(f"dropped {counts['scans']} scan(s) whose NODE pose is not finite, with their points")
     if counts.get("lines"):
