@@ -27,6 +27,7 @@ from shapely.geometry.base import BaseGeometry
 from occtool.errors import InputError
 from occtool.features import Features, Pose
 from occtool.guard import guard_candidates
+from occtool.limits import MAX_RAYS
 from occtool.robot import Robot
 from occtool.simulate import Obstacle, Scene
 
@@ -174,6 +175,8 @@ def reachable_region(
     _check_nonnegative("max range", max_range)
     if n_rays < 8:
         raise InputError(f"need at least 8 rays to trace the reachable region, got {n_rays}")
+    if n_rays > MAX_RAYS:
+        raise InputError(f"n_rays must be at most {MAX_RAYS:,}, got {n_rays:,}")
     obstacles = configuration_obstacles(scene, robot_radius=robot_radius)
     if max_range == 0 or (not obstacles.is_empty and obstacles.intersects(_ORIGIN)):
         return shapely.Polygon()

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
+from occtool.limits import MAX_COORDINATE
 
 FloatArray = NDArray[np.float64]
 
@@ -64,8 +65,9 @@ class Features:
     Raises
     ------
     InputError
-        If the shapes disagree, a value is not finite, an evidence value lies outside
-        [0, 1] or a point lies at the sensor origin (it has no direction).
+        If the shapes disagree, a value is not finite, a coordinate exceeds
+        :data:`MAX_COORDINATE` metres, an evidence value lies outside [0, 1] or a point
+        lies at the sensor origin (it has no direction).
     """
 
     points: FloatArray
@@ -83,6 +85,13 @@ class Features:
         bad = ~np.isfinite(points).all(axis=1) | ~np.isfinite(evidence)
         if bad.any():
             raise InputError(f"feature {int(np.argmax(bad))} has a value that is NaN or infinite")
+        far = ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
+        if far.any():
+            i = int(np.argmax(far))
+            raise InputError(
+                f"feature {i} lies at {tuple(float(v) for v in points[i])}, farther than {MAX_COORDINATE:g} m "
+                "from the sensor: not range data (wrong units or columns?)"
+            )
         outside = (evidence < 0.0) | (evidence > 1.0)
         if outside.any():
             i = int(np.argmax(outside))

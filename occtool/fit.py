@@ -47,6 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool import guard as guard_module
 from occtool.errors import InputError, NotFittedError
+from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT
 from occtool.features import Features
 from occtool.guard import (
     GUARD_BINS, ReturnGuard, Support, build_guard, guard_candidates, is_planar_scan, ray_spacing, support_count,
@@ -298,12 +299,16 @@ class OccupancyRegressor:
     def _validate(self) -> None:
         if isinstance(self.pieces, bool) or int(self.pieces) != self.pieces or self.pieces < 1:
             raise InputError(f"pieces must be a whole number >= 1, got {self.pieces}")
+        if self.pieces > MAX_PIECES:
+            raise InputError(f"pieces must be at most {MAX_PIECES:,}, got {self.pieces:,}")
         if self.basis not in BASES:
             raise InputError(f"basis must be one of {', '.join(BASES)}, got {self.basis!r}")
         for name in ("c_min", "a_max", "b_max", "c_max", "c_floor", "huber_delta", "safety", "level"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value!r}")
+            if value > MAX_WEIGHT:
+                raise InputError(f"{name} must be at most {MAX_WEIGHT:g}, got {value!r}")
         if self.c_max < self.c_min:
             raise InputError(f"c max ({self.c_max}) must not be below c min ({self.c_min})")
         if self.construction not in ("profile", "regression"):
@@ -315,10 +320,14 @@ class OccupancyRegressor:
         if not (isinstance(self.focus_range, (int, float)) and math.isfinite(self.focus_range)
                 and self.focus_range > 0):
             raise InputError(f"focus range must be a finite positive number of metres, got {self.focus_range!r}")
+        if self.focus_range > MAX_DISTANCE:
+            raise InputError(f"focus_range must be at most {MAX_DISTANCE:g} m, got {self.focus_range!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise InputError(f"seed must be a whole number >= 0, got {self.seed!r}")
         if int(self.max_sweeps) != self.max_sweeps or self.max_sweeps < 0:
             raise InputError(f"max sweeps must be a whole number >= 0, got {self.max_sweeps}")
+        if self.max_sweeps > MAX_SWEEPS:
+            raise InputError(f"max_sweeps must be at most {MAX_SWEEPS:,}, got {self.max_sweeps:,}")
 
     # ------------------------------------------------------------------ fitting
     def fit(self, features: Features, *, progress: ProgressCallback | None = None) -> OccupancyRegressor:

@@ -37,6 +37,7 @@ from shapely.geometry.polygon import orient
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.guard import ReturnGuard
+from occtool.limits import MAX_ANGLES, MAX_DISTANCE
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -547,8 +548,12 @@ def navigation_map(
         raise InputError(f"threshold must lie strictly between 0 and 1, got {threshold}")
     if not (math.isfinite(max_range) and max_range > 0):
         raise InputError(f"max range must be a finite number > 0, got {max_range}")
+    if max_range > MAX_DISTANCE:
+        raise InputError(f"max_range must be at most {MAX_DISTANCE:g} m, got {max_range:g}")
     if int(n_angles) != n_angles or n_angles < 8:
         raise InputError(f"the number of angles must be an integer >= 8, got {n_angles}")
+    if n_angles > MAX_ANGLES:
+        raise InputError(f"n_angles must be at most {MAX_ANGLES:,} (0.01 degree apart), got {n_angles:,}")
     n_angles = int(n_angles)
     radius = float(robot.radius)
     if point_spacing is None:
@@ -569,6 +574,8 @@ def navigation_map(
     requested = default_heights(robot) if heights is None else np.asarray(heights, dtype=np.float64).ravel()
     if requested.size == 0:
         raise InputError("at least one height is needed")
+    if requested.size > MAX_SLICES:
+        raise InputError(f"heights holds {requested.size:,} heights, more than {MAX_SLICES:,}")
     if not np.isfinite(requested).all():
         raise InputError(f"heights must be finite numbers, got {requested.tolist()}")
     if (requested <= robot.floor_h).any():

@@ -12,6 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from occtool.errors import InputError
+from occtool.limits import MAX_ROBOT_SIZE
+
+#: Defaults for a planar (2D) laser scanner, as in CARMEN logs: such a laser sits low on
+#: a small robot, and its plane must lie inside the body band, not at its top edge as with
+#: the general defaults (sensor 1 m up, body 1 m tall).
+PLANAR_LASER_SENSOR_HEIGHT = 0.3
+PLANAR_LASER_BODY_HEIGHT = 0.5
 
 
 @dataclass(frozen=True)
@@ -41,6 +48,8 @@ class Robot:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"robot {name.replace('_', ' ')} must be a finite number >= 0, got {value}")
+            if value > MAX_ROBOT_SIZE:
+                raise InputError(f"robot {name} must lie in [0, {MAX_ROBOT_SIZE:g}] metres, got {value:g}")
         if self.body_height <= self.ground_clearance:
             raise InputError(
                 f"body height {self.body_height} m must exceed the ground clearance {self.ground_clearance} m"

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features
+from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -150,11 +151,15 @@ class SensorModel:
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise InputError(f"{name.replace('_', ' ')} must be a whole number >= 0, got {value}")
+            if value > MAX_BODY_SAMPLES:
+                raise InputError(f"{name} must be at most {MAX_BODY_SAMPLES:,}, got {value:,}")
             object.__setattr__(self, name, int(value))
         for name in ("footprint_weight", "background_weight", "background_range"):
             value = float(getattr(self, name))
             if not (np.isfinite(value) and value > 0.0):
                 raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value}")
+            if name == "background_range" and value > MAX_DISTANCE:
+                raise InputError(f"background_range must be at most {MAX_DISTANCE:g} m, got {value}")
             object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ serialisation
@@ -318,4 +323,99 @@ class SensorModel:
         return (angles, heights, R, np.zeros(n), np.full(n, self.background_weight), SAMPLE_KINDS["background"])
 
 
-__all__ = ["SAMPLE_KINDS", "FLOOR_MODES", "Samples", "SensorModel"]
+# --- does the data fit the robot's geometry? ----------------------------------------------
+
+#: Returns within this height (metres) of the body band's edge count as "at the edge".
+BAND_EDGE = 0.02
+#: Share of returns that makes a layer or a region worth a warning.
+FINDING_SHARE = 0.2
+#: Returns this far (metres) below the floor that ``sensor_height`` puts are "below the floor".
+BELOW_FLOOR = 0.1
+#: A floor-like layer this far (metres) above the assumed floor is worth a warning.
+FLOOR_OFFSET = 0.15
+#: Returns in one plane within this height spread, metres (a 2D laser).
+PLANAR_SPREAD = 0.01
+
+
+def geometry_findings(features: Features, robot: Robot) -> list[str]:
+    """Ways in which the data and the robot's geometry disagree, as sentences (none: they agree).
+
+    The fit keeps the robot's body band (``ground_clearance`` to ``body_height`` above the
+    floor, the floor ``sensor_height`` below the sensor) clear of obstacles and takes what
+    lies below the floor for floor. When the data cannot have been taken with that
+    geometry the model is still fitted, but it maps nothing useful: a 2D laser's plane at
+    the band's edge, no return inside the band, much of the data below the floor (the
+    sensor sits higher than ``sensor_height``) or a floor-like layer well above the floor
+    (it sits lower). The fit itself does not change.
+
+    Parameters
+    ----------
+    features
+        One position's features; free rays (evidence 0) are not returns and are ignored.
+    robot
+        The robot the model is fitted for.
+
+    Returns
+    -------
+    list of str
+        One sentence per finding, naming the keywords (``sensor_height`` ...) to check.
+    """
+    heights = features.points[features.evidence > 0.0, 2]
+    if heights.size == 0:
+        return []
+    low, high = robot.body_band
+    floor = robot.floor_h
+    band = (f"the body band (h = {low:g} to {high:g} m: ground_clearance {robot.ground_clearance:g} m to "
+            f"body_height {robot.body_height:g} m above the floor, sensor_height {robot.sensor_height:g} m)")
+    findings = []
+    planar = is_planar(features)
+    inside = (heights > low + BAND_EDGE) & (heights < high - BAND_EDGE)
+    if planar:
+        plane = float(np.median(heights))
+        if not inside.any():
+            where = "at the edge of" if low - BAND_EDGE <= plane <= high + BAND_EDGE else "outside"
+            findings.append(
+                f"the returns lie in one plane at h = {plane:g} m (a 2D laser), {where} {band}: the map cannot "
+                "keep the body clear of them; give the laser's sensor_height and the robot's body_height"
+            )
+        return findings
+    if not inside.any():
+        findings.append(f"none of the {heights.size:,} returns lies inside {band}: the map will show no obstacle")
+    below = float(np.mean(heights < floor - BELOW_FLOOR))
+    if below >= FINDING_SHARE:
+        findings.append(
+            f"{below:.0%} of the returns lie more than {BELOW_FLOOR:g} m below the floor (h = {floor:g} m) and are "
+            f"taken for floor: is the sensor higher than sensor_height {robot.sensor_height:g} m?"
+        )
+    layer = _densest_layer(heights)
+    if layer is not None and layer[0] > floor + FLOOR_OFFSET and layer[0] < 0.0:
+        findings.append(
+            f"{layer[1]:.0%} of the returns lie in a horizontal layer at h = {layer[0]:.2f} m, likely the floor, "
+            f"{layer[0] - floor:.2f} m above the floor sensor_height {robot.sensor_height:g} m puts at h = {floor:g} m: "
+            "is the sensor lower than that?"
+        )
+    return findings
+
+
+def is_planar(features: Features) -> bool:
+    """Whether the returns (evidence > 0) all lie in one horizontal plane: a 2D laser's scan."""
+    heights = features.points[features.evidence > 0.0, 2]
+    return heights.size > 0 and float(heights.max() - heights.min()) <= PLANAR_SPREAD
+
+
+def _densest_layer(heights: np.ndarray, thickness: float = 0.06) -> tuple[float, float] | None:
+    """Centre height and share of the thickest-populated ``thickness`` layer, if it holds
+    at least :data:`FINDING_SHARE` of ``heights`` (the floor, in most 3D data)."""
+    step = thickness / 3.0
+    counts, edges = np.histogram(heights, bins=max(1, int(np.ceil((heights.max() - heights.min()) / step))))
+    if counts.size >= 3:
+        counts = np.convolve(counts, np.ones(3), mode="same")
+    k = int(np.argmax(counts))
+    share = float(counts[k]) / heights.size
+    if share < FINDING_SHARE:
+        return None
+    layer = heights[(heights >= edges[k] - step) & (heights <= edges[k + 1] + step)]
+    return float(np.median(layer)), share
+
+
+__all__ = ["FLOOR_MODES", "SAMPLE_KINDS", "Samples", "SensorModel", "geometry_findings", "is_planar"]

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from occtool.errors import InputError
 from occtool.features import Features
 from occtool.io._atomic import atomic_write
+from occtool.limits import MAX_DISTANCE, MAX_FEATURES, MAX_RANGE_NOISE
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -618,12 +619,18 @@ def simulate_scene(
         scene = build_scene(name, robot=robot)
     if not isinstance(n_features, (int, np.integer)) or n_features < 0:
         raise InputError(f"the number of features must be a whole number >= 0, got {n_features!r}")
+    if n_features > MAX_FEATURES:
+        raise InputError(f"n_features must be at most {MAX_FEATURES:,}, got {n_features:,}")
     if not (np.isfinite(range_noise) and range_noise >= 0):
         raise InputError(f"range noise must be a finite number >= 0, got {range_noise}")
+    if range_noise > MAX_RANGE_NOISE:
+        raise InputError(f"range_noise must be at most {MAX_RANGE_NOISE:g} (per metre squared), got {range_noise:g}")
     if not 0.0 <= outlier_rate <= 1.0:
         raise InputError(f"outlier rate must lie in [0, 1], got {outlier_rate}")
     if not (np.isfinite(sensor_range) and sensor_range > MIN_SENSOR_RANGE):
         raise InputError(f"sensor range must be a finite number > {MIN_SENSOR_RANGE} m, got {sensor_range}")
+    if sensor_range > MAX_DISTANCE:
+        raise InputError(f"sensor_range must be at most {MAX_DISTANCE:g} m, got {sensor_range:g}")
     if not np.isfinite(yaw):
         raise InputError(f"yaw must be finite, got {yaw}")
 

@@ -16,6 +16,7 @@ from occtool.cli.options import (
     refuse_existing,
     seed_option,
 )
+from occtool.limits import MAX_REPEATS
 
 
 def _unique_params(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -45,7 +46,7 @@ def _holdout(ctx: click.Context | None, param: click.Parameter | None, value: fl
               help="Cell edge of the grids, metres.")
 @click.option("--octomap", "use_octomap", is_flag=True, default=False,
               help="Also build an OctoMap (needs the extra: pip install 'occtool[octomap]').")
-@click.option("--octomap-scans", type=click.IntRange(min=1), default=10, show_default=True,
+@click.option("--octomap-scans", type=click.IntRange(min=1, max=MAX_REPEATS), default=10, show_default=True,
               help="Insert the features into OctoMap as this many scans (it updates a cell once per scan).")
 @click.option("--unknown", type=click.Choice(["free", "occupied"]), default="free", show_default=True,
               help="Read unobserved space in the grids' navigation polygons as free (its prior 0.5, below the "
@@ -55,7 +56,7 @@ def _holdout(ctx: click.Context | None, param: click.Parameter | None, value: fl
               help="Scene truth (truth.json from `occtool simulate`) to score the polygons against.")
 @click.option("--holdout", type=float, default=0.1, show_default=True, callback=_holdout,
               help="Share of the features held out of every model to score occupancy (ROC AUC).")
-@click.option("--repeat", type=click.IntRange(min=1), default=1, show_default=True,
+@click.option("--repeat", type=click.IntRange(min=1, max=MAX_REPEATS), default=1, show_default=True,
               help="Build and extract each model this many times; report the shortest time.")
 @click.option("--position", type=click.IntRange(min=0), default=None,
               help="Robot position of a multi-position log (default: the only one).")
@@ -99,7 +100,11 @@ def compare_grid(
     import logging
 
     refuse_existing(overwrite, json_path, plot_path)
-    from occtool.cli.options import extract_from_kwargs, fit_from_kwargs, read_log_from_kwargs
+    from occtool.cli.options import (
+        extract_from_kwargs,
+        fit_from_kwargs,
+        read_log_from_kwargs,
+    )
     from occtool.compare import compare_grid as run_comparison
     from occtool.compare import report_json
     from occtool.io._atomic import atomic_write

@@ -5,16 +5,17 @@ from __future__ import annotations
 import click
 
 from occtool.cli.options import config_option
+from occtool.limits import MAX_DISTANCE, MAX_RAYS, MAX_ROBOT_SIZE
 
 
 @click.command("evaluate")
 @click.argument("navigation", type=click.Path(exists=True, dir_okay=False), metavar="NAV.geojson")
 @click.argument("truth", type=click.Path(exists=True, dir_okay=False), metavar="TRUTH.json")
-@click.option("--robot-radius", type=click.FloatRange(min=0.0), default=None,
+@click.option("--robot-radius", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE), default=None,
               help="Robot radius for the truth, metres (default: the GeoJSON's, else the truth's).")
-@click.option("--max-range", type=click.FloatRange(min=0.0, min_open=True), default=None,
+@click.option("--max-range", type=click.FloatRange(min=0.0, max=MAX_DISTANCE, min_open=True), default=None,
               help="Max range of the navigation map, metres (default: the GeoJSON's).")
-@click.option("--rays", type=click.IntRange(min=8), default=7200, show_default=True,
+@click.option("--rays", type=click.IntRange(min=8, max=MAX_RAYS), default=7200, show_default=True,
               help="Rays of the angular sweep tracing the reachable region.")
 @click.option("--point-tolerance", type=click.FloatRange(min=0.0), default=0.05, show_default=True,
               help="Metres short of the max range that still count as open, judging the map's points.")

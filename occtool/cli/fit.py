@@ -34,7 +34,7 @@ def fit(log_path: str, output: str | None, overwrite: bool, position: int | None
     from pathlib import Path
 
     from occtool import __version__
-    from occtool.cli.options import fit_from_kwargs, read_log_from_kwargs
+    from occtool.cli.options import fit_from_kwargs, fit_template_for_log, read_log_from_kwargs
     from occtool.io.model import save_model, save_model_set_index
 
     logger = logging.getLogger("occtool.fit")
@@ -50,6 +50,7 @@ def fit(log_path: str, output: str | None, overwrite: bool, position: int | None
             log.single(None)  # raises the "no range data" error
     else:
         chosen = [log.single(position)]
+    template = fit_template_for_log(template, log, chosen)  # planar-laser defaults, geometry warnings (h12)
     if to_folder:
         refuse_existing(overwrite, *(Path(output) / f"model_{item.index:04d}.json" for item in chosen),
                         Path(output) / "index.json")

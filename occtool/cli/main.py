@@ -8,8 +8,14 @@ exit with 2, as click does.
 
 from __future__ import annotations
 
+import errno
 import importlib
+import io
 import logging
+import os
+import signal
+import sys
+import warnings
 from typing import Any
 
 import click
@@ -60,7 +66,15 @@ class LazyGroup(click.Group):
             return super().invoke(ctx)
         except OcctoolError as exc:
             raise click.ClickException(str(exc)) from exc
-        except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError, FileExistsError) as exc:
+        except KeyboardInterrupt as exc:
+            raise click.ClickException("interrupted by SIGINT (Ctrl-C)") from exc
+        except BrokenPipeError as exc:
+            # The reader of standard output went away (`| head`, a closed pipe).
+            _detach_stdout()
+            raise click.ClickException("standard output was closed before the output was written") from exc
+        except OSError as exc:
+            # Missing files, permissions, a full disk (ENOSPC), a read-only file system
+            # (EROFS), the file-size limit (EFBIG, with SIGXFSZ ignored), a name too long.
             raise click.ClickException(_describe_os_error(exc)) from exc
         except MemoryError as exc:
             raise click.ClickException("out of memory: try fewer features or a coarser resolution") from exc
@@ -68,7 +82,14 @@ class LazyGroup(click.Group):
 
 def _describe_os_error(exc: OSError) -> str:
     if exc.filename is not None and exc.strerror:
-        return f"{exc.strerror}: {exc.filename}"
+        name = str(exc.filename)
+        if len(name) > 80:
+            name = name[:40] + "..." + name[-20:]
+        return f"{exc.strerror}: {name}"
+    if exc.strerror:
+        hint = {errno.ENOSPC: " (the output device or disk is full)",
+                errno.EFBIG: " (the file-size limit, ulimit -f, was reached)"}.get(exc.errno or 0, "")
+        return f"cannot write the output: {exc.strerror}{hint}"
     return str(exc)
 
 
@@ -93,13 +114,78 @@ def cli(ctx: click.Context, verbosity: int, quietness: int) -> None:
         handlers=[RichHandler(console=Console(stderr=True), show_time=False, show_path=False)],
         force=True,
     )
+    # A numpy RuntimeWarning (or any other) is one log line, not a source line on stderr.
+    warnings.showwarning = _log_warning
     ctx.ensure_object(dict)
     ctx.obj["verbosity"] = verbosity - quietness
 
 
+def _log_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                 file: Any = None, line: str | None = None) -> None:
+    first_line = str(message).splitlines()[0] if str(message) else ""
+    logging.getLogger("occtool").warning("%s: %s", category.__name__, first_line)
+
+
+class Interrupted(BaseException):
+    """Raised in the main thread on SIGTERM or SIGHUP, so every ``finally`` and temporary-file
+    cleanup runs as for Ctrl-C (a BaseException: ``except Exception`` does not swallow it)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_interrupted(signum: int, frame: Any) -> None:
+    raise Interrupted(signum)
+
+
+def _install_signal_handlers() -> None:
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), _raise_interrupted)
+    if hasattr(signal, "SIGXFSZ"):
+        # Past `ulimit -f` a write then fails with EFBIG (one line) instead of killing us.
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+
+class _ClosedStdout(io.TextIOBase):
+    """Stands in for a standard output the process was started without (``>&-``): any
+    write fails with EBADF, so a command printing to it ends in one line, not silence."""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        raise OSError(errno.EBADF, "standard output is closed: name an output file with -o")
+
+    @property
+    def buffer(self) -> _ClosedStdout:
+        return self
+
+    def isatty(self) -> bool:
+        return False
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry point."""
-    cli.main(args=argv, prog_name="occtool")
+    """Console-script entry point: signals and a closed standard output end in one line."""
+    _install_signal_handlers()
+    if sys.stdout is None:
+        sys.stdout = _ClosedStdout()
+    try:
+        cli.main(args=argv, prog_name="occtool")
+    except Interrupted as exc:
+        print(f"Error: interrupted by {signal.Signals(exc.signum).name}", file=sys.stderr)
+        sys.exit(128 + exc.signum)
+
+
+def _detach_stdout() -> None:
+    """Point standard output at /dev/null, so the flush at exit does not fail a second time."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -20,6 +20,16 @@ from typing import Any, TypeVar
 
 import click
 
+from occtool.limits import (
+    MAX_ANGLES,
+    MAX_BODY_SAMPLES,
+    MAX_DISTANCE,
+    MAX_PIECES,
+    MAX_ROBOT_SIZE,
+    MAX_SWEEPS,
+    MAX_WEIGHT,
+)
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -249,12 +259,13 @@ sensor_options = _compose(
     click.option("--floor", type=click.Choice(["free", "drop", "obstacle"]), default=None,
                  help="Floor features (below the ground clearance): free-space samples only, dropped, "
                       "or obstacles [default: free]."),
-    click.option("--footprint-samples", type=click.IntRange(min=0), default=None,
+    click.option("--footprint-samples", type=click.IntRange(min=0, max=MAX_BODY_SAMPLES), default=None,
                  help="Zero-occupancy samples filling the robot's body [default: 512]."),
-    click.option("--background-samples", type=click.IntRange(min=0), default=None,
+    click.option("--background-samples", type=click.IntRange(min=0, max=MAX_BODY_SAMPLES), default=None,
                  help="Zero-occupancy background samples for featureless directions [default: 0]."),
     click.option("--background-weight", type=float, default=None, help="Weight of each background sample [default: 0.05]."),
-    click.option("--background-range", type=float, default=None, help="Farthest background sample, metres [default: 3]."),
+    click.option("--background-range", type=click.FloatRange(min=0, max=MAX_DISTANCE, min_open=True), default=None,
+                 help="Farthest background sample, metres [default: 3]."),
 )
 
 
@@ -263,24 +274,24 @@ def fit_options(function: F) -> F:
     options = _compose(
         sensor_options,
         robot_options,
-        click.option("-L", "--pieces", type=click.IntRange(min=1), default=64, show_default=True,
+        click.option("-L", "--pieces", type=click.IntRange(min=1, max=MAX_PIECES), default=64, show_default=True,
                      help="Number of linear pieces."),
         click.option("--basis", type=click.Choice(["trig", "linear"]), default="trig", show_default=True,
                      help="Pieces a1 cos(alpha) + a2 sin(alpha) + b h + c r + d (seam-free) or the paper's "
                           "a alpha + b h + c r + d."),
-        click.option("--c-min", type=float, default=None, help="Lower bound of the range weight c, per metre [default: 0.25]."),
-        click.option("--a-max", type=float, default=None, help="Bound of |dF/dalpha|, per radian [default: 12]."),
-        click.option("--b-max", type=float, default=None, help="Bound of the height weight |b|, per metre [default: 8]."),
-        click.option("--c-max", type=float, default=None,
+        click.option("--c-min", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Lower bound of the range weight c, per metre [default: 0.25]."),
+        click.option("--a-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Bound of |dF/dalpha|, per radian [default: 12]."),
+        click.option("--b-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Bound of the height weight |b|, per metre [default: 8]."),
+        click.option("--c-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None,
                      help="Largest range weight of a centre piece, per metre [default: 8]."),
         click.option("--loss", type=click.Choice(["huber", "squared"]), default="huber", show_default=True,
                      help="Regression loss (Huber is robust to outliers)."),
-        click.option("--huber-delta", type=float, default=None, help="Huber loss threshold [default: 0.1]."),
+        click.option("--huber-delta", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Huber loss threshold [default: 0.1]."),
         click.option("--groups", type=click.IntRange(min=1), default=None,
                      help="Angular segments of the tree [default: pieces // 4]."),
-        click.option("--max-sweeps", type=click.IntRange(min=0), default=None,
+        click.option("--max-sweeps", type=click.IntRange(min=0, max=MAX_SWEEPS), default=None,
                      help="Least-squares refit sweeps after the construction [default: 0]."),
-        click.option("--focus-range", type=click.FloatRange(min=0.0, min_open=True), default=None, callback=_positive,
+        click.option("--focus-range", type=click.FloatRange(min=0.0, max=MAX_DISTANCE, min_open=True), default=None, callback=_positive,
                      help="Farthest horizontal distance fitted, metres; scale it with the maps' "
                           "--max-range (about 2.5x) [default: 4]."),
         click.option("--guard/--no-guard", default=None,
@@ -308,6 +319,42 @@ def fit_from_kwargs(kwargs: dict[str, Any], *, seed: int = 0) -> Any:
     values = {name: kwargs.pop(name) for name in FIT_OPTION_NAMES if name in kwargs}
     return OccupancyRegressor(**{k: v for k, v in values.items() if v is not None}, sensor=sensor, robot=robot, seed=seed)
 
+def fit_template_for_log(template: Any, log: RangeLog, positions: list[Any]) -> Any:
+    """Adapt the fit to the log's sensor and warn where the data and the geometry disagree.
+
+    A log whose returns all lie in one plane (a 2D laser, as CARMEN logs) gets a planar
+    scanner's robot (:data:`occtool.robot.PLANAR_LASER_SENSOR_HEIGHT`, ``..._BODY_HEIGHT``)
+    unless --sensor-height or --body-height was given (on the command line or in --config).
+    Then each finding of :func:`occtool.sensor.geometry_findings` is a one-line warning
+    (the first position's, with a count of the others that have findings too).
+    """
+    import logging
+    from dataclasses import replace
+
+    from click.core import ParameterSource
+
+    from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT
+    from occtool.sensor import geometry_findings, is_planar
+
+    logger = logging.getLogger("occtool.fit")
+    ctx = click.get_current_context(silent=True)
+    given = ctx is not None and any(
+        ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None) for name in ("sensor_height", "body_height"))
+    robot = template.robot
+    if not given and positions and all(is_planar(p.features) for p in positions):
+        robot = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT, body_height=PLANAR_LASER_BODY_HEIGHT)
+        template = type(template)(**{**template.get_params(), "robot": robot})
+        logger.info("a planar laser log: sensor height %g m, body height %g m (--sensor-height, --body-height "
+                    "change them)", robot.sensor_height, robot.body_height)
+    flagged = [(p, findings) for p in positions if (findings := geometry_findings(p.features, robot))]
+    if flagged:
+        position, findings = flagged[0]
+        where = f"position {position.index}: " if len(positions) > 1 else ""
+        more = f" (and {len(flagged) - 1} more position(s))" if len(flagged) > 1 else ""
+        for finding in findings:
+            logger.warning("%s%s%s", where, finding, more)
+    return template
+
 # --- navigation extraction (owner: navigation) ----------------------------------------
 
 ROBOT_OPTION_NAMES = ("robot_radius", "sensor_height", "body_height", "ground_clearance")
@@ -328,13 +375,13 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 
 
 robot_options = _compose(
-    click.option("--robot-radius", type=float, default=0.25, show_default=True,
+    click.option("--robot-radius", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=0.25, show_default=True,
                  help="Robot footprint radius, metres: the navigation polygon is shrunk by it."),
-    click.option("--sensor-height", type=float, default=1.0, show_default=True,
+    click.option("--sensor-height", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=1.0, show_default=True,
                  help="Height of the sensor centre above the floor, metres."),
-    click.option("--body-height", type=float, default=1.0, show_default=True,
+    click.option("--body-height", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=1.0, show_default=True,
                  help="Height of the top of the robot above the floor, metres."),
-    click.option("--ground-clearance", type=float, default=0.05, show_default=True,
+    click.option("--ground-clearance", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=0.05, show_default=True,
                  help="Obstacles lower than this above the floor are driven over, metres."),
 )
 
@@ -348,9 +395,9 @@ extract_options = _compose(
     click.option("--slice-spacing", type=float, default=None, callback=_positive,
                  help="Largest gap between cuts, metres: cuts are added between the heights so the map "
                       "holds between them (default: from the model's slope bounds)."),
-    click.option("--max-range", type=float, default=1.5, show_default=True, callback=_positive,
+    click.option("--max-range", type=click.FloatRange(min=0, max=MAX_DISTANCE, min_open=True), default=1.5, show_default=True, callback=_positive,
                  help="Radius of the circle bounding the navigation polygon, metres."),
-    click.option("--angles", "n_angles", type=click.IntRange(min=8), default=360, show_default=True,
+    click.option("--angles", "n_angles", type=click.IntRange(min=8, max=MAX_ANGLES), default=360, show_default=True,
                  help="Pan angles swept, evenly spaced."),
     click.option("--point-spacing", type=float, default=None, callback=_positive,
                  help="Arc length between obstacle/exploration points on the max-range circle, metres "

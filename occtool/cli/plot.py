@@ -13,6 +13,7 @@ from typing import Any
 import click
 
 from occtool.cli.options import _compose, config_option, log_options, overwrite_option, refuse_existing
+from occtool.limits import MAX_ROBOT_SIZE
 
 DEFAULT_DPI = 100.0
 
@@ -63,7 +64,7 @@ def plot() -> None:
 @log_options
 @click.option("--position", type=click.IntRange(min=0), default=None,
               help="Draw this robot position only (default: the only one, or all along the path).")
-@click.option("--robot-radius", type=click.FloatRange(min=0.0), default=0.25, show_default=True,
+@click.option("--robot-radius", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE), default=0.25, show_default=True,
               help="Radius of the robot disc, metres.")
 @_figure_options
 def features(log: str, position: int | None, robot_radius: float, output: str, overwrite: bool, dpi: float,

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from occtool.cli.options import config_option, overwrite_option, refuse_existing, seed_option
+from occtool.limits import MAX_DISTANCE, MAX_FEATURES, MAX_RANGE_NOISE, MAX_ROBOT_SIZE
 
 
 def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
@@ -21,25 +22,25 @@ def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
 @click.argument("scene", callback=_scene_name, metavar="SCENE")
 @click.option("-o", "--output", "output", required=True, type=click.Path(file_okay=False),
               help="Folder to write features.csv and truth.json into (created if missing).")
-@click.option("--features", type=click.IntRange(min=1), default=10000, show_default=True,
+@click.option("--features", type=click.IntRange(min=1, max=MAX_FEATURES), default=10000, show_default=True,
               help="Number of features to register.")
 @seed_option
-@click.option("--noise", type=click.FloatRange(min=0.0), default=0.01, show_default=True,
+@click.option("--noise", type=click.FloatRange(min=0.0, max=MAX_RANGE_NOISE), default=0.01, show_default=True,
               help="Stereo range noise: sigma = NOISE * r^2 metres at range r.")
-@click.option("--outlier-rate", type=click.FloatRange(0.0, 1.0), default=0.05, show_default=True,
-              help="Share of features registered at a wrong range along their ray.")
+@click.option("--outlier-rate", type=click.FloatRange(0.0, 1.0),
+              default=0.05, show_default=True, help="Share of features registered at a wrong range along their ray.")
 @click.option("--yaw", type=float, default=0.0, show_default=True,
               help="Turn the whole scene (features and truth) by this many radians.")
-@click.option("--sensor-height", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True,
-              help="Height of the camera above the floor, metres.")
-@click.option("--body-height", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True,
-              help="Height of the robot's top above the floor, metres.")
-@click.option("--radius", type=click.FloatRange(min=0.0), default=0.25, show_default=True,
-              help="Robot radius, metres (recorded in the truth).")
-@click.option("--ground-clearance", type=click.FloatRange(min=0.0), default=0.05, show_default=True,
-              help="Obstacles lower than this are driven over, metres.")
-@click.option("--sensor-range", type=click.FloatRange(min=0.0, min_open=True), default=6.0, show_default=True,
-              help="Farthest range at which the camera registers features, metres.")
+@click.option("--sensor-height", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE, min_open=True),
+              default=1.0, show_default=True, help="Height of the camera above the floor, metres.")
+@click.option("--body-height", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE, min_open=True),
+              default=1.0, show_default=True, help="Height of the robot's top above the floor, metres.")
+@click.option("--radius", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE),
+              default=0.25, show_default=True, help="Robot radius, metres (recorded in the truth).")
+@click.option("--ground-clearance", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE),
+              default=0.05, show_default=True, help="Obstacles lower than this are driven over, metres.")
+@click.option("--sensor-range", type=click.FloatRange(min=0.0, max=MAX_DISTANCE, min_open=True),
+              default=6.0, show_default=True, help="Farthest range at which the camera registers features, metres.")
 @overwrite_option
 @config_option
 def simulate(scene: str, output: str, features: int, seed: int, noise: float, outlier_rate: float,

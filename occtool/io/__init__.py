@@ -33,12 +33,13 @@ from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
+from occtool.limits import MAX_DISTANCE
 
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
     from occtool.io.read_options import ReadOptions
 
-__all__ = ["FORMATS", "check_no_return_range", "detect_format", "read_log", "describe_log", "write_csv", "write_mcap"]
+__all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "read_log", "write_csv", "write_mcap"]
 
 FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -60,7 +61,8 @@ def _head(path: Path, size: int = 4096) -> bytes:
     except (OSError, EOFError) as exc:
         raise InputError(f"{path}: the compressed file is corrupt ({exc})") from None
     with open(path, "rb") as handle:
-        return handle.read(size)
+        head = handle.read(size)
+    return head[3:] if head.startswith(b"\xef\xbb\xbf") else head  # a UTF-8 byte-order mark
 
 
 def detect_format(path: str | os.PathLike[str]) -> str:
@@ -126,6 +128,8 @@ def check_no_return_range(value: float | None) -> float | None:
         raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}") from None
     if not (number > 0.0 and number < float("inf")):
         raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}")
+    if number > MAX_DISTANCE:
+        raise InputError(f"no-return range must be at most {MAX_DISTANCE:g} m, got {value!r}")
     return number
 
 

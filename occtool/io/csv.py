@@ -13,8 +13,6 @@ slower pass run, to name the offending line or, with ``skip_invalid``, to drop i
 
 from __future__ import annotations
 
-import bz2
-import gzip
 import logging
 import os
 import warnings
@@ -28,6 +26,7 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, assign_positions, to_reference_frame
+from occtool.limits import MAX_COORDINATE
 
 logger = logging.getLogger(__name__)
 
@@ -37,13 +36,10 @@ STAMP_ALIASES = ("stamp", "time", "t")
 
 
 def open_text(path: str | os.PathLike[str]) -> IO[str]:
-    """Open a text file for reading, decompressing ``.gz`` and ``.bz2`` transparently."""
-    name = str(path)
-    if name.endswith(".gz"):
-        return gzip.open(name, "rt", encoding="utf-8", errors="replace")
-    if name.endswith(".bz2"):
-        return bz2.open(name, "rt", encoding="utf-8", errors="replace")
-    return open(name, encoding="utf-8", errors="replace", newline=None)
+    """Open a text file for reading, decompressing gzip and bzip2 (told by content) transparently."""
+    from occtool.io._open import open_input
+
+    return open_input(path, "r")
 
 
 def _content(line: str) -> str:
@@ -251,6 +247,8 @@ def read_csv(
     not_finite = ~np.isfinite(data).all(axis=1)
     outside = ~not_finite & ((m < 0.0) | (m > 1.0))
     at_origin = ~not_finite & ~(np.abs(points) > 0.0).any(axis=1)
+    too_far = ~not_finite & ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
+    bad_reason[too_far] = 4
     bad_reason[at_origin] = 3
     bad_reason[outside] = 2
     bad_reason[not_finite] = 1
@@ -265,6 +263,7 @@ def read_csv(
                 1: "a value is NaN or infinite",
                 2: f"evidence {float(m[first])!r} lies outside [0, 1]",
                 3: "the point lies at the sensor origin (0, 0, 0) and has no direction",
+                4: f"the point lies farther than {MAX_COORDINATE:g} m from the sensor: not range data",
             }[int(bad_reason[first])]
             problems.append((int(line_numbers[first]), reason))
         line, problem = min(problems)

@@ -29,6 +29,7 @@ from shapely.geometry.polygon import orient
 
 from occtool.errors import InputError
 from occtool.features import Pose
+from occtool.io import json as safe_json
 from occtool.io._atomic import atomic_write
 from occtool.navigation import NavigationMap, Slice
 
@@ -323,7 +324,7 @@ def _parse(text: str, source: str) -> tuple[list[Any], dict[str, Any]]:
     if not stripped:
         raise InputError(f"{source}: the file is empty")
     try:
-        document = json.loads(stripped)
+        document = safe_json.loads(stripped)
         documents = [document]
     except json.JSONDecodeError as exc:
         # A sequence: one JSON text per line, each optionally after an RS (RFC 8142).
@@ -333,7 +334,7 @@ def _parse(text: str, source: str) -> tuple[list[Any], dict[str, Any]]:
             if not line:
                 continue
             try:
-                documents.append(json.loads(line))
+                documents.append(safe_json.loads(line))
             except json.JSONDecodeError as line_error:
                 first = exc if len(documents) == 0 and number == 1 else line_error
                 raise InputError(f"{source}: not valid GeoJSON (line {number}: {first.msg})") from None

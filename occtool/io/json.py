@@ -1,8 +1,11 @@
-"""Reading a JSON document with one-line errors that name the file.
+"""JSON from users: integers and nesting bounded, one-line errors that name the file.
 
 The one JSON reader of occtool's report-like files (comparison reports, benchmark
-results, scene truths); model files keep their own format checks in
-:mod:`occtool.io.model`.
+results, scene truths); model files and navigation maps parse with :func:`loads` and keep
+their own format checks (:mod:`occtool.io.model`, :mod:`occtool.io.geojson`).
+``json.loads`` turns a 400-digit integer into a Python int that overflows every float
+conversion later, and a document nested a thousand deep into a RecursionError; here both
+are :class:`json.JSONDecodeError`, which every reader reports in one line.
 """
 
 from __future__ import annotations
@@ -46,6 +49,27 @@ def read_json(path: str | os.PathLike[str], *, error: type[OcctoolError] = Model
     except UnicodeDecodeError:
         raise error(f"{os.fspath(path)}: not a text (UTF-8) file") from None
     try:
-        return json.loads(text)
+        return loads(text)
     except json.JSONDecodeError as exc:
         raise error(f"{os.fspath(path)}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+
+
+#: Longest integer literal accepted: counts, versions and seeds have at most 19 digits.
+MAX_INTEGER_DIGITS = 20
+
+
+def _parse_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_INTEGER_DIGITS:
+        # JSONDecodeError needs a document and position; the caller adds the file name.
+        raise json.JSONDecodeError(f"an integer of {digits} digits ({text[:12]}...) is too long to be a value", text, 0)
+    return int(text)
+
+
+def loads(text: str) -> Any:
+    """``json.loads`` with integers of at most :data:`MAX_INTEGER_DIGITS` digits and a
+    nesting the parser can follow; both failures are :class:`json.JSONDecodeError`."""
+    try:
+        return json.loads(text, parse_int=_parse_int)
+    except RecursionError:
+        raise json.JSONDecodeError("nested too deeply", text, 0) from None

@@ -178,6 +178,8 @@ def _rotation_from_quaternion(q: Any) -> NDArray[np.float64]:
     if q is None:
         return np.eye(3)
     x, y, z, w = (float(_get(q, k, 0.0 if k != "w" else 1.0)) for k in ("x", "y", "z", "w"))
+    if not np.isfinite([x, y, z, w]).all():
+        raise InputError(f"the orientation quaternion ({x}, {y}, {z}, {w}) is not finite")
     norm = np.sqrt(x * x + y * y + z * z + w * w)
     if norm == 0.0:
         return np.eye(3)
@@ -219,8 +221,25 @@ class _Rigid:
 _IDENTITY = _Rigid(np.eye(3), np.zeros(3))
 
 
-def _transforms_of(message: Any) -> list[tuple[str, str, _Rigid]]:
-    """``(parent, child, child-to-parent transform)`` for each transform in a TF message."""
+def _checked_rigid(rotation: Any, translation: Any, what: str) -> _Rigid:
+    """The transform of a quaternion and a translation, refusing ones that are no rigid motion."""
+    q = tuple(float(_get(rotation, k, 0.0 if k != "w" else 1.0)) for k in ("x", "y", "z", "w")) if rotation is not None else (0.0, 0.0, 0.0, 1.0)
+    t = _vector(translation)
+    if not (np.isfinite(q).all() and np.isfinite(t).all()):
+        raise InputError(f"{what} is not finite (rotation {q}, translation {tuple(float(v) for v in t)})")
+    if not any(q):
+        raise InputError(f"{what} has the zero quaternion (0, 0, 0, 0), which is no rotation")
+    return _Rigid(_rotation_from_quaternion(rotation), t)
+
+
+def _transforms_of(message: Any, topic: str = "tf") -> list[tuple[str, str, _Rigid]]:
+    """``(parent, child, child-to-parent transform)`` for each transform in a TF message.
+
+    Raises
+    ------
+    InputError
+        For a transform with a NaN or infinite value or a zero quaternion.
+    """
     out = []
     if _get(message, "transforms") is not None and _get(message, "parent_frame_id") is None:
         items = list(_get(message, "transforms"))
@@ -231,12 +250,14 @@ def _transforms_of(message: Any) -> list[tuple[str, str, _Rigid]]:
             parent = _get(_get(item, "header"), "frame_id", "")
             child = _get(item, "child_frame_id", "")
             transform = _get(item, "transform")
-            rigid = _Rigid(_rotation_from_quaternion(_get(transform, "rotation")), _vector(_get(transform, "translation")))
+            rotation, translation = _get(transform, "rotation"), _get(transform, "translation")
         else:  # foxglove.FrameTransform
             parent = _get(item, "parent_frame_id", "")
             child = _get(item, "child_frame_id", "")
-            rigid = _Rigid(_rotation_from_quaternion(_get(item, "rotation")), _vector(_get(item, "translation")))
-        out.append((_strip_frame(parent), _strip_frame(child), rigid))
+            rotation, translation = _get(item, "rotation"), _get(item, "translation")
+        parent, child = _strip_frame(parent), _strip_frame(child)
+        rigid = _checked_rigid(rotation, translation, f"{topic}: the transform {parent} -> {child}")
+        out.append((parent, child, rigid))
     return out
 
 
@@ -417,8 +438,17 @@ def _scan_points(
     return np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)]), values
 
 
+def _check_finite_fields(message: Any, names: tuple[str, ...], where: str) -> None:
+    """A laser scan's geometry must be numbers: a NaN angle puts every beam nowhere."""
+    for field_name in names:
+        value = float(_get(message, field_name, 0.0))
+        if not np.isfinite(value) and not (field_name == "range_max" and value == np.inf):
+            raise InputError(f"{where}: the scan's {field_name} is {value}, not a finite number")
+
+
 def _decode_laserscan(message: Any, options: _Options, where: str) -> _Decoded:
     ranges = np.asarray(message.ranges, dtype=np.float64)
+    _check_finite_fields(message, ("angle_min", "angle_increment", "range_min", "range_max"), where)
     angles = float(message.angle_min) + float(message.angle_increment) * np.arange(ranges.size)
     range_min, range_max = float(message.range_min), float(message.range_max)
     # REP 117: +inf is "no object within range" (as is a value above range_max); -inf
@@ -469,6 +499,7 @@ def _decode_foxglove_pointcloud(message: Any, options: _Options, where: str) -> 
 
 def _decode_foxglove_laserscan(message: Any, options: _Options, where: str) -> _Decoded:
     ranges = np.asarray(_get(message, "ranges", []) or [], dtype=np.float64)
+    _check_finite_fields(message, ("start_angle", "end_angle"), where)
     start, end = float(_get(message, "start_angle", 0.0)), float(_get(message, "end_angle", 0.0))
     # foxglove spaces the beams evenly from start_angle to end_angle, both included.
     angles = np.linspace(start, end, ranges.size) if ranges.size > 1 else np.full(ranges.size, start)
@@ -563,7 +594,7 @@ class _Reader:
         from mcap.reader import make_reader
 
         try:
-            self.reader = make_reader(self.handle, decoder_factories=_decoder_factories())
+            self.reader = make_reader(self.handle, validate_crcs=True, decoder_factories=_decoder_factories())
             self.reader.get_header()
             self.summary = self.reader.get_summary()
         except (*_mcap_errors(), OSError) as exc:  # type: ignore[misc]  # OSError: a seek to a corrupt summary offset
@@ -598,7 +629,7 @@ class _Reader:
         counts: dict[int, list[Any]] = {}
         with open(self.path, "rb") as handle:
             try:
-                for schema, channel, _ in NonSeekingReader(handle).iter_messages():
+                for schema, channel, _ in NonSeekingReader(handle, validate_crcs=True).iter_messages():
                     entry = counts.setdefault(channel.id, [channel.topic, schema.name if schema else "", channel.message_encoding, 0])
                     entry[3] += 1
             except _mcap_errors() as exc:
@@ -647,7 +678,30 @@ def describe_channels(path: str | os.PathLike[str]) -> tuple[list[ChannelRow], d
                 extra["duration"] = f"{(stats.message_end_time - stats.message_start_time) * 1e-9:.3f} s"
         else:
             extra["summary"] = "none (channels counted by reading the file)"
+        extra["checksums"] = _describe_checksums(reader)
     return rows, extra
+
+
+def _describe_checksums(reader: _Reader) -> str:
+    """Whether the file's chunks carry CRC32s (read back from each chunk's record header)."""
+    import struct
+
+    indexes = reader.summary.chunk_indexes if reader.summary is not None else []
+    if not indexes:
+        return "unknown: no chunk index (the data section's CRC, if any, is checked on a full read)"
+    missing = 0
+    for index in indexes:
+        # Chunk record: opcode (1), length (8), start time (8), end time (8), uncompressed
+        # size (8), then the uncompressed data's CRC32 (4); 0 means "not computed".
+        reader.handle.seek(index.chunk_start_offset + 33)
+        raw = reader.handle.read(4)
+        if len(raw) < 4 or struct.unpack("<I", raw)[0] == 0:
+            missing += 1
+    if missing == len(indexes):
+        return f"none: its {len(indexes):,} chunk(s) carry no CRC32, so corrupt data cannot be detected"
+    if missing:
+        return f"{len(indexes) - missing:,} of {len(indexes):,} chunks carry a CRC32 (checked on read); {missing:,} do not"
+    return f"CRC32 on all {len(indexes):,} chunk(s), checked on read"
 
 
 def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path: str) -> list[ChannelRow]:
@@ -731,8 +785,8 @@ def read_mcap(
 
         frames = _FrameTree()
         if static_topics:
-            for _, _, _, message in reader.messages(static_topics):
-                for parent, child, rigid in _transforms_of(message):
+            for _, static_channel, _, message in reader.messages(static_topics):
+                for parent, child, rigid in _transforms_of(message, f"{name}, {static_channel.topic}"):
                     frames.add(parent, child, rigid)
         base = _strip_frame(base_frame) if base_frame else None
         if base is not None and base not in frames and not tf_topics and not odom_topics and sensor_frame is None:
@@ -753,7 +807,7 @@ def read_mcap(
         for schema, channel, mcap_message, message in reader.messages([r.topic for r in chosen] + tf_topics + odom_topics):
             topic = channel.topic
             if topic in tf_topics:
-                for parent, child, rigid in _transforms_of(message):
+                for parent, child, rigid in _transforms_of(message, f"{name}, {topic}"):
                     if child == base_name:
                         tf_pose = _planar_pose(rigid)
                 continue
@@ -761,7 +815,9 @@ def read_mcap(
                 child = _strip_frame(_get(message, "child_frame_id", ""))
                 if not child or child == base_name:
                     pose = _get(_get(message, "pose"), "pose")
-                    odom_pose = _planar_pose(_Rigid(_rotation_from_quaternion(_get(pose, "orientation")), _vector(_get(pose, "position"))))
+                    odom_pose = _planar_pose(_checked_rigid(
+                        _get(pose, "orientation"), _get(pose, "position"),
+                        f"{name}, {topic}, message {mcap_message.sequence}: the odometry pose"))
                 continue
             where = f"{name}, topic {topic}, message {mcap_message.sequence or scan_count}"
             try:

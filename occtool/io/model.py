@@ -24,6 +24,7 @@ import numpy as np
 
 from occtool.errors import InputError, ModelFormatError
 from occtool.io._atomic import atomic_write
+from occtool.io.json import read_json
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 from occtool.tree import InverseTree, MinMaxTree
@@ -132,14 +133,23 @@ def _dumps(data: dict[str, Any]) -> str:
     return text
 
 
+#: Deepest tree of MIN/MAX nodes read (occtool writes depth 2: MAX over MIN over pieces).
+MAX_TREE_DEPTH = 64
+
+
 def _read_json(path: str | os.PathLike[str]) -> Any:
-    try:
-        with open(path, encoding="utf-8") as handle:
-            return json.load(handle)
-    except json.JSONDecodeError as exc:
-        raise ModelFormatError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    except UnicodeDecodeError:
-        raise ModelFormatError(f"{path}: not a text (UTF-8 JSON) file") from None
+    return read_json(path, error=ModelFormatError)
+
+
+def _check_tree_depth(tree: Any, source: str) -> None:
+    """Refuse a tree nested deeper than :data:`MAX_TREE_DEPTH` before anything recurses into it."""
+    level = [tree]
+    for _ in range(MAX_TREE_DEPTH + 1):
+        children = [node.get("children") for node in level if isinstance(node, dict)]
+        level = [child for group in children if isinstance(group, list) for child in group]
+        if not level:
+            return
+    raise ModelFormatError(f"{source}: the tree is nested deeper than {MAX_TREE_DEPTH} levels")
 
 
 def _check_header(data: Any, expected: str, path: str | os.PathLike[str]) -> None:
@@ -168,24 +178,30 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
     for key in ("constraints", "sensor_model", "robot", "fit", "training"):
         if not isinstance(data.get(key), dict):
             raise ModelFormatError(f"{source}: '{key}' is missing or not an object")
+    _check_tree_depth(data.get("tree"), source)
     try:
         tree = MinMaxTree.from_dict(data)
     except ModelFormatError as exc:
         raise ModelFormatError(f"{source}: {exc}") from None
+    except OverflowError:
+        raise ModelFormatError(f"{source}: a piece coefficient is too large for a number") from None
     try:
         sensor = SensorModel.from_dict(data["sensor_model"])
         robot = Robot(**{k: float(v) for k, v in data["robot"].items()})
         names = _fit_params()
         fit_params = {k: v for k, v in data["fit"].items() if k in names}
         constraints = {k: float(data["constraints"][k]) for k in ("c_min", "a_max", "b_max")}
-    except (InputError, TypeError, ValueError, KeyError, AttributeError) as exc:
+    except (InputError, TypeError, ValueError, KeyError, AttributeError, OverflowError) as exc:
         raise ModelFormatError(f"{source}: invalid settings: {exc}") from None
     for key, value in constraints.items():
         if not (math.isfinite(value) and value > 0):
             raise ModelFormatError(f"{source}: constraint {key} must be a finite number > 0, got {value}")
     fit_params.update(constraints)
     _check_constraints(tree, constraints, source)
-    model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
+    try:
+        model = OccupancyRegressor(**fit_params, sensor=sensor, robot=robot)
+    except (InputError, TypeError, ValueError) as exc:
+        raise ModelFormatError(f"{source}: invalid fit settings: {exc}") from None
     training = data["training"]
     try:
         loss = training.get("loss")
@@ -194,13 +210,14 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
         rmse = float(training["rmse"])
         n_sweeps = int(training.get("sweeps", 0))
         digest = str(training["features_sha256"])
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        loss = math.nan if loss is None else float(loss)
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise ModelFormatError(f"{source}: incomplete training summary ({exc})") from None
     if not math.isfinite(rmse):
         raise ModelFormatError(f"{source}: the training summary's rmse is not a finite number")
     model._set_fitted(tree, sensor=sensor, robot=robot, guard=_guard_from(data, source), n_features=n_features,
                       n_samples=n_samples, sample_counts=sample_counts, rmse=rmse, loss_history=[],
-                      loss=math.nan if loss is None else float(loss), n_sweeps=n_sweeps, features_digest=digest,
+                      loss=loss, n_sweeps=n_sweeps, features_digest=digest,
                       seconds=math.nan)
     model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}
     return model
@@ -281,10 +298,13 @@ def load_inverse(path: str | os.PathLike[str]) -> InverseTree:
     """Read an inverse file written by :func:`save_inverse`; :class:`ModelFormatError` if malformed."""
     data = _read_json(path)
     _check_header(data, INVERSE_FORMAT, path)
+    _check_tree_depth(data.get("tree"), str(path))
     try:
         inverse = InverseTree.from_dict(data)
     except ModelFormatError as exc:
         raise ModelFormatError(f"{path}: {exc}") from None
+    except OverflowError:
+        raise ModelFormatError(f"{path}: a piece coefficient is too large for a number") from None
     if not (inverse.coefficients[:, -2] > 0).all():
         raise ModelFormatError(f"{path}: every inverse piece needs a positive weight on m")
     return inverse
@@ -370,7 +390,7 @@ def read_navigable(path: str | os.PathLike[str]) -> Navigable:
     robot = data.get("robot")
     try:
         robot = Robot(**{k: float(v) for k, v in robot.items()}) if isinstance(robot, dict) else None
-    except (InputError, TypeError, ValueError):
+    except (InputError, TypeError, ValueError, OverflowError):
         robot = None
     return Navigable(inverse_range, item.horizontal_lower_bound, dict(bounds) if isinstance(bounds, dict) else None,
                      robot, _guard_from(data, str(path)))

@@ -31,6 +31,7 @@ from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.io.csv import open_text
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.limits import MAX_COORDINATE
 
 DEFAULT_CONSTANT_EVIDENCE = 0.9
 _PLY_TYPES = {
@@ -51,24 +52,31 @@ def _points_and_evidence(values: dict[str, np.ndarray], evidence_field: str, con
     return points, np.full(points.shape[0], constant)
 
 def _open_binary(path: str | os.PathLike[str]) -> io.BufferedIOBase:
-    import bz2
-    import gzip
+    from occtool.io._open import open_input
 
-    name = str(path)
-    if name.endswith(".gz"):
-        return gzip.open(name, "rb")
-    if name.endswith(".bz2"):
-        return bz2.open(name, "rb")
-    return open(name, "rb")
+    return open_input(path, "rb")  # type: ignore[return-value]
 
 
 # --- numeric text with line numbers --------------------------------------------------------
 
 
+XYZ_COLUMNS = (3, 4)  # x y z, and one more value (an intensity, ignored) at most
+
+
+def _column_count_problem(count: int) -> str:
+    """Why a line of ``count`` numbers is not an ``x y z`` point."""
+    detail = f"has {count} values, expected x y z (3 or 4 numbers)"
+    if count > 100:
+        # BreezySLAM's MINES ParisTech logs (exp1.dat): time, telemetry, wheel ticks, 682 ranges.
+        detail += (": it looks like a raw laser log (one scan of ranges per line, e.g. a Hokuyo URG "
+                   "log as BreezySLAM's exp1.dat), not points; convert it to x y z points or CSV first")
+    return detail
+
+
 def _parse_numeric_lines(
-    lines: list[str], first_line: int, width: int, name: str, skip_invalid: bool
+    lines: list[str], first_line: int, name: str, skip_invalid: bool
 ) -> tuple[NDArray[np.float64], int]:
-    """Parse whitespace-separated rows, keeping the first ``width`` columns.
+    """Parse whitespace-separated rows of 3 or 4 numbers, keeping the first three.
 
     Vectorised first; on failure a per-line pass names the bad line (or skips it).
     Returns the values and the count of skipped lines.
@@ -76,8 +84,9 @@ def _parse_numeric_lines(
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
-            data = np.loadtxt(lines, usecols=range(width), ndmin=2, dtype=np.float64, comments="#")
-        return data, 0
+            data = np.loadtxt(lines, ndmin=2, dtype=np.float64, comments="#")
+        if data.shape[1] in XYZ_COLUMNS or data.shape[0] == 0:
+            return data[:, :3].reshape(-1, 3), 0
     except ValueError:
         pass
     rows, skipped = [], 0
@@ -86,15 +95,15 @@ def _parse_numeric_lines(
         if not text:
             continue
         try:
-            if len(text) < width:
-                raise ValueError(f"has {len(text)} values, expected {width}")
-            rows.append([float(v) for v in text[:width]])
+            if len(text) not in XYZ_COLUMNS:
+                raise ValueError(_column_count_problem(len(text)))
+            rows.append([float(v) for v in text[:3]])
         except ValueError as exc:
             if not skip_invalid:
-                detail = str(exc) if "expected" in str(exc) else f"is not {width} numbers: {line.strip()[:60]!r}"
+                detail = str(exc) if "expected" in str(exc) else f"is not 3 or 4 numbers: {line.strip()[:60]!r}"
                 raise InputError(f"{name}, line {first_line + k}: the line {detail}") from None
             skipped += 1
-    return np.array(rows, dtype=np.float64).reshape(-1, width), skipped
+    return np.array(rows, dtype=np.float64).reshape(-1, 3), skipped
 
 
 def _checked(
@@ -107,6 +116,14 @@ def _checked(
     origin = ~(np.abs(points) > 0.0).any(axis=1)
     counts["origin"] += int(origin.sum())
     points, evidence = points[~origin], evidence[~origin]
+    far = ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
+    if far.any():
+        if not skip_invalid:
+            i = int(np.argmax(far))
+            raise InputError(f"{name}: point {i} lies at {tuple(float(v) for v in points[i])}, farther than "
+                             f"{MAX_COORDINATE:g} m from the sensor: not range data (pass --skip-invalid to drop such points)")
+        counts["invalid"] += int(far.sum())
+        points, evidence = points[~far], evidence[~far]
     bad = ~np.isfinite(evidence) | (evidence < 0.0) | (evidence > 1.0)
     if bad.any():
         if not skip_invalid:
@@ -127,7 +144,10 @@ def _notes(counts: dict[str, int]) -> list[str]:
     if counts["origin"]:
         notes.append(f"dropped {counts['origin']} point(s) at the sensor origin (no return)")
     if counts["invalid"]:
-        notes.append(f"skipped {counts['invalid']} point(s) with evidence outside [0, 1]")
+        notes.append(f"skipped {counts['invalid']} point(s) with evidence outside [0, 1] or farther than "
+                     f"{MAX_COORDINATE:g} m")
+    if counts.get("scans"):
+        notes.append(f"dropped {counts['scans']} scan(s) whose NODE pose is not finite, with their points")
     if counts.get("lines"):
         notes.append(f"skipped {counts['lines']} line(s) that do not parse")
     return notes
@@ -170,12 +190,19 @@ def _read_xyz(path: str | os.PathLike[str], name: str, constant: float, skip_inv
                     raise ValueError
             except ValueError:
                 raise InputError(f"{name}, line {start + 1}: expected 'NODE x y z roll pitch yaw', got {node_line.strip()[:60]!r}") from None
+            if not np.isfinite([x, y, z, roll, pitch, yaw]).all():
+                if not skip_invalid:
+                    raise InputError(
+                        f"{name}, line {start + 1}: the scan's pose is not finite: {node_line.strip()[:60]!r} "
+                        "(pass --skip-invalid to drop such scans)")
+                counts["scans"] = counts.get("scans", 0) + 1
+                continue
             pose = Pose(x, y, z, yaw)
             if roll or pitch:
                 tilt = _rotation_rpy(roll, pitch)
         if not any(line.strip() for line in body):
             continue
-        data, skipped = _parse_numeric_lines(body, start + 2, 3, name, skip_invalid)
+        data, skipped = _parse_numeric_lines(body, start + 2, name, skip_invalid)
         counts["lines"] += skipped
         points = data if tilt is None else data @ tilt.T
         evidence = np.full(points.shape[0], constant)
@@ -218,6 +245,14 @@ def _read_pcd(path: str | os.PathLike[str], name: str, evidence_field: str, cons
             raise InputError(f"{name}: PCD header is incomplete or malformed ({exc!r})") from None
         if not (len(fields) == len(sizes) == len(types) == len(field_counts)):
             raise InputError(f"{name}: PCD FIELDS, SIZE, TYPE and COUNT differ in length")
+        if len(set(fields)) != len(fields):
+            raise InputError(f"{name}: PCD FIELDS names a field twice ({' '.join(fields)})")
+        if any(c < 1 for c in field_counts):
+            raise InputError(f"{name}: PCD COUNT must be whole numbers >= 1, got {' '.join(header['COUNT'])}")
+        if width < 0 or height < 0 or points_count < 0:
+            raise InputError(f"{name}: PCD WIDTH, HEIGHT and POINTS must be >= 0, got {width}, {height}, {points_count}")
+        if points_count != width * height:
+            raise InputError(f"{name}: PCD POINTS {points_count} differs from WIDTH x HEIGHT = {width * height}")
         mode = header["DATA"][0].lower() if header["DATA"] else ""
         codes = []
         for f, size, kind in zip(fields, sizes, types):
@@ -247,12 +282,17 @@ def _read_pcd(path: str | os.PathLike[str], name: str, evidence_field: str, cons
                     data = np.loadtxt(lines, usecols=usecols, ndmin=2, dtype=np.float64)
             except ValueError as exc:
                 raise InputError(f"{name}: PCD ascii data does not parse ({exc})") from None
+            if data.shape[0] != points_count:
+                raise InputError(f"{name}: PCD ascii data holds {data.shape[0]} points, the header says POINTS {points_count}")
             values = {w: data[:, k] for k, w in enumerate(wanted)}
         elif mode == "binary":
             stride = off
-            raw = handle.read(points_count * stride)
+            raw = handle.read()  # bounded by the file (or the decompression limit), not by POINTS
             if len(raw) < points_count * stride:
                 raise InputError(f"{name}: PCD binary data is truncated ({len(raw)} of {points_count * stride} bytes)")
+            if len(raw) - points_count * stride >= stride > 0:
+                raise InputError(f"{name}: PCD binary data holds {len(raw) // stride} points, the header says "
+                                 f"POINTS {points_count}")
             dtype = np.dtype({"names": wanted, "formats": [offsets[w][1] for w in wanted],
                               "offsets": [offsets[w][0] for w in wanted], "itemsize": stride})
             records = np.frombuffer(raw, dtype=dtype, count=points_count)
@@ -299,6 +339,8 @@ def _read_ply(path: str | os.PathLike[str], name: str, evidence_field: str, cons
                 if parts[0] == "format":
                     fmt = parts[1]
                 elif parts[0] == "element":
+                    if int(parts[2]) < 0:
+                        raise ValueError
                     elements.append((parts[1], int(parts[2]), []))
                 elif parts[0] == "property":
                     if parts[1] == "list":
@@ -314,6 +356,11 @@ def _read_ply(path: str | os.PathLike[str], name: str, evidence_field: str, cons
             raise InputError(f"{name}: PLY file has no vertex element")
         _, count, properties = elements[vertex_index]
         names = [p for p, _ in properties]
+        for element_name, _, element_properties in elements:
+            property_names = [p for p, _ in element_properties]
+            if len(set(property_names)) != len(property_names):
+                raise InputError(f"{name}: PLY element '{element_name}' names a property twice "
+                                 f"({' '.join(property_names)})")
         missing = [c for c in ("x", "y", "z") if c not in names]
         if missing:
             raise InputError(f"{name}: PLY vertices have no property {', '.join(missing)}")
@@ -335,9 +382,10 @@ def _read_ply(path: str | os.PathLike[str], name: str, evidence_field: str, cons
         elif fmt in ("binary_little_endian", "binary_big_endian"):
             order = "<" if fmt == "binary_little_endian" else ">"
             skip = sum(e[1] * sum(np.dtype(t).itemsize for _, t in e[2]) for e in elements[:vertex_index])
-            handle.read(skip)
+            if len(handle.read(skip)) < skip:
+                raise InputError(f"{name}: PLY data is truncated before the vertices")
             dtype = np.dtype([(p, order + t) for p, t in properties])  # type: ignore[operator]
-            raw = handle.read(count * dtype.itemsize)
+            raw = handle.read(count * dtype.itemsize) if count * dtype.itemsize < 2**31 else handle.read()
             if len(raw) < count * dtype.itemsize:
                 raise InputError(f"{name}: PLY vertex data is truncated")
             records = np.frombuffer(raw, dtype=dtype, count=count)

@@ -161,12 +161,20 @@ def build_log(
 ) -> RangeLog:
     """Group scans into positions and return the :class:`RangeLog`.
 
-    Scans with no points are kept for grouping but contribute nothing; a position
+    A scan whose pose holds a NaN or infinity is an :class:`InputError` (readers refuse or
+    drop such poses first, naming the line or message). Scans with no points are kept
+    for grouping but contribute nothing; a position
     left without features is dropped. Points that land on the position's sensor origin
     after the move into the reference frame are dropped too (they carry no direction).
     """
     scan_list = list(scans)
     notes = list(notes or [])
+    for k, scan in enumerate(scan_list):
+        if scan.pose is not None and not np.isfinite([scan.pose.x, scan.pose.y, scan.pose.z, scan.pose.yaw]).all():
+            raise InputError(
+                f"{source}: scan {scan.source or k} was taken at a pose that is not finite "
+                f"(x {scan.pose.x}, y {scan.pose.y}, z {scan.pose.z}, yaw {scan.pose.yaw})"
+            )
     labels = assign_positions([s.pose for s in scan_list], tolerance=tolerance, group_by=group_by)
     has_poses = any(s.pose is not None for s in scan_list)
     # A single scan without a pose is the normal case of a one-shot file; say so only when

@@ -1,0 +1,43 @@
+"""Bounds on every size and length a user can ask for, in one light module.
+
+The library refuses values beyond these with an :class:`~occtool.errors.InputError`
+naming its keyword; the command line reads the same numbers for its options' ranges
+(importing this module costs nothing), so a flag is refused before any work starts.
+Each bound sits far above any sensible use and far below what exhausts a machine;
+the figures are from runs on the project's 2-core machine.
+"""
+
+from __future__ import annotations
+
+#: Most pan angles a map is swept at (0.01 degree apart): memory grows by ~25 KB per angle
+#: with 64 pieces (36,000 angles took 0.9 GB), so ten million would need 250 GB.
+MAX_ANGLES = 36_000
+#: Most linear pieces of a model (1,024 fitted 10,000 features in 6 s and 0.34 GB).
+MAX_PIECES = 4096
+#: Most footprint or background samples of the sensor model (a million: 0.25 GB, 5 s to fit).
+MAX_BODY_SAMPLES = 1_000_000
+#: Most rays `evaluate` traces (72,000 took 4.5 s and 0.1 GB, 720,000 took 42 s and 0.8 GB).
+MAX_RAYS = 100_000
+#: Most features a simulated scene registers (a million took 21 s and 0.26 GB).
+MAX_FEATURES = 2_000_000
+#: A coordinate farther than this from the sensor is no range measurement (1,000 km), and
+#: squares of coordinates near 1e154 overflow to infinity in every range computation.
+MAX_COORDINATE = 1e6
+#: Largest robot dimension (radius, heights), metres: a robot is not bigger than a building,
+#: and lengths near 1e154 overflow when squared.
+MAX_ROBOT_SIZE = 100.0
+#: Largest distance option (max range, focus range, background range, a simulated sensor's
+#: range, a laser's no-return range), metres.
+MAX_DISTANCE = 1e4
+#: Most bytes a compressed input may expand to; readers hold the text in memory, several
+#: times over while parsing (the largest shared log expands to 9.5 MB).
+MAX_DECOMPRESSED_BYTES = 2**30
+#: Largest weight or slope bound of the fit (c_min, a_max, b_max, c_max, huber_delta): far
+#: beyond any useful value, and small enough that the linear programmes stay finite.
+MAX_WEIGHT = 1e6
+#: Most least-squares refit sweeps (each one refits every piece).
+MAX_SWEEPS = 1000
+#: Most repetitions or scan splits of `compare-grid`.
+MAX_REPEATS = 1000
+#: Largest simulated range noise, metres per metre squared (the default is 0.01).
+MAX_RANGE_NOISE = 10.0
