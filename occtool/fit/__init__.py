@@ -39,7 +39,7 @@ The parts, one concept a module (private; everything public is imported from her
 ========================  ===============================================================
 """
 
-from occtool.fit._construction import LOSS_SAMPLES, box_qp, huber_loss
+from occtool.fit._construction import LOSS_SAMPLES, ProgressCallback, box_qp, huber_loss
 from occtool.fit._focus import focus_samples, frontier_samples, join_samples
 from occtool.fit._profile import (
     FOCUS_ANGLE_BINS,
@@ -57,7 +57,6 @@ from occtool.fit._regressor import (
     DEFAULT_FOCUS_RANGE,
     DEFAULT_PIECES,
     OccupancyRegressor,
-    ProgressCallback,
     features_digest,
     slope_bounds,
 )

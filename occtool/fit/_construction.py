@@ -13,8 +13,9 @@ goes down. Every candidate piece is projected onto the constraints.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,10 +34,30 @@ from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples
 from occtool.tree import MinMaxTree, Op, design_matrix
 
-if TYPE_CHECKING:
-    from occtool.fit._regressor import OccupancyRegressor, ProgressCallback
-
 FloatArray = NDArray[np.float64]
+#: ``callback(done, total)``, called after each group is built and after each sweep.
+ProgressCallback = Callable[[int, int], None]
+
+
+class FitSettings(Protocol):
+    """The estimator's parameters the construction reads (an :class:`OccupancyRegressor`)."""
+
+    pieces: int
+    basis: str
+    groups: int | None
+    c_min: float
+    a_max: float
+    b_max: float
+    c_max: float
+    c_floor: float
+    level: float
+    loss: str
+    huber_delta: float
+    safety: float
+    max_sweeps: int
+    tol: float
+    focus: bool
+    focus_range: float
 
 #: Share of ``focus_range`` beyond which pushing a crossing farther out gains nothing: with
 #: the default 2.5 m, 2.25 m, the default 1.5 m max range of the navigation map plus
@@ -96,7 +117,7 @@ def box_qp(gram: FloatArray, rhs: FloatArray, lower: FloatArray, upper: FloatArr
 class _Fitter:
     """One fit: holds the samples, the design matrix and the evolving pieces."""
 
-    def __init__(self, params: OccupancyRegressor, samples: Samples, robot: Robot,
+    def __init__(self, params: FitSettings, samples: Samples, robot: Robot,
                  returns: tuple[FloatArray, FloatArray], *,
                  floor_is_obstacle: bool = False, depth_error: float = 0.0,
                  progress: ProgressCallback | None = None) -> None:

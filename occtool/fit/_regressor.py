@@ -14,7 +14,6 @@ import inspect
 import logging
 import math
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -22,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features, wrap_angle
-from occtool.fit._construction import _Fitter
+from occtool.fit._construction import ProgressCallback, _Fitter
 from occtool.fit._focus import focus_samples, frontier_samples, join_samples
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
 from occtool.guard import ReturnGuard, build_guard
@@ -33,7 +32,6 @@ from occtool.tree import BASES, InverseTree, MinMaxTree, Op
 log = logging.getLogger("occtool.fit")
 
 FloatArray = NDArray[np.float64]
-ProgressCallback = Callable[[int, int], None]
 
 DEFAULT_BASIS = "trig"
 #: 64 pieces (16 groups) and a 4 m reach: with 32 and 2.5 m the fit gave the held-out
