@@ -28,6 +28,7 @@ from occtool.errors import InputError
 from occtool.features import Features, Pose
 from occtool.guard import guard_candidates
 from occtool.limits import MAX_RAYS
+from occtool.navigation._raycast import first_hits
 from occtool.robot import Robot
 from occtool.simulate import Obstacle, Scene
 
@@ -82,28 +83,6 @@ def _boundary_segments(geometry: BaseGeometry) -> tuple[FloatArray, FloatArray]:
     return np.concatenate(starts), np.concatenate(vectors)
 
 
-def _first_hits(angles: FloatArray, starts: FloatArray, vectors: FloatArray, limit: float) -> FloatArray:
-    """Distance from the origin along each angle to the first segment, capped at ``limit``."""
-    ux, uy = np.cos(angles), np.sin(angles)
-    best = np.full(angles.shape[0], limit)
-    if starts.shape[0] == 0:
-        return best
-    ax, ay = starts[:, 0], starts[:, 1]
-    ex, ey = vectors[:, 0], vectors[:, 1]
-    # Bound the memory: rays x segments in chunks of about half a million pairs.
-    chunk = max(1, 500_000 // starts.shape[0])
-    for lo in range(0, angles.shape[0], chunk):
-        cx, cy = ux[lo:lo + chunk, None], uy[lo:lo + chunk, None]
-        denom = cx * ey - cy * ex
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (ax * ey - ay * ex) / denom
-            u = (ax * cy - ay * cx) / denom
-        ok = (np.abs(denom) > 1e-15) & (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
-        t = np.where(ok, t, np.inf)
-        best[lo:lo + chunk] = np.minimum(best[lo:lo + chunk], t.min(axis=1))
-    return best
-
-
 def _reach(obstacles: BaseGeometry, angles: FloatArray, max_range: float) -> FloatArray:
     """Distance along each pan angle to the first C-space obstacle, capped at ``max_range``."""
     starts, vectors = _boundary_segments(obstacles)
@@ -114,7 +93,7 @@ def _reach(obstacles: BaseGeometry, angles: FloatArray, max_range: float) -> Flo
             _ORIGIN.buffer(max_range * 1.001, quad_segs=64),
         )
         starts, vectors = starts[near], vectors[near]
-    return _first_hits(angles, starts, vectors, max_range)
+    return np.minimum(first_hits(starts, vectors, angles)[0], max_range)
 
 
 def true_reach(scene: Scene, angles: ArrayLike, *, robot_radius: float | None = None,

@@ -81,7 +81,8 @@ def node_from_dict(data: Any, n_pieces: int, *, where: str = "tree") -> Node:
     children = data["children"]
     if not isinstance(children, list) or not children:
         raise ModelFormatError(f"{where}: node children must be a non-empty list")
-    return Op(data["op"], tuple(node_from_dict(c, n_pieces, where=f"{where}.children[{i}]") for i, c in enumerate(children)))
+    return Op(data["op"], tuple(node_from_dict(c, n_pieces, where=f"{where}.children[{i}]")
+                                for i, c in enumerate(children)))
 
 
 def leaves(node: Node) -> list[int]:
@@ -148,7 +149,8 @@ class _PieceTree:
         coefficients = np.array(coefficients, dtype=np.float64, ndmin=2)
         width = len(self._names[basis])
         if coefficients.ndim != 2 or coefficients.shape[1] != width or coefficients.shape[0] == 0:
-            raise ModelFormatError(f"basis {basis!r} needs pieces of {width} coefficients, got shape {coefficients.shape}")
+            raise ModelFormatError(
+                f"basis {basis!r} needs pieces of {width} coefficients, got shape {coefficients.shape}")
         if not np.isfinite(coefficients).all():
             raise ModelFormatError("a piece coefficient is NaN or infinite")
         used = leaves(root)
@@ -219,7 +221,8 @@ class _PieceTree:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form: basis, pieces (named coefficients) and the nested tree."""
-        return {"basis": self.basis, "pieces": self.pieces(), "tree": self.root.to_dict() if isinstance(self.root, Op) else self.root}
+        tree = self.root.to_dict() if isinstance(self.root, Op) else self.root
+        return {"basis": self.basis, "pieces": self.pieces(), "tree": tree}
 
     @classmethod
     def from_dict(cls, data: Any):
@@ -423,7 +426,8 @@ class _Program:
         for child in node.children:
             if isinstance(child, int):
                 groups.setdefault(int(self.rest_of[child]), []).append(child)
-        parts: list[Node | tuple[int, list[int]]] = [*groups.items(), *(c for c in node.children if not isinstance(c, int))]
+        parts: list[Node | tuple[int, list[int]]] = [
+            *groups.items(), *(c for c in node.children if not isinstance(c, int))]
         deepest = level
         for index, part in enumerate(parts):
             target = level if index == 0 else level + 1

@@ -288,7 +288,7 @@ def test_one_position_of_the_whole_intel_log(runner, shared_data, tmp_path):
 def test_projected_pan_weight_holds_as_the_loader_measures_it():
     """A fitted Intel position once wrote a piece with hypot(a1, a2) = 12.000000000000002
     by numpy (12.0 by math.hypot), which the model loader then refused."""
-    from occtool.fit import _Fitter
+    from occtool.fit._construction import _Fitter
     from occtool.tree import MinMaxTree
 
     a1, a2 = -6.3453855919518025, -10.185091147822414

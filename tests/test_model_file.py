@@ -112,6 +112,23 @@ def test_malformed_model_rejected(model, tmp_path, mutate, message):
         load_model(_write(tmp_path, data))
 
 
+def test_a_file_from_before_the_construction_option_was_removed_still_loads(model, tmp_path):
+    data = json.loads(json.dumps(model_to_dict(model)))
+    assert "construction" not in data["fit"]
+    data["fit"]["construction"] = "profile"
+    loaded = load_model(_write(tmp_path, data))
+    assert loaded.tree_ == model.tree_ and loaded.get_params(deep=False)["pieces"] == 12
+    assert not hasattr(loaded, "construction")
+
+
+def test_a_model_of_the_removed_regression_construction_is_refused_in_one_line(model, tmp_path):
+    data = json.loads(json.dumps(model_to_dict(model)))
+    data["fit"]["construction"] = "regression"
+    with pytest.raises(ModelFormatError, match="construction 'regression' is no longer supported") as error:
+        load_model(_write(tmp_path, data))
+    assert "\n" not in str(error.value)
+
+
 def test_not_json_rejected(tmp_path):
     with pytest.raises(ModelFormatError, match="not valid JSON"):
         load_model(_write(tmp_path, "{ nope"))

@@ -590,10 +590,10 @@ def random_region(seed: int) -> Polygon:
 
 @pytest.mark.parametrize("block", [None, 5])
 def test_the_ray_cast_finds_what_every_ray_against_every_edge_finds(monkeypatch, block):
-    import occtool.navigation
+    import occtool.navigation._raycast
 
     if block is not None:
-        monkeypatch.setattr(occtool.navigation, "RAY_CAST_BLOCK", block)
+        monkeypatch.setattr(occtool.navigation._raycast, "RAY_CAST_BLOCK", block)
     rng = np.random.default_rng(1)
     checked = 0
     for seed in range(60):

@@ -179,6 +179,11 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
         if not isinstance(data.get(key), dict):
             raise ModelFormatError(f"{source}: '{key}' is missing or not an object")
     _check_tree_depth(data.get("tree"), source)
+    # Files written before the least-squares construction was removed record
+    # `construction`: "profile" is what every fit now does; "regression" cannot be refitted.
+    construction = data["fit"].get("construction", "profile")
+    if construction != "profile":
+        raise ModelFormatError(f"{source}: construction {construction!r} is no longer supported: refit the model")
     try:
         tree = MinMaxTree.from_dict(data)
     except ModelFormatError as exc:

@@ -1,0 +1,599 @@
+"""Building the tree: the centre pieces placed by linear programmes, the side pieces, refits.
+
+One :class:`_Fitter` per fit. The near runs of the first-obstacle profile are cut into
+segments, one group of pieces each (``F = MAX over groups (MIN over the group's pieces)``).
+Each centre piece's level crossing is placed by a small linear programme as far out as the
+segment's first obstacles allow, at every height of the body band; its slope in ``r`` comes
+from a robust fit to the samples. Two side pieces rise steeply (within ``a_max``) outside the
+segment and so switch the group off there. Optional sweeps then refit each piece by bounded,
+Huber-weighted least squares (:func:`box_qp`) where it is active, kept only if the loss
+goes down. Every candidate piece is projected onto the constraints.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from functools import cached_property
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.fit._profile import (
+    adaptive_support,
+    angle_bins,
+    first_obstacle_distance,
+    group_by_bin,
+    profile_bins,
+    segment_cost,
+    segment_near_runs,
+)
+from occtool.linear_program import solve_lp
+from occtool.robot import Robot
+from occtool.sensor import SAMPLE_KINDS, Samples
+from occtool.tree import MinMaxTree, Op, design_matrix
+
+FloatArray = NDArray[np.float64]
+#: ``callback(done, total)``, called after each group is built and after each sweep.
+ProgressCallback = Callable[[int, int], None]
+
+
+class FitSettings(Protocol):
+    """The estimator's parameters the construction reads (an :class:`OccupancyRegressor`)."""
+
+    pieces: int
+    basis: str
+    groups: int | None
+    c_min: float
+    a_max: float
+    b_max: float
+    c_max: float
+    c_floor: float
+    level: float
+    loss: str
+    huber_delta: float
+    safety: float
+    max_sweeps: int
+    tol: float
+    focus: bool
+    focus_range: float
+
+#: Share of ``focus_range`` beyond which pushing a crossing farther out gains nothing: with
+#: the default 2.5 m, 2.25 m, the default 1.5 m max range of the navigation map plus
+#: room for the shrink by the robot radius. A share, not a distance, so that the fit
+#: scales with the scene (``focus_range``) as the paper's model does.
+NAVIGATION_REACH_SHARE = 0.9
+#: Where obstacles allow, centre crossings stay this far (m) outside the robot's radius.
+BODY_CLEARANCE = 0.1
+#: A centre's crossing stays above this share of the segment's nearest crossing.
+FLAT_SHARE = 0.97
+#: Heights of the body band at which a centre's crossing is kept in front of obstacles.
+PROFILE_HEIGHTS = 9
+#: Samples whose loss is summed at once.
+LOSS_CHUNK = 1 << 16
+#: Samples of a segment the slope of its crossing is estimated from, at most.
+SLOPE_SAMPLES = 8192
+#: Samples the reported loss and RMSE are computed over, at most (an even subsample).
+LOSS_SAMPLES = 300_000
+
+
+def huber_loss(residual: FloatArray, delta: float) -> FloatArray:
+    """Elementwise Huber loss: quadratic within ``delta``, linear beyond."""
+    a = np.abs(residual)
+    return np.where(a <= delta, 0.5 * residual * residual, delta * (a - 0.5 * delta))
+
+
+def box_qp(gram: FloatArray, rhs: FloatArray, lower: FloatArray, upper: FloatArray) -> FloatArray:
+    """Minimise ``x'Gx/2 - rhs'x`` subject to ``lower <= x <= upper`` (small, dense G).
+
+    An active-set method: solve for the free variables, clamp those outside their box,
+    free a clamped one whose multiplier has the wrong sign, repeat. The result lies in the
+    box exactly (clamped values are the bounds themselves).
+    """
+    k = rhs.shape[0]
+    x = np.clip(np.zeros(k), lower, upper)
+    free = np.ones(k, dtype=bool)
+    for _ in range(4 * k + 4):
+        if free.any():
+            fixed = ~free
+            sub_rhs = rhs[free] - gram[np.ix_(free, fixed)] @ x[fixed]
+            try:
+                x[free] = np.linalg.solve(gram[np.ix_(free, free)], sub_rhs)
+            except np.linalg.LinAlgError:
+                x[free] = np.linalg.lstsq(gram[np.ix_(free, free)], sub_rhs, rcond=None)[0]
+        outside = free & ((x < lower) | (x > upper))
+        if outside.any():
+            x = np.clip(x, lower, upper)
+            free &= ~outside
+            continue
+        grad = gram @ x - rhs
+        wrong = ~free & (((x <= lower) & (grad < 0)) | ((x >= upper) & (grad > 0)))
+        if not wrong.any():
+            break
+        free[int(np.argmax(np.where(wrong, np.abs(grad), -1.0)))] = True
+    return np.clip(x, lower, upper)
+
+class _Fitter:
+    """One fit: holds the samples, the design matrix and the evolving pieces."""
+
+    def __init__(self, params: FitSettings, samples: Samples, robot: Robot,
+                 returns: tuple[FloatArray, FloatArray], *,
+                 floor_is_obstacle: bool = False, depth_error: float = 0.0,
+                 progress: ProgressCallback | None = None) -> None:
+        self.p = params
+        self.progress = progress
+        #: Pan angle (turned) and horizontal distance of the obstacle returns in the body band.
+        self.returns = returns
+        self.depth_error = depth_error
+        self.floor_is_obstacle = floor_is_obstacle
+        self.samples = samples
+        self.robot = robot
+        self.basis = params.basis
+        self.k_angle = 1 if self.basis == "linear" else 2
+        # Angle terms, h, r and the offset.
+        self.n_terms = self.k_angle + 3
+        self.m = samples.m
+        self.w = samples.weight
+        self.hit = samples.kind == SAMPLE_KINDS["hit"]
+        self.on_rays = self.hit | (samples.kind == SAMPLE_KINDS["near"])
+        self.w_safe = self.w * params.safety
+        self.w_total = float(self.w.sum())
+        k = self.n_terms
+        inf = np.inf
+        self.lower = np.full(k, -inf)
+        self.upper = np.full(k, inf)
+        self.lower[: self.k_angle] = -params.a_max
+        self.upper[: self.k_angle] = params.a_max
+        self.lower[self.k_angle] = -params.b_max
+        self.upper[self.k_angle] = params.b_max
+        self.lower[self.k_angle + 1] = params.c_min
+        self.delta = params.huber_delta if params.loss == "huber" else np.inf
+        #: The final tree's values at the samples, set by :meth:`alternate`.
+        self.prediction: FloatArray | None = None
+        #: The samples ``prediction`` is at.
+        self.loss_rows = slice(None)
+        # Hit and near samples grouped by profile bin, and the bins' bounds (built on first use).
+        self._ray_groups: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
+
+    @cached_property
+    def X(self) -> FloatArray:
+        """The ``(samples, terms)`` design matrix: only least squares and sweeps need it,
+        and at a million features it is 100 MB."""
+        return design_matrix(self.basis, self.samples.alpha, self.samples.h, self.samples.r)
+
+    def turned_tree(self, tree: MinMaxTree, origin: float) -> MinMaxTree:
+        """The tree fitted in pan angles measured from ``origin``, in the robot's angles.
+
+        ``cos(alpha - o)`` and ``sin(alpha - o)`` are a rotation of ``cos(alpha)``,
+        ``sin(alpha)``, so the pan weights turn by ``o`` and keep their length.
+        """
+        W = tree.coefficients.copy()
+        co, so = math.cos(origin), math.sin(origin)
+        a1, a2 = W[:, 0].copy(), W[:, 1].copy()
+        W[:, 0] = a1 * co - a2 * so
+        W[:, 1] = a1 * so + a2 * co
+        W = np.array([self.project(row) for row in W])
+        return MinMaxTree(tree.basis, W, tree.root)
+
+    # ---------------------------------------------------------------- constraints
+    def project(self, piece: FloatArray) -> FloatArray:
+        """Move a piece onto the constraint set (box, and the disc for trig angle terms)."""
+        piece = np.clip(piece, self.lower, self.upper)
+        if self.k_angle == 2:
+            norm = pan_weight(piece[0], piece[1])
+            if norm > self.p.a_max:
+                piece[:2] *= self.p.a_max / norm
+                # hypot after scaling can exceed a_max by an ulp; shave it off exactly.
+                while pan_weight(piece[0], piece[1]) > self.p.a_max:
+                    piece[:2] = np.nextafter(piece[:2], 0.0)
+        return piece
+
+    def solve_piece(self, rows: NDArray[np.intp] | NDArray[np.bool_], weights: FloatArray) -> FloatArray | None:
+        """Bounded weighted least squares of one piece on the given samples."""
+        X = self.X[rows]
+        if X.shape[0] < X.shape[1]:
+            return None
+        Xw = X * weights[:, None]
+        gram = Xw.T @ X
+        rhs = Xw.T @ self.m[rows]
+        gram[np.diag_indices_from(gram)] += 1e-9 * (np.trace(gram) + 1.0)
+        piece = box_qp(gram, rhs, self.lower, self.upper)
+        if self.k_angle == 2 and pan_weight(piece[0], piece[1]) > self.p.a_max:
+            # The disc constraint is not a box: keep the direction of the angle weights,
+            # fix their length at the bound and re-solve the remaining weights.
+            angle = piece[:2] * (self.p.a_max / pan_weight(piece[0], piece[1]))
+            rest = slice(2, None)
+            sub_rhs = rhs[rest] - gram[rest, :2] @ angle
+            piece = np.concatenate([angle, box_qp(gram[rest, rest], sub_rhs, self.lower[rest], self.upper[rest])])
+        return self.project(piece)
+
+    def irls_weights(self, residual: FloatArray, weights: FloatArray, hit: NDArray[np.bool_]) -> FloatArray:
+        """Weights of one reweighted least-squares step: ``w min(1, delta/|res|)``, times
+        ``safety`` where a hit is under-predicted."""
+        weights = np.where(hit & (residual < 0), weights * self.p.safety, weights)
+        if not np.isfinite(self.delta):
+            return weights
+        a = np.abs(residual)
+        return weights * np.minimum(1.0, self.delta / np.maximum(a, 1e-300))
+
+    def total_loss(self, prediction: FloatArray, rows: slice = slice(None)) -> float:
+        """The weighted loss of ``prediction`` at the samples ``rows``, per unit weight."""
+        m, w, w_safe = self.m[rows], self.w[rows], self.w_safe[rows]
+        hit = self.hit[rows]
+        # In chunks: at 2M samples whole-array temporaries (16 MB each, fresh pages every
+        # time) made this 0.23 s, 160x its cost at 200k samples.
+        total = 0.0
+        for first in range(0, prediction.size, LOSS_CHUNK):
+            part = slice(first, first + LOSS_CHUNK)
+            residual = prediction[part] - m[part]
+            weights = np.where(hit[part] & (residual < 0), w_safe[part], w[part])
+            total += float(np.dot(weights, huber_loss(residual, self.delta)))
+        return total / (self.w_total if rows == slice(None) else float(w.sum()))
+
+    # ---------------------------------------------------------------- initial tree
+    def range_profile(self, n_bins: int) -> FloatArray:
+        """Horizontal distance of the first obstacle per pan-angle bin, outliers ignored."""
+        s = self.samples
+        support, _ = adaptive_support(s.count("robot"))
+        # From the returns themselves (the surface is where they are, not their hit samples
+        # at r (1 -+ depth error)), a feature for every two hit samples of the support. The
+        # front is the cluster's last return of that support, not its nearest: the nearest
+        # of many noisy returns lies farther in front of the surface the more there are
+        # (about 2.5 sigma of range noise at 80 returns a bin, 2 at 30; the map lost
+        # 0.02-0.04 IoU from 10k to 30k features), but no more than the depth error beyond
+        # the cluster's return half way there, so a table top seen from above keeps its
+        # front edge (first_obstacle_distance).
+        alpha, distance = self.returns
+        keep = support // 2
+        profile = first_obstacle_distance(alpha, distance, n_bins, keep, front=keep - 1, cap=1.0 + self.depth_error)
+        frontier = s.kind == SAMPLE_KINDS["frontier"]
+        if frontier.any():
+            reach = np.sqrt(np.maximum(s.r[frontier] ** 2 - s.h[frontier] ** 2, 0.0))
+            np.minimum.at(profile, angle_bins(s.alpha[frontier], n_bins), reach)
+        cap = self.p.focus_range if self.p.focus else (distance.max() if distance.size else 1.0)
+        return np.minimum(profile, cap)
+
+    def initial_groups(self, n_groups: int, range_profile: FloatArray) -> list[tuple[int, int]]:
+        """Segments ``(first_bin, end_bin)`` of the profile's bins (end exclusive, may exceed
+        the bin count: wraps).
+
+        Bins whose first obstacle lies beyond the navigation reach need no group (where
+        no group is on, the neighbours' sides recede and the space reads free), so only
+        the near runs are cut into at most ``n_groups`` segments.
+        """
+        n_bins = range_profile.shape[0]
+        if n_groups == 1:
+            return [(0, n_bins)]
+        reach = NAVIGATION_REACH_SHARE * self.p.focus_range
+        profile = np.minimum(range_profile, reach)
+        far = profile >= reach
+        if far.all():
+            return [(0, n_bins)]
+        shift = 0
+        if self.basis == "trig":
+            if far.any():
+                # Start where a far run starts, so no segment wraps around the cut.
+                starts = np.flatnonzero(far & ~np.roll(far, 1))
+                shift = int(starts[0]) if starts.size else int(np.flatnonzero(far)[0])
+            else:
+                # Start the linear DP where the profile jumps most: a natural segment edge.
+                shift = int(np.argmax(np.abs(profile - np.roll(profile, 1))))
+        rolled = np.roll(profile, -shift)
+        # A group's sides can only switch it off outside a segment narrower than pi.
+        max_length = min(n_bins // 2 - 1, 2 * int(math.ceil(n_bins / n_groups)))
+        segments = segment_near_runs(rolled, np.roll(far, -shift), n_groups, max_length)
+        return [(a + shift, b + shift) for a, b in segments]
+
+    def run(self) -> tuple[MinMaxTree, list[float]]:
+        p = self.p
+        L = int(p.pieces)
+        # Four pieces a group by default: two centres (low and high part of the body band)
+        # and two sides.
+        n_groups = int(p.groups) if p.groups is not None else max(1, L // 4)
+        if n_groups > 1 and L < 3 * n_groups:
+            n_groups = max(1, L // 3)
+        n_bins = profile_bins(self.samples.count("robot"))
+        profile = self.range_profile(n_bins)
+        segments = self.initial_groups(n_groups, profile)
+        width = 2.0 * np.pi / n_bins
+        sample_bin = angle_bins(self.samples.alpha, n_bins)
+
+        pieces: list[FloatArray] = []
+        members: list[list[int]] = []
+        centres_per_group = [1] * len(segments)
+        extra = L - (3 * len(segments) if len(segments) > 1 else 1)
+        # Extra centres go to the segments whose profile a single line fits worst.
+        seg_cost = [segment_cost(profile, first, end) for first, end in segments]
+        order = np.argsort(-np.asarray(seg_cost), kind="stable")
+        for i in range(extra):
+            centres_per_group[int(order[i % len(order)])] += 1
+
+        for g, (first, end) in enumerate(segments):
+            group: list[int] = []
+            centres = self.profile_centres(profile, first, end, centres_per_group[g], sample_bin)
+            for piece in centres:
+                group.append(len(pieces))
+                pieces.append(piece)
+            if len(segments) > 1:
+                # Side pieces start at the segment's edges and switch the group off beyond
+                # them; where neighbouring groups overlap, the MAX keeps the nearer obstacle.
+                start_angle = first * width - np.pi
+                end_angle = end * width - np.pi
+                base = centres[0]
+                for side in (self.side_piece(base, start_angle, +1), self.side_piece(base, end_angle, -1)):
+                    group.append(len(pieces))
+                    pieces.append(side)
+            members.append(group)
+            if self.progress is not None:
+                self.progress(g + 1, len(segments) + int(p.max_sweeps))
+        W = np.array(pieces)
+        self.progress_offset = len(segments)
+        return self.alternate(W, members)
+
+    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int,
+                        sample_bin: NDArray[np.intp]) -> list[FloatArray]:
+        """Centre pieces whose level crossing lies just in front of the segment's first obstacles.
+
+        In range terms a piece crosses ``level`` at ``r* = p0 + p_angle . angle_terms + p_h h``.
+        A linear programme pushes ``r*`` as far out as it may go while staying at or below
+        ``sqrt(D(alpha)^2 + h^2)`` (the first obstacle at horizontal distance ``D``) at the
+        edges of every bin of the segment, its overlap and every height of the body band.
+        The slope ``c`` through the crossing comes from a robust least-squares fit to the
+        segment's samples, so the sensor model decides how sharp the crossing is.
+        """
+        n_bins = profile.shape[0]
+        width = 2.0 * np.pi / n_bins
+        # The crossing must stay in front of the obstacles over the segment's own bins only:
+        # where a group reaches past its segment, the MAX over groups keeps the nearer one.
+        bins = np.arange(first, end)
+        D_bins = profile[np.mod(bins, n_bins)]
+        # Between two bins the obstacle may be as near as in either of them.
+        left = np.where(bins > first, np.minimum(D_bins, profile[np.mod(bins - 1, n_bins)]), D_bins)
+        right = np.where(bins < end - 1, np.minimum(D_bins, profile[np.mod(bins + 1, n_bins)]), D_bins)
+        # The right edge of one bin is the left edge of the next, with the same bound:
+        # keep each edge once (the nearer bound), halving the programmes' rows.
+        edge_index, first_of = np.unique(np.concatenate([bins, bins + 1]), return_inverse=True)
+        D_edges = np.full(edge_index.size, np.inf)
+        np.minimum.at(D_edges, first_of, np.concatenate([left, right]))
+        edges = edge_index * width - np.pi
+        # From the floor up: the map's lowest cut may lie a little under the clearance.
+        low, high = self.robot.floor_h, self.robot.body_band[1]
+        heights = np.linspace(low, max(high, 0.0), PROFILE_HEIGHTS)
+        if self.k_angle == 1:
+            # The paper's basis is discontinuous at +-pi: keep the overlap on this side.
+            keep = (edges >= -np.pi) & (edges <= np.pi)
+            edges, D_edges = edges[keep], D_edges[keep]
+        A, H = np.meshgrid(edges, heights, indexing="ij")
+        D = np.repeat(D_edges, PROFILE_HEIGHTS).reshape(A.shape)
+        target = np.sqrt(D**2 + H**2).ravel()
+        cap = np.sqrt(np.minimum(D, NAVIGATION_REACH_SHARE * self.p.focus_range) ** 2 + H**2).ravel()
+        body = np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + H**2).ravel()
+        keep_off = np.minimum(body, target - 1e-6)
+        nearest = np.sqrt(np.min(D, axis=0) ** 2 + heights**2)
+        floor_flat = np.minimum((FLAT_SHARE * nearest)[None, :].repeat(A.shape[0], axis=0).ravel(), target - 1e-6)
+        # The crossing line in local angle terms about the segment's middle, where they are
+        # well conditioned: 1, cos(da) - 1, sin(da), h (linear basis: 1, da, h).
+        middle = (first + end) / 2.0 * width - np.pi
+        delta = A.ravel() - middle
+        local = [delta] if self.k_angle == 1 else [np.cos(delta) - 1.0, np.sin(delta)]
+        rows = np.column_stack([np.ones(target.size), *local, H.ravel()])
+
+        c = self.crossing_slope(self.segment_ray_samples(first, end, sample_bin, n_bins), float(np.median(D_bins)))
+        # Half the pan-weight budget is left to the side pieces that switch the group off.
+        bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
+        bound_h = self.p.b_max / c
+        # The offset is free.
+        if self.k_angle == 1:
+            lower = np.array([-np.inf, -bound_angle, -bound_h])
+            upper = np.array([np.inf, bound_angle, bound_h])
+        else:
+            # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
+            # weight <= 0): far from its segment a group then recedes, and its sides can
+            # switch it off.
+            lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
+            upper = np.array([np.inf, 0.0, bound_angle, bound_h])
+        centres = []
+        heights_of_rows = H.ravel()
+        for j in range(count):
+            # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
+            # in h, and the group's crossing (the farthest of its pieces') follows it with one
+            # tangent line per part.
+            part_lo = low + (max(high, 0.0) - low) * j / count
+            part_hi = low + (max(high, 0.0) - low) * (j + 1) / count
+            emphasis = (heights_of_rows >= part_lo - 1e-9) & (heights_of_rows <= part_hi + 1e-9)
+            n_rows, k = rows.shape
+            chosen = np.flatnonzero(emphasis)
+            # Maximise the emphasised crossings, but only up to the range the map looks at
+            # (t_i <= min(r*_i, cap_i)): pushing out far walls must not tilt the line into a
+            # near obstacle. Relative gains: a centimetre near the robot counts more. (Maximising
+            # the linearised horizontal distance per bin edge instead measured 0.01-0.02 worse.)
+            # A programme in the line's own k unknowns: the crossings are capped at the
+            # range the map looks at (r*_i <= cap_i) as constraints. (An auxiliary variable
+            # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
+            # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
+            objective = -(rows[chosen] / cap[chosen, None] ** 2).sum(axis=0)
+            # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
+            # each, bounded by the smaller.
+            A_ub = rows
+            b_ub = np.where(emphasis, np.minimum(target, cap), target)
+            # Keep the crossing off the robot's body wherever the obstacle allows: at the
+            # floor, a crossing a few centimetres too near in r is a body in collision.
+            # Only this centre's part of the band: the group's crossing is the farthest of its
+            # centres', so each needs to keep off the body where it is the one that counts.
+            # Nor may it dip below (nearly) the segment's nearest obstacle at that height, which
+            # a flat crossing would keep: a tilt that gains far away must not cost near by.
+            # Each floor is dropped again if it makes the programme infeasible.
+            floors = [np.maximum(keep_off, floor_flat)[chosen], keep_off[chosen], None]
+            for floor in floors:
+                if floor is None:
+                    result = solve_lp(objective, A_ub, b_ub, lower, upper)
+                else:
+                    result = solve_lp(objective, np.vstack([A_ub, -rows[chosen]]),
+                                      np.concatenate([b_ub, -np.minimum(floor, cap[chosen])]), lower, upper)
+                if result.status == 0:
+                    break
+            if result.status == 0:
+                q = result.x[:k]  # type: ignore[index]  # status 0: solved, x is set
+            else:
+                q = np.zeros(rows.shape[1])
+                q[0] = float(target.min())
+            # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
+            if self.k_angle == 1:
+                p_angle = np.array([q[1]])
+                p0 = q[0] - q[1] * middle
+            else:
+                cm, sm = math.cos(middle), math.sin(middle)
+                p_angle = np.array([q[1] * cm - q[2] * sm, q[1] * sm + q[2] * cm])
+                p0 = q[0] - q[1]
+            # F = level + c (r - r*): angle and height weights -c p, offset level - c p0.
+            piece = np.empty(self.n_terms)
+            piece[: self.k_angle] = -c * p_angle
+            piece[self.k_angle] = -c * q[-1]
+            piece[self.k_angle + 1] = c
+            piece[-1] = self.p.level - c * p0
+            centres.append(self.project(piece))
+        return centres
+
+    def segment_ray_samples(self, first: int, end: int, sample_bin: NDArray[np.intp], n_bins: int) -> NDArray[np.intp]:
+        """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
+
+        Only the samples on rays near their feature say how sharp a crossing is; the robot
+        and footprint samples would pull ``c`` down to ``level / distance``. The samples
+        are grouped by bin once per fit, so each segment takes slices instead of a pass
+        over every sample (8 passes over 2M samples were 0.2 s at 1M features).
+        """
+        if self._ray_groups is None or self._ray_groups[1].size != n_bins + 1:
+            rays = np.flatnonzero(self.on_rays)
+            order, bounds = group_by_bin(sample_bin[rays], n_bins)
+            self._ray_groups = (rays[order], bounds)
+        grouped, bounds = self._ray_groups
+        start, length = first % n_bins, end - first
+        if start + length <= n_bins:
+            return grouped[bounds[start]:bounds[start + length]]
+        return np.concatenate([grouped[bounds[start]:], grouped[:bounds[start + length - n_bins]]])
+
+    def crossing_slope(self, rows: NDArray[np.intp], distance: float) -> float:
+        """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples
+        (an even subsample of at most :data:`SLOPE_SAMPLES` of them: one number needs no
+        more, and at a million features the full segments took 1.3 s of a 6 s fit)."""
+        rows = rows[:: max(1, -(-rows.size // SLOPE_SAMPLES))]
+        s = self.samples
+        r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
+        x = s.r[rows] - r_star
+        y = s.m[rows] - self.p.level
+        w = self.w[rows]
+        c = 1.0
+        for _ in range(4):
+            denominator = float(np.dot(w, x * x))
+            if denominator <= 0:
+                break
+            c = float(np.dot(w, x * y)) / denominator
+            w = self.irls_weights(c * x - y, self.w[rows], self.hit[rows])
+        return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
+
+    def side_piece(self, centre: FloatArray, angle: float, direction: int) -> FloatArray:
+        """A piece that lets the centre's group recede steeply in range beyond ``angle``.
+
+        The side crosses ``level`` where the centre does at ``angle``, with the least slope
+        in ``r`` (``c_min``) and the full pan weight left within ``a_max``: its crossing then
+        moves away from the robot at ``(a_max - |a_centre|) / c_min`` metres per radian
+        outside the segment, and inside it stays nearer than the centre's crossing, so the
+        group (a MIN: its crossing is the farthest of its pieces') keeps the centre's there.
+        ``direction`` +1: the side rises for pan angles above ``angle`` (segment start);
+        -1: below it (segment end).
+        """
+        scale = min(1.0, self.p.c_min / centre[self.k_angle + 1])
+        level = self.p.level
+        piece = centre * scale
+        piece[-1] = centre[-1] * scale + level * (1.0 - scale)
+        A = self.p.a_max
+        if self.k_angle == 1:
+            a = piece[0]
+            gain = (A - a) if direction > 0 else (A + a)
+            piece[0] = a + direction * gain
+            piece[-1] -= direction * gain * angle
+        else:
+            # direction * sin(alpha - angle) = direction * (cos(angle) sin(alpha) - sin(angle) cos(alpha))
+            u = direction * np.array([-math.sin(angle), math.cos(angle)])
+            v = piece[:2].copy()
+            vu = float(v @ u)
+            gain = -vu + math.sqrt(max(vu * vu - float(v @ v) + A * A, 0.0))
+            piece[:2] = v + gain * u
+        return self.project(piece)
+
+    # ---------------------------------------------------------------- alternation
+    def alternate(self, W: FloatArray, members: list[list[int]]) -> tuple[MinMaxTree, list[float]]:
+        root = Op("max", tuple(Op("min", tuple(g)) if len(g) > 1 else g[0] for g in members))
+        if len(members) == 1:
+            root = root.children[0]  # type: ignore[assignment]  # one group: its min (or lone piece)
+        if not self.p.max_sweeps:
+            # No sweeps (the default): only the loss is wanted, from the tree's own
+            # evaluation (rows per piece), not the (samples x pieces) matrix the sweeps need.
+            # Over an even subsample of at most LOSS_SAMPLES samples: the loss and RMSE are
+            # reported, not optimised (at a million features all 2.5M samples took 1.4 s).
+            tree = MinMaxTree(self.basis, W, root)
+            self.loss_rows = slice(None, None, max(1, -(-self.samples.r.size // LOSS_SAMPLES)))
+            s = self.samples
+            self.prediction = tree.predict(s.alpha[self.loss_rows], s.h[self.loss_rows], s.r[self.loss_rows])
+            return tree, [self.total_loss(self.prediction, self.loss_rows)]
+        X, m = self.X, self.m
+        n = X.shape[0]
+        V = X @ W.T
+        G = np.column_stack([V[:, g].min(axis=1) for g in members])
+        F = G.max(axis=1)
+        loss = self.total_loss(F)
+        history = [loss]
+        group_of = {piece: gi for gi, g in enumerate(members) for piece in g}
+        n_groups = len(members)
+        for sweep in range(int(self.p.max_sweeps)):
+            before = loss
+            for piece in range(W.shape[0]):
+                gi = group_of[piece]
+                others = [q for q in members[gi] if q != piece]
+                in_group = V[:, others].min(axis=1) if others else np.full(n, np.inf)
+                if n_groups > 1:
+                    other_groups = np.delete(G, gi, axis=1).max(axis=1)
+                else:
+                    other_groups = np.full(n, -np.inf)
+                current = V[:, piece]
+                active = (current <= in_group) & (current >= other_groups)
+                if active.sum() < X.shape[1]:
+                    continue
+                rows = np.flatnonzero(active)
+                candidate = self.solve_piece(rows, self.irls_weights(F[rows] - m[rows], self.w[rows], self.hit[rows]))
+                if candidate is None or np.array_equal(candidate, W[piece]):
+                    continue
+                for step in (1.0, 0.5):
+                    trial = candidate if step == 1.0 else self.project(W[piece] + step * (candidate - W[piece]))
+                    values = X @ trial
+                    group_value = np.minimum(in_group, values)
+                    F_new = np.maximum(other_groups, group_value)
+                    new_loss = self.total_loss(F_new)
+                    if new_loss < loss:
+                        W[piece] = trial
+                        V[:, piece] = values
+                        G[:, gi] = group_value
+                        F = F_new
+                        loss = new_loss
+                        break
+            history.append(loss)
+            if self.progress is not None:
+                offset = getattr(self, "progress_offset", 0)
+                self.progress(offset + sweep + 1, offset + int(self.p.max_sweeps))
+            if before - loss <= self.p.tol * max(before, 1e-12):
+                break
+        self.prediction = F
+        return MinMaxTree(self.basis, W, root), history
+
+
+
+def pan_weight(a1: float, a2: float) -> float:
+    """``hypot(a1, a2)``, computed as :attr:`MinMaxTree.angle_weight` computes it.
+
+    The constraint ``|dF/dalpha| <= a_max`` is checked (by the loader and the slope
+    bounds) with numpy's ``hypot``, which can be an ulp above ``math.hypot`` for the same
+    pair; a piece projected with the other function could then load as breaking it.
+    """
+    return float(np.hypot(a1, a2))
+

@@ -1,0 +1,150 @@
+"""What the fit knows of the features before any sample is made: the screen.
+
+Which features are obstacles, which are mismatches (:func:`~occtool.fit._sight.contradicted_features`),
+the pan origin the fit's angle bins start at, and which returns the return guard holds
+(:mod:`occtool.guard`): each return confirmed by returns on neighbouring rays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool import guard as guard_module
+from occtool.features import Features, wrap_angle
+from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction
+from occtool.fit._sight import contradicted_features
+from occtool.guard import GUARD_BINS, Support, guard_candidates, is_planar_scan, ray_spacing, support_count
+from occtool.robot import Robot
+from occtool.sensor import SensorModel
+
+FloatArray = NDArray[np.float64]
+
+#: The return guard's line-of-sight test (:func:`guarded_mask`): rays
+#: must pass within 1 cm (+ 1 % of the distance) of a return's height, three of them and
+#: three times as many as end near it, to drop it.
+GUARD_SIGHT_TOLERANCE = (0.01, 0.01)
+GUARD_SIGHT_RATIO = 3
+#: Returns of each guard bin tested for support at first, nearest first (then twice as
+#: many more, and so on, in the bins where none was confirmed).
+GUARD_TEST_CHUNK = 16
+#: Returns this far (m) above or below the body band still confirm a guarded return (a
+#: sign hanging into the band is confirmed by its part above it).
+SUPPORT_HEIGHT_REACH = 0.5
+
+
+@dataclass(frozen=True)
+class Screen:
+    """What the fit and the return guard know of the features before any sample is made."""
+
+    obstacle: NDArray[np.bool_]
+    origin: float
+    planar: bool
+    mismatch: NDArray[np.bool_]
+
+
+def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, basis: str, focus: bool,
+                    focus_range: float) -> Screen:
+    """Which features are obstacles, which are mismatches, and the fit's pan origin."""
+    # Mismatches a few centimetres apart can pass for a small obstacle; where other
+    # rays in nearly the same direction see through them, they are dropped. Floor
+    # features are not obstacles, and grazing rays see "through" them all the time.
+    # The trig basis has no seam, so the angular bins can start anywhere: starting them
+    # at the mean direction of the obstacle features makes the whole fit (the mismatch
+    # test included) turn with the scene: rotating the features rotates the model
+    # exactly, not up to a bin.
+    obstacle = sensor.is_obstacle(features, robot) & ~sensor.is_floor(features.height, robot)
+    origin = mean_direction(features.alpha[obstacle]) if basis == "trig" else 0.0
+    # A planar scan (a 2D laser) has one beam per direction: a beam passing beside a
+    # return says only that the object is narrower than the beam spacing, never that
+    # the return is a mismatch (a chair leg is often hit by a single beam).
+    planar = is_planar_scan(features.height[obstacle])
+    mismatch = np.zeros(len(features), dtype=bool)
+    if focus and not planar:
+        # Only features the focus keeps can mislead the fit: test those alone.
+        horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
+        candidates = obstacle & (horizontal <= focus_range)
+        mismatch = contradicted_features(features, origin=origin, candidates=candidates)
+    return Screen(obstacle, origin, planar, mismatch)
+
+
+def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: float, focus: bool,
+                 focus_range: float) -> tuple[NDArray[np.bool_], FloatArray, float]:
+    """The guarded returns, the share of each feature's distance the guard keeps, and the
+    ray spacing (radians; 0 for a planar scan, whose beams the guard's bins match)."""
+    returns = screen.obstacle & guard_candidates(features, features.evidence, robot, level)
+    if focus:
+        # Only as far as the fit reaches: beyond it the model is an extrapolation anyway.
+        returns &= np.hypot(features.points[:, 0], features.points[:, 1]) <= focus_range + robot.radius
+    if screen.planar:
+        # A planar scan has no mismatches of this kind: every return is guarded, as measured.
+        return returns, np.ones(len(features)), 0.0
+    # 3D data. A return is dropped as a mismatch only when rays clearly pass through it:
+    # a stricter test than the fit's, which also drops the front edge of a thin seat or
+    # table top that rays graze on their way to the floor beyond.
+    strict = contradicted_features(features, origin=screen.origin, candidates=returns & screen.mismatch,
+                                   tolerance=GUARD_SIGHT_TOLERANCE, ratio=GUARD_SIGHT_RATIO)
+    returns &= ~strict
+    spacing = ray_spacing(features.points)
+    # A return alone may be a mismatch; one confirmed by returns on neighbouring rays at
+    # nearly its range (at any height: a sign hanging into the band is confirmed by its
+    # part above it) is a surface.
+    index = np.flatnonzero(returns)
+    candidates = features.points[index]
+    distance = np.hypot(candidates[:, 0], candidates[:, 1])
+    # Support from returns near enough (in reach and height) to confirm a candidate.
+    x, y, z = features.points.T
+    low, high = robot.body_band
+    near = (np.hypot(x, y) <= 1.2 * float(distance.max(initial=0.0)) + 0.1) & (
+        z >= low - SUPPORT_HEIGHT_REACH) & (z <= high + SUPPORT_HEIGHT_REACH)
+    support = features.points[near & screen.obstacle & ~strict & (features.evidence >= level)]
+    # Near the robot a surface spans a wide tilt range and many rays end on it, while
+    # two mismatches there box the robot in: the count grows as 1 / distance, as the fit's.
+    needed = support_count(len(features)) * np.maximum(1.0, NEAR_SUPPORT_DISTANCE / np.maximum(distance, 1e-9))
+    # Only a guard bin's nearest confirmed return counts: test each bin's nearest
+    # returns first, and farther ones only in bins where none was confirmed yet (a
+    # million features: 0.9 s of the fit for the support test of every return).
+    bins = np.mod(np.floor((np.arctan2(candidates[:, 1], candidates[:, 0]) + math.pi)
+                           * (GUARD_BINS / (2.0 * math.pi))).astype(np.int64), GUARD_BINS)
+    order = np.lexsort((distance, bins))
+    starts = np.searchsorted(bins[order], np.arange(GUARD_BINS))
+    rank = np.empty(order.size, dtype=np.int64)
+    rank[order] = np.arange(order.size) - starts[bins[order]]
+    confirmed = np.zeros(index.size, dtype=bool)
+    settled = np.zeros(GUARD_BINS, dtype=bool)
+    confirming = Support(support, spacing)
+    low_rank, chunk = 0, GUARD_TEST_CHUNK
+    while low_rank < max(int(rank.max(initial=-1)) + 1, 0):
+        tested = (rank >= low_rank) & (rank < low_rank + chunk) & ~settled[bins]
+        if not tested.any():
+            break
+        chosen = np.flatnonzero(tested)
+        confirmed[chosen] = confirming.confirmed(candidates[chosen], needed[chosen])
+        settled[bins[chosen[confirmed[chosen]]]] = True
+        low_rank, chunk = low_rank + chunk, 2 * chunk
+    returns[index[~confirmed]] = False
+    # A surface seen from above is first hit up to a ray spacing or two behind its front
+    # edge: its returns are taken that much nearer. A wall's or a leg's first return is
+    # its front (at 1k features the blanket shrink cost 0.07 IoU).
+    scale = np.ones(len(features))
+    kept = np.flatnonzero(returns)
+    tops = confirming.seen_from_above(features.points[kept])
+    scale[kept[tops]] = max(0.0, 1.0 - guard_module.SPACING_FACTOR * spacing)
+    return returns, scale, spacing
+
+
+def profile_returns(features: Features, sensor: SensorModel, robot: Robot,
+                    origin: float) -> tuple[FloatArray, FloatArray]:
+    """Turned pan angle and horizontal distance of the returns the range profile is made of:
+    the features that give hit samples, in the body band (from the floor up when the
+    floor is an obstacle)."""
+    low, high = robot.body_band
+    if sensor.floor == "obstacle":
+        low = -np.inf
+    z = features.points[:, 2]
+    chosen = sensor.is_obstacle(features, robot) & (z >= low) & (z <= high)
+    points = features.points[chosen]
+    return wrap_angle(np.arctan2(points[:, 1], points[:, 0]) - origin), np.hypot(points[:, 0], points[:, 1])

@@ -1,0 +1,121 @@
+"""The line-of-sight test: features that other rays pass through are mismatches.
+
+A real surface stops the rays that meet it; a mismatch registered at a wrong, shorter
+range sits in space other rays of nearly the same direction cross on their way to
+something farther (:func:`contradicted_features`). The fit drops such features before
+sampling, and the return guard drops those rays clearly pass through.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.features import Features
+from occtool.fit._profile import FOCUS_WINDOW, FOCUS_WINDOW_ABS, angle_bins
+
+FloatArray = NDArray[np.float64]
+
+#: Pan-angle bins of the line-of-sight test (:func:`contradicted_features`).
+SIGHT_BINS = 120
+#: A ray passes "through" a feature when it crosses the feature's horizontal distance
+#: within this many metres of the feature's height, plus this share of the distance. Tight,
+#: because rays grazing a horizontal surface (a table top seen from above) end on it a
+#: little farther on: 5 cm + 10 % counted those as passing through the nearer part.
+SIGHT_HEIGHT_TOLERANCE = 0.02
+SIGHT_HEIGHT_SHARE = 0.02
+#: Rays per bin tested against each feature at most (an even subsample beyond that), so
+#: the test stays linear in the number of features.
+SIGHT_MAX_RAYS = 128
+#: Features of the line-of-sight test evaluated at once.
+SIGHT_BLOCK = 1 << 16
+
+
+def contradicted_features(features: Features, origin: float = 0.0,
+                          candidates: NDArray[np.bool_] | None = None, *,
+                          tolerance: tuple[float, float] = (SIGHT_HEIGHT_TOLERANCE, SIGHT_HEIGHT_SHARE),
+                          ratio: int = 2) -> NDArray[np.bool_]:
+    """Features that other rays in nearly the same direction pass through.
+
+    A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
+    range sits in space that other rays of its pan-angle bin cross on their way to
+    something farther. A feature is contradicted when at least two rays of its bin
+    (:data:`SIGHT_BINS`), and at least twice as many as end near it (itself included),
+    pass within :data:`SIGHT_HEIGHT_TOLERANCE` (+ :data:`SIGHT_HEIGHT_SHARE` of the
+    distance) of its height at its horizontal distance
+    and end beyond the focus window (:data:`FOCUS_WINDOW`, :data:`FOCUS_WINDOW_ABS`).
+    Near the robot the height tolerance spans a wide tilt range, so isolated mismatches
+    there, which would box the robot in, are the ones most surely caught. The bins start
+    at the pan angle ``origin``; only the ``candidates`` (default: all) are tested, every
+    feature counts as a ray.
+    """
+    alpha, h, r = features.polar()
+    contradicted = np.zeros(r.size, dtype=bool)
+    if r.size == 0:
+        return contradicted
+    distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
+    bins = angle_bins(alpha - origin, SIGHT_BINS)
+    order = np.argsort(bins, kind="stable")
+    counts = np.bincount(bins, minlength=SIGHT_BINS)
+    starts = np.cumsum(counts) - counts
+    # Each bin's rays: all its features, or an even subsample of them.
+    step = np.maximum(1, counts // SIGHT_MAX_RAYS)
+    n_rays = np.where(counts > 0, -(-counts // step), 0)
+    ray_bin = np.repeat(np.arange(SIGHT_BINS), n_rays)
+    slot = np.arange(ray_bin.size) - np.repeat(np.cumsum(n_rays) - n_rays, n_rays)
+    rays = order[starts[ray_bin] + slot * step[ray_bin]]
+    tested = np.flatnonzero(counts[bins] >= 3)
+    if candidates is not None:
+        tested = tested[candidates[tested]]
+    if tested.size == 0:
+        return contradicted
+    # A ray passes a feature when it ends beyond it (d > D + window) and its height at the
+    # feature's distance, z D / d, lies within `within` of the feature's: an interval of
+    # the ray's elevation z / d. With the rays sorted by bin, then elevation (as an angle,
+    # so the key is bounded), each feature's candidate rays are one run; the exact test is
+    # made on those pairs alone (trying every ray of the bin: 2.3x the time at 10k and
+    # 100k features, the same answer). Rays ending near the feature, which can save it,
+    # are a run of the rays sorted by bin, then distance.
+    d_ray, z_ray = distance[rays], h[rays]
+    ahead = d_ray > 0
+    elevation_key = 4.0 * ray_bin[ahead] + np.arctan2(z_ray[ahead], d_ray[ahead])
+    order = np.argsort(elevation_key, kind="stable")
+    by_elevation = (elevation_key[order], rays[ahead][order])
+    lane = 2.0 * float(distance.max()) + 1.0
+    order = np.lexsort((d_ray, ray_bin))
+    by_distance = (ray_bin[order] * lane + d_ray[order], rays[order])
+    for first in range(0, tested.size, SIGHT_BLOCK):  # blocks of features bound the pairs' memory
+        block = tested[first:first + SIGHT_BLOCK]
+        D, H = distance[block], h[block]
+        window = D * FOCUS_WINDOW + FOCUS_WINDOW_ABS
+        within = tolerance[0] + tolerance[1] * D
+        D_safe = np.maximum(D, 1e-12)
+        owner, pair_ray = _runs(*by_elevation, 4.0 * bins[block] + np.arctan((H - within) / D_safe) - 1e-9,
+                                4.0 * bins[block] + np.arctan((H + within) / D_safe) + 1e-9)
+        d, z, D_pair = distance[pair_ray], h[pair_ray], D[owner]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            passes = (d > D_pair + window[owner]) & (np.abs(z * D_pair / d - H[owner]) < within[owner])
+        beyond = np.bincount(owner, weights=passes, minlength=block.size)
+        maybe = np.flatnonzero(beyond >= ratio)
+        if maybe.size == 0:
+            continue
+        D, H, window, within, beyond = D[maybe], H[maybe], window[maybe], within[maybe], beyond[maybe]
+        owner, pair_ray = _runs(*by_distance, bins[block[maybe]] * lane + (D - window) - 1e-9,
+                                bins[block[maybe]] * lane + (D + window) + 1e-9)
+        ends_near = (np.abs(distance[pair_ray] - D[owner]) <= window[owner]) & (
+            np.abs(h[pair_ray] - H[owner]) < within[owner])
+        near = np.maximum(np.bincount(owner, weights=ends_near, minlength=maybe.size), 1)
+        contradicted[block[maybe]] = beyond >= np.maximum(ratio, ratio * near)
+    return contradicted
+
+
+def _runs(keys: FloatArray, items: NDArray[np.intp], low: NDArray[np.floating[Any]],
+          high: NDArray[np.floating[Any]]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Every pair (query ``i``, item) whose key lies in ``[low[i], high[i]]``, for ``keys``
+    sorted ascending: the query's index and the item, one row per pair."""
+    first = np.searchsorted(keys, low, side="left")
+    span = np.maximum(np.searchsorted(keys, high, side="right") - first, 0)
+    owner = np.repeat(np.arange(span.size), span)
+    return owner, items[np.repeat(first - np.cumsum(span) + span, span) + np.arange(owner.size)]
