@@ -25,6 +25,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "invert": ("occtool.cli.invert", "invert", "Write the inverted model r = F^-1(alpha, h, m)."),
     "extract": ("occtool.cli.extract", "extract", "Extract the navigation polygon and points as GeoJSON."),
     "evaluate": ("occtool.cli.evaluate", "evaluate", "Score a navigation polygon against a scene's truth."),
+    "map": ("occtool.cli.map", "map_command", "Fuse every position of a log into one world map (Nav2, Foxglove)."),
+    "evaluate-log": ("occtool.cli.evaluate_log", "evaluate_log", "Score a log's fused map against a grid on held-out scans."),
     "compare-grid": ("occtool.cli.compare_grid", "compare_grid", "Compare the model with occupancy grids."),
     "convert": ("occtool.cli.convert", "convert", "Convert a range log (CSV, MCAP, ...) to CSV or MCAP."),
     "plot": ("occtool.cli.plot", "plot", "Draw features, models, navigation maps and reports."),
