@@ -198,7 +198,7 @@ class LogScore:
 
 def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: int = BLOCK, seed: int = 0,
                  resolution: float = 0.05, no_return_range: float | None = 5.0, threshold: float = 0.6,
-                 read_options: dict[str, Any] | None = None) -> LogScore:
+                 read_options: dict[str, Any] | None = None, grid_resolutions: tuple[float, ...] = ()) -> LogScore:
     """Score the fused map of ``path``'s training scans against a dense 2D grid on held-out blocks.
 
     Parameters
@@ -213,6 +213,8 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         Cell size of the grid and of the fused map's raster (for the Nav2 agreement), metres.
     no_return_range
         Beams without a return become free rays this long (training only; only returns are tested).
+    grid_resolutions
+        Further grid cell sizes to score (``auc["grid_0.1m"]`` ...); ``auc["grid"]`` is at ``resolution``.
     """
     from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
@@ -246,6 +248,12 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     observed = sums.count > 0
     grid_p = grid.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * resolution)]))
     auc["grid"] = roc_auc(grid_p[:len(occupied)], grid_p[len(occupied):])
+    # Coarser grids blur walls into the free points near them but fill gaps between beams:
+    # the grid is scored at each, so the comparison is with its best.
+    for size in grid_resolutions:
+        other = world_grid(train, size)
+        other_p = other.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * size)]))
+        auc[f"grid_{size:g}m"] = roc_auc(other_p[:len(occupied)], other_p[len(occupied):])
     started = time.perf_counter()
     raster = fused.rasterise(resolution)
     raster_s = time.perf_counter() - started

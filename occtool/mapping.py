@@ -146,16 +146,26 @@ def _polygons(geometry: Any) -> list[Any]:
     return [g for g in getattr(geometry, "geoms", []) if g.geom_type == "Polygon" and not g.is_empty]
 
 
-def layer_collections(run: RunMap, *, simplify: float | None = None,
-                      precision: int | None = None) -> dict[str, dict[str, Any]]:
+def layer_collections(run: RunMap, *, simplify: float | None = None, precision: int | None = None,
+                      georeference: Any | None = None) -> dict[str, dict[str, Any]]:
     """The three GeoJSON layers, one geometry type each: ``navigation`` (Polygon),
-    ``obstacles`` and ``frontiers`` (Point), metric x, y in the ``map`` frame."""
+    ``obstacles`` and ``frontiers`` (Point), metric x, y in the ``map`` frame, or WGS84
+    longitude/latitude (RFC 7946) with a :class:`occtool.io.wgs84.Georeference`.
+    ``simplify`` is in metres either way."""
     region = run.navigation
     if simplify is not None:
         if not (math.isfinite(simplify) and simplify >= 0):
             raise InputError(f"simplify tolerance must be a number of metres >= 0, got {simplify}")
         region = shapely.simplify(region, simplify, preserve_topology=True)
     polygons = [shapely.orient_polygons(p) if hasattr(shapely, "orient_polygons") else p for p in _polygons(region)]
+    obstacles, frontiers = run.obstacles, run.frontiers
+    properties: dict[str, Any] = {"frame": "map", "units": "m",
+                                  "crs_note": "metric x, y in the map frame, not longitude/latitude"}
+    if georeference is not None:
+        polygons = [shapely.transform(p, georeference.to_lonlat) for p in polygons]
+        obstacles, frontiers = georeference.to_lonlat(obstacles), georeference.to_lonlat(frontiers)
+        properties = {"frame": "WGS84", "units": "degrees",
+                      "origin": {"lat": georeference.lat, "lon": georeference.lon, "heading": georeference.heading}}
     if precision is not None:
         polygons = [shapely.set_precision(p, 10.0 ** -precision) for p in polygons]
 
@@ -163,7 +173,6 @@ def layer_collections(run: RunMap, *, simplify: float | None = None,
         out = np.asarray(values, dtype=np.float64).reshape(-1, 2)
         return (np.round(out, precision) if precision is not None else out).tolist()
 
-    properties = {"frame": "map", "units": "m", "crs_note": "metric x, y in the map frame, not longitude/latitude"}
     return {
         "navigation": {"type": "FeatureCollection", "properties": {**properties, "kind": "navigation"},
                        "features": [{"type": "Feature", "properties": {"kind": "navigation"},
@@ -171,11 +180,11 @@ def layer_collections(run: RunMap, *, simplify: float | None = None,
         "obstacles": {"type": "FeatureCollection", "properties": {**properties, "kind": "obstacle"},
                       "features": [{"type": "Feature", "properties": {"kind": "obstacle"},
                                     "geometry": {"type": "Point", "coordinates": xy}}
-                                   for xy in rounded(run.obstacles)]},
+                                   for xy in rounded(obstacles)]},
         "frontiers": {"type": "FeatureCollection", "properties": {**properties, "kind": "frontier"},
                       "features": [{"type": "Feature", "properties": {"kind": "frontier"},
                                     "geometry": {"type": "Point", "coordinates": xy}}
-                                   for xy in rounded(run.frontiers)]},
+                                   for xy in rounded(frontiers)]},
     }
 
 
@@ -187,7 +196,7 @@ def output_paths(folder: str | os.PathLike[str]) -> list[Path]:
 
 def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bool = True,
                   simplify: float | None = None, precision: int | None = None, mcap: bool = True,
-                  extra_summary: dict[str, Any] | None = None) -> list[Path]:
+                  georeference: Any | None = None, extra_summary: dict[str, Any] | None = None) -> list[Path]:
     """Write the Nav2 map, the Foxglove MCAP, the GeoJSON layers and ``summary.json`` into
     ``folder`` (created if missing). Every file is written completely or not at all, and
     everything is computed before the first file is written."""
@@ -200,7 +209,7 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
         for path in output_paths(folder):
             if path.exists():
                 raise FileExistsError(f"{path} exists already (pass --overwrite to replace it)")
-    layers = layer_collections(run, simplify=simplify, precision=precision)
+    layers = layer_collections(run, simplify=simplify, precision=precision, georeference=georeference)
     summary = {**run.summary(), **(extra_summary or {})}
     mcap_bytes = None
     if mcap:

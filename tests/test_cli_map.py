@@ -129,3 +129,25 @@ def test_evaluate_log_prints_the_figures(mapped):
     figures = json.loads(result.output)
     assert set(figures["auc"]) == {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid"}
     assert figures["auc"]["fused_log_odds"] > 0.9
+
+
+def test_origin_writes_wgs84_that_round_trips(mapped, tmp_path):
+    pytest.importorskip("pyproj")
+    from occtool.io.wgs84 import Georeference
+
+    log, out = mapped
+    result = run("map", log, "-o", tmp_path / "geo", "--origin", "47.0,8.0,30", "--no-mcap", *LASER)
+    assert result.exit_code == 0, result.output
+    metric = json.loads((out / "obstacles.geojson").read_text())
+    geo = json.loads((tmp_path / "geo" / "obstacles.geojson").read_text())
+    assert geo["properties"]["frame"] == "WGS84"
+    xy = np.array([f["geometry"]["coordinates"] for f in metric["features"]])
+    lonlat = np.array([f["geometry"]["coordinates"] for f in geo["features"]])
+    back = Georeference(47.0, 8.0, 30.0).from_lonlat(lonlat)
+    assert np.abs(back - xy).max() < 0.01
+
+
+def test_bad_origin_is_a_usage_error(mapped, tmp_path):
+    log, _ = mapped
+    result = CliRunner().invoke(cli, ["map", str(log), "-o", str(tmp_path / "x"), "--origin", "95,0"])
+    assert result.exit_code == 2 and not (tmp_path / "x").exists()

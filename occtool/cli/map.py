@@ -37,6 +37,9 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
               help="Simplify the navigation polygons in the GeoJSON to this tolerance.")
 @click.option("--precision", type=click.IntRange(min=0, max=17), default=None,
               help="Decimal places of the GeoJSON coordinates (default: full precision).")
+@click.option("--origin", default=None, metavar="LAT,LON[,HEADING]",
+              help="Write the GeoJSON in WGS84 longitude/latitude: the map origin's latitude and longitude "
+                   "and the compass bearing of the map's +x axis, degrees (default 90: x east). Needs the geo extra.")
 @click.option("--mcap/--no-mcap", default=True, show_default=True,
               help="Write map.mcap for Foxglove (needs the protobuf extra).")
 @fit_options
@@ -45,7 +48,8 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 @overwrite_option
 @config_option
 def map_command(source: str, output: str, resolution: float, threshold: float, combination: str, max_range: float,
-                simplify: float | None, precision: int | None, mcap: bool, seed: int, overwrite: bool,
+                simplify: float | None, precision: int | None, origin: str | None, mcap: bool, seed: int,
+                overwrite: bool,
                 **kwargs: Any) -> None:
     """Fuse every robot position of LOG (fitted here with the fit options) or of MODELS (a
     folder written by `occtool fit LOG -o MODELS/`) into one world-frame map and write, in
@@ -70,6 +74,15 @@ def map_command(source: str, output: str, resolution: float, threshold: float, c
     from occtool.mapping import map_of_run, output_paths, write_run_map
 
     logger = logging.getLogger("occtool.map")
+    georeference = None
+    if origin is not None:
+        from occtool.io.wgs84 import Georeference, parse_origin
+
+        try:
+            georeference = Georeference(*parse_origin(origin))
+        except InputError as exc:
+            raise click.BadParameter(str(exc), param_hint="--origin") from None
+        georeference.to_lonlat([[0.0, 0.0]])  # a missing pyproj is reported before any work
     if not overwrite:
         for path in output_paths(output):
             if path.exists():
@@ -110,7 +123,7 @@ def map_command(source: str, output: str, resolution: float, threshold: float, c
     run = map_of_run(fused, models, positions, resolution=resolution,
                      navigation={"max_range": max_range, "threshold": threshold})
     written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
-                            extra_summary=extra)
+                            georeference=georeference, extra_summary=extra)
     summary = run.summary()
     logger.info("fused map: %d positions, %.1f KB; raster %dx%d: %s", summary["positions"],
                 summary["fused_map_bytes"] / 1e3, summary["raster"]["columns"], summary["raster"]["rows"],
