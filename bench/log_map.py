@@ -52,12 +52,12 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
     lines = [
         "## The fused map of a whole log (held-out scan blocks)",
         "",
-        f"Hilbert-maps protocol: 10 % of the scans held out in blocks of 40; each held-out return's end point "
-        f"occupied, 5 points drawn uniformly along its beam up to 0.1 m before the end free. Fused: the local "
-        f"models of the training positions (laser 0.3 m above the floor, robot 0.5 m tall), combined as named. "
-        f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
-        f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m against its "
-        f"training scans. Published on Intel for orientation: {PUBLISHED_INTEL}.",
+        (f"Hilbert-maps protocol: 10 % of the scans held out in blocks of 40; each held-out return's end point "
+         f"occupied, 5 points drawn uniformly along its beam up to 0.1 m before the end free. Fused: the local "
+         f"models of the training positions (laser 0.3 m above the floor, robot 0.5 m tall), combined as named. "
+         f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
+         f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m against its "
+         f"training scans. Published on Intel for orientation: {PUBLISHED_INTEL}."),
         "",
         "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
             n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)

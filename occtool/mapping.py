@@ -27,8 +27,8 @@ from occtool.fuse import FusedMap, Raster
 from occtool.io._atomic import atomic_write
 
 FloatArray = NDArray[np.float64]
-#: How far past an exploration point the fused map is asked whether anyone saw beyond it.
-FRONTIER_LOOKAHEAD = 0.3
+#: How far past an exploration point the raster is walked for unknown space, metres.
+FRONTIER_LOOKAHEAD = 1.0
 LAYERS = ("navigation", "obstacles", "frontiers")
 
 
@@ -70,12 +70,16 @@ class RunMap:
             "frontier_points": len(self.frontiers),
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
             "frame": "map",
+            "path": [[round(p.pose.x, 3), round(p.pose.y, 3)] for p in self.placed],
         }
 
 
-def _frontiers(fused: FusedMap, placed: list[PlacedMap], lookahead: float) -> FloatArray:
-    """Exploration points past which no position saw: the fused map is unknown a little
-    beyond each, away from the position that found it."""
+def _frontiers(raster: Raster, placed: list[PlacedMap], lookahead: float) -> FloatArray:
+    """Exploration points past which no position saw: walking on from each, away from the
+    position that found it, the fused raster turns unknown before it turns occupied
+    (within ``lookahead`` metres)."""
+    from occtool.fuse import FREE, UNKNOWN
+
     points, outward = [], []
     for item in placed:
         pts = np.asarray(item.nav.exploration_points, dtype=np.float64).reshape(-1, 2)
@@ -86,11 +90,15 @@ def _frontiers(fused: FusedMap, placed: list[PlacedMap], lookahead: float) -> Fl
             outward.append(direction)
     if not points:
         return np.zeros((0, 2))
-    pts = np.concatenate(points)
-    beyond = pts + lookahead * np.concatenate(outward)
-    z = float(np.median([p.pose.z for p in placed]))
-    seen = fused.evidence(np.column_stack([beyond, np.full(len(beyond), z)])).observed
-    return pts[~seen]
+    pts, direction = np.concatenate(points), np.concatenate(outward)
+    steps = np.arange(1, max(2, int(np.ceil(lookahead / raster.resolution))) + 1) * raster.resolution
+    walk = pts[:, None, :] + steps[None, :, None] * direction[:, None, :]
+    row, col, inside = raster.cell_of(walk.reshape(-1, 2))
+    cells = np.where(inside, raster.cells[row, col], UNKNOWN).reshape(len(pts), len(steps))
+    not_free = cells != FREE
+    first = np.argmax(not_free, axis=1)
+    reached = not_free.any(axis=1)
+    return pts[reached & (cells[np.arange(len(pts)), first] == UNKNOWN)]
 
 
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
@@ -132,7 +140,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])
     obstacles = np.concatenate([np.asarray(p.nav.obstacle_points, dtype=np.float64).reshape(-1, 2)
                                 for p in placed]) if placed else np.zeros((0, 2))
-    frontiers = _frontiers(fused, placed, lookahead)
+    frontiers = _frontiers(raster, placed, lookahead)
     seconds["union_frontiers"] = time.perf_counter() - started
     return RunMap(fused, raster, placed, region, obstacles, frontiers, seconds)
 

@@ -151,3 +151,14 @@ def test_bad_origin_is_a_usage_error(mapped, tmp_path):
     log, _ = mapped
     result = CliRunner().invoke(cli, ["map", str(log), "-o", str(tmp_path / "x"), "--origin", "95,0"])
     assert result.exit_code == 2 and not (tmp_path / "x").exists()
+
+
+def test_plot_map_draws_the_folder(mapped, tmp_path):
+    pytest.importorskip("matplotlib")
+    _, out = mapped
+    picture = tmp_path / "map.png"
+    result = run("plot", "map", out, "-o", picture, "--size", "300,300px")
+    assert result.exit_code == 0, result.output
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["path"]) == summary["positions"]
