@@ -189,7 +189,9 @@ class _Sums:
         norm = np.maximum(1.0 - conflict, 1e-300)
         belief_occ, belief_free, unknown_mass = m_occ / norm, m_free / norm, q_unknown / norm
         if combination == "log_odds":
-            probability = 1.0 / (1.0 + np.exp(-self.logit))
+            from scipy.special import expit
+
+            probability = expit(self.logit)
         elif combination == "dempster_shafer":
             probability = belief_occ + 0.5 * unknown_mass
         else:
@@ -387,7 +389,7 @@ class FusedMap:
         occupied = np.zeros(ny * nx, dtype=bool)
         observed = np.zeros(ny * nx, dtype=bool)
         conflict = np.zeros(ny * nx, dtype=bool)
-        best = np.full(ny * nx, 0.5)
+        best = np.full(ny * nx, np.nan)
         z0 = float(np.median(self._pose_array[:, 2]))
         for h in heights:
             sums = _Sums(ny * nx)
@@ -413,12 +415,12 @@ class FusedMap:
             occupied |= ev.observed & (ev.probability >= self.threshold)
             observed |= ev.observed
             conflict |= ev.contradicted
-            best = np.where(ev.observed, np.maximum(np.where(best == 0.5, 0.0, best), ev.probability), best)
+            best = np.where(ev.observed, np.fmax(best, ev.probability), best)
         cells = np.full(ny * nx, UNKNOWN, dtype=np.uint8)
         cells[observed] = FREE
         cells[occupied] = OCCUPIED
         return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
-                      best.reshape(ny, nx).astype(np.float32), conflict.reshape(ny, nx))
+                      np.nan_to_num(best, nan=0.5).reshape(ny, nx).astype(np.float32), conflict.reshape(ny, nx))
 
 
 # ---------------------------------------------------------------------- building

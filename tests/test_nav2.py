@@ -67,3 +67,17 @@ def test_any_broken_image_is_an_input_error(tmp_path_factory, data):
     except InputError:
         return
     assert loaded.cells.dtype == np.int8
+
+
+@given(st.integers(0, 6), st.integers(0, 6), st.binary(max_size=40))
+def test_a_pgm_of_the_wrong_size_is_an_input_error(tmp_path_factory, width, height, body):
+    folder = tmp_path_factory.mktemp("fuzz")
+    (folder / "map.yaml").write_text("image: map.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+                                     "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    (folder / "map.pgm").write_bytes(f"P5\n{width} {height}\n255\n".encode() + body)
+    try:
+        loaded = read_nav2(folder / "map.yaml")
+    except InputError:
+        assert width * height == 0 or len(body) < width * height
+        return
+    assert loaded.cells.shape == (height, width)

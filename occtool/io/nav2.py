@@ -91,7 +91,10 @@ def _read_pgm(path: Path) -> NDArray[np.uint8]:
         while position < len(data) and data[position:position + 1].isspace():
             position += 1
         if data[position:position + 1] == b"#":
-            position = data.index(b"\n", position) + 1
+            end = data.find(b"\n", position)
+            if end < 0:
+                raise InputError(f"{path}: truncated PGM header")
+            position = end + 1
             continue
         start = position
         while position < len(data) and not data[position:position + 1].isspace():
