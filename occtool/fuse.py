@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -432,6 +432,7 @@ class FuseReport:
     skipped: list[tuple[int, str]]
     fit_seconds: float
     fuse_seconds: float
+    notes: list[str] = field(default_factory=list)
 
 
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
@@ -439,8 +440,9 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     """Fit every position of ``log`` with a copy of ``template`` (an unfitted
     :class:`occtool.fit.OccupancyRegressor`) and fuse them.
 
-    Positions without a pose cannot be placed and raise; positions whose fit fails for
-    their data (no usable features) are skipped and reported.
+    Positions without a pose cannot be placed and raise, unless the log is a single
+    position without one (its frame becomes the map's, noted in the report); positions
+    whose fit fails for their data (no usable features) are skipped and reported.
 
     Returns
     -------
@@ -451,15 +453,21 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     from occtool.errors import OcctoolError
     from occtool.fit import OccupancyRegressor
 
-    missing = [p.index for p in log.positions if p.pose is None]
-    if missing:
+    notes = []
+    positions = list(log.positions)
+    missing = [p.index for p in positions if p.pose is None]
+    if missing and len(positions) == 1:
+        # One position and no pose (a log without any): its own frame is the map.
+        positions = [replace(positions[0], pose=Pose())]
+        notes.append("the log has no poses: its single position is the map frame's origin")
+    elif missing:
         raise InputError(f"{log.source or 'the log'}: position {missing[0]} has no pose; a world map needs poses")
     params = template.get_params()
     robot = params.get("robot") or Robot()
     focus_range = params.get("focus_range", math.inf) if params.get("focus", True) else math.inf
     started = time.perf_counter()
     models, poses, reaches, stamps, skipped = [], [], [], [], []
-    for done, item in enumerate(log.positions, start=1):
+    for done, item in enumerate(positions, start=1):
         try:
             model = OccupancyRegressor(**params).fit(item.features)
         except OcctoolError as exc:
@@ -471,13 +479,13 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         stamps.append(item.stamp)
         reaches.append(observed_reach(item.features, robot, focus_range))
         if progress is not None:
-            progress(done, len(log.positions))
+            progress(done, len(positions))
     fitted = time.perf_counter()
     if not models:
         raise InputError(f"{log.source or 'the log'}: no position could be fitted ({skipped[0][1]})")
     fused = FusedMap([m.tree_ for m in models], poses, np.stack(reaches), robot, combination=combination,
                      threshold=threshold, stamps=stamps)
-    report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted)
+    report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes)
     return fused, models, report
 
 

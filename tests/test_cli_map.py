@@ -106,12 +106,26 @@ def test_map_of_a_model_set(mapped, tmp_path):
 
 
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path):
-    log = tmp_path / "one.xyz"
-    log.write_text("1 0 0\n0 1 0\n-1 0 0\n")
+    # Two positions without poses: they cannot be placed in one map.
+    log = tmp_path / "two.csv"
+    log.write_text("x,y,z,m,position\n1,0,0,0.9,0\n0,1,0,0.9,0\n1,0,0,0.9,1\n0,1,0,0.9,1\n")
     result = CliRunner().invoke(cli, ["-q", "map", str(log), "-o", str(tmp_path / "out")])
     assert result.exit_code == 1
-    assert len(result.output.strip().splitlines()) == 1 and "pose" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and "no pose" in result.output
     assert not (tmp_path / "out").exists()
+
+
+def test_a_log_without_poses_is_one_position_at_the_origin(tmp_path):
+    from _room_log import room_ranges
+
+    ranges = room_ranges(1.0, 0.25, 0.0)
+    angles = -np.pi / 2 + np.arange(180) * np.pi / 180
+    log = tmp_path / "scan.xyz"
+    log.write_text("".join(f"{r * np.cos(a):.4f} {r * np.sin(a):.4f} 0\n" for r, a in zip(ranges, angles)))
+    result = run("-q", "map", log, "-o", tmp_path / "out", "--no-mcap", "--evidence", "0.9", *LASER)
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["positions"] == 1 and summary["path"] == [[0.0, 0.0]]
 
 
 def test_no_overwrite_refuses_before_work(mapped):

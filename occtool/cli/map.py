@@ -113,10 +113,11 @@ def map_command(source: str, output: str, resolution: float, threshold: float, c
         template = fit_from_kwargs(kwargs, seed=seed)
         log = read_log_from_kwargs(source, kwargs)
         fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold)
+        for note in report.notes:
+            logger.warning("%s: %s", Path(source).name, note)
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
-        by_index = {p.index: p for p in log.positions}
-        positions = [(m.position_, by_index[m.position_].pose, by_index[m.position_].stamp) for m in models]
+        positions = [(m.position_, pose, stamp) for m, pose, stamp in zip(models, fused.poses, fused.stamps)]
         logger.info("%d positions fitted in %.1f s", report.positions, report.fit_seconds)
         extra = {"source": str(source), "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
                  "skipped_positions": [index for index, _ in report.skipped]}
