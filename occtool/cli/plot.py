@@ -150,7 +150,12 @@ def nav(maps: tuple[str, ...], features_log: str | None, position: int | None, t
     """
     figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.cli.options import read_log_from_kwargs
-    from occtool.plot import DEFAULT_SIZE, expand_navigation_paths, navigation_figure, read_navigation_maps
+    from occtool.plot import (
+        DEFAULT_SIZE,
+        expand_navigation_paths,
+        navigation_figure,
+        read_navigation_maps,
+    )
 
     paths = expand_navigation_paths(maps)
     tagged = [pair for path in paths for pair in read_navigation_maps(path)]
@@ -185,4 +190,21 @@ def compare(report: str, bench: str | None, output: str, overwrite: bool, dpi: f
     document = read_json(report)
     bench_document = read_json(bench) if bench else None
     figure = compare_figure(document, bench=bench_document, source=report, size=figure_size, dpi=dpi, title=title)
+    _write(figure, output)
+
+
+@plot.command("map", short_help="A run's fused map (occtool map), its path and frontiers.")
+@click.argument("folder", type=click.Path(exists=True, file_okay=False))
+@click.option("--path/--no-path", "draw_path", default=True, show_default=True, help="Draw the run's path.")
+@click.option("--frontiers/--no-frontiers", default=True, show_default=True, help="Draw the frontier points.")
+@_figure_options
+def map_picture(folder: str, draw_path: bool, frontiers: bool, output: str, overwrite: bool, dpi: float,
+                size: str | None, title: str | None) -> None:
+    """The map FOLDER written by `occtool map`: free, occupied and unknown cells as Nav2
+    reads them, the robot's path and the frontier points."""
+    figure_size = _prepare(output, size, dpi, overwrite)
+    from occtool.plot import DEFAULT_MAP_SIZE, map_figure
+
+    figure = map_figure(folder, size=figure_size or DEFAULT_MAP_SIZE, dpi=dpi, title=title, path=draw_path,
+                        frontiers=frontiers)
     _write(figure, output)

@@ -14,7 +14,7 @@ a user's interactive backend is left alone.
 The package keeps one concept per private module, behind this public one:
 ``_canvas`` (matplotlib, figure files, style), ``_reading`` (the files pictures are
 drawn from, parsed by :mod:`occtool.io`), ``_probing`` (asking a model what to draw),
-``_drawing`` (artists on an Axes) and ``_figures`` (whole figures).
+``_drawing`` (artists on an Axes), ``_figures`` (whole figures) and ``_map`` (a run's fused map).
 
 Coordinates are metres in REP-103 frames (x forward, y left). Navigation maps and
 features are drawn in the robot frame unless a pose places them in the world frame.
@@ -52,6 +52,7 @@ from occtool.plot._drawing import (
     map_in_frame,
 )
 from occtool.plot._figures import compare_figure, features_figure, model_figure, navigation_figure
+from occtool.plot._map import DEFAULT_MAP_SIZE, map_figure, read_map_folder
 from occtool.plot._probing import (
     active_piece_function,
     evaluate_on_floor_grid,
@@ -71,6 +72,7 @@ from occtool.plot._reading import (
 
 __all__ = [
     "DEFAULT_DPI",
+    "DEFAULT_MAP_SIZE",
     "DEFAULT_SIZE",
     "EXPLORATION_COLOUR",
     "MODEL_COLOURS",
@@ -107,6 +109,8 @@ __all__ = [
     "read_json",
     "read_navigation",
     "read_navigation_maps",
+    "map_figure",
+    "read_map_folder",
     "report_polygons",
     "require_matplotlib",
     "save_figure",

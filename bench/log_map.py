@@ -1,0 +1,90 @@
+"""The fused world map on real laser logs, for the bench (not wired into ``bench/run.py`` yet).
+
+:func:`log_map_section` runs :func:`occtool.log_score.evaluate_log` (the Hilbert-maps
+protocol: 10 % of scans held out in blocks of 40 consecutive scans; end points occupied,
+points along the beam up to 0.1 m before its end free) on the CARMEN logs present in
+``data_dir`` and returns a markdown section and the figures as JSON.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from occtool.fit import OccupancyRegressor
+from occtool.log_score import evaluate_log
+from occtool.robot import Robot
+
+#: The logs of issue 10, as (folder, file) in ../shared/data.
+LOGS = (
+    ("intel_lab", "intel-corrected.log.gz"),
+    ("fr079", "freiburg-079-corrected.log.gz"),
+    ("aces3_austin", "aces-corrected.log.gz"),
+    ("mit_csail", "csail-corrected.log.gz"),
+)
+#: A robot carrying its 2D laser 0.3 m above the floor, 0.5 m tall, 0.25 m in radius (as map_quality.py).
+LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
+NO_RETURN_RANGE = 5.0
+GRID_RESOLUTIONS = (0.1, 0.2)
+#: Published on Intel, for orientation (various splits): occupancy grid 0.93, BHM 0.96.
+PUBLISHED_INTEL = "occupancy grid 0.93, Fast-BHM 0.95, BHM 0.96, I-GPOM2 0.97 (BHM model 0.04 MB)"
+
+
+def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LOGS, *, seed: int = 0,
+                    resolution: float = 0.05) -> tuple[str, dict[str, Any]]:
+    """Score the fused map of each log present under ``data_dir``; returns ``(markdown, json)``."""
+    rows: list[dict[str, Any]] = []
+    notes: list[str] = []
+    for folder, name in logs:
+        path = Path(data_dir) / folder / name
+        if not path.is_file():
+            notes.append(f"{folder}: {name} not found, skipped")
+            continue
+        started = time.perf_counter()
+        score = evaluate_log(str(path), OccupancyRegressor(robot=LASER_ROBOT, seed=seed), seed=seed,
+                             resolution=resolution, no_return_range=NO_RETURN_RANGE,
+                             grid_resolutions=GRID_RESOLUTIONS)
+        row = {"log": folder, **score.as_dict(), "total_s": time.perf_counter() - started}
+        rows.append(row)
+        print(f"[bench] log map {folder}: {row['total_s']:.0f} s", flush=True)
+    grid_names = ["grid"] + [f"grid_{size:g}m" for size in GRID_RESOLUTIONS]
+    lines = [
+        "## The fused map of a whole log (held-out scan blocks)",
+        "",
+        (f"Hilbert-maps protocol: 10 % of the scans held out in blocks of 40; each held-out return's end point "
+         f"occupied, 5 points drawn uniformly along its beam up to 0.1 m before the end free. Fused: the local "
+         f"models of the training positions (laser 0.3 m above the floor, robot 0.5 m tall), combined as named. "
+         f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
+         f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m against its "
+         f"training scans. Published on Intel for orientation: {PUBLISHED_INTEL}."),
+        "",
+        "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
+            n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)
+        + " | test points covered | fused map | grid | fit / raster / grid build | returns on occupied "
+          "(+neighbour) | beams clear to 0.1 m | scans with both >= 95 % |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        auc = row["auc"]
+        nav2 = row["nav2"]
+        lines.append(
+            f"| {row['log']} | {row['held_out_scans']} of {row['scans']} | "
+            f"{auc['fused_log_odds']:.3f} / {auc['fused_dempster_shafer']:.3f} / {auc['fused_mean']:.3f} | "
+            + " / ".join(f"{auc[n]:.3f}" for n in grid_names)
+            + f" | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB | {row['grid_bytes'] / 1e6:.2f} MB | "
+            f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
+            f"{nav2['returns_on_occupied']:.1%} | {nav2['beams_clear']:.1%} | {nav2['scans_both_95']:.1%} |"
+        )
+    lines += [""] + [f"- {note}" for note in notes]
+    return "\n".join(lines) + "\n", {"rows": rows, "notes": notes}
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import json
+    import sys
+
+    markdown, figures = log_map_section(sys.argv[1] if len(sys.argv) > 1 else "../shared/data",
+                                        logs=tuple(LOGS[:1]) if "--intel" in sys.argv else LOGS)
+    print(markdown)
+    print(json.dumps(figures, indent=1, default=float))

@@ -1,0 +1,134 @@
+"""``occtool map``: one world map of a whole log, for Nav2, Foxglove and GIS."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from occtool.cli.options import (
+    config_option,
+    fit_options,
+    log_options,
+    overwrite_option,
+    seed_option,
+)
+
+
+def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float:
+    if not 0.0 < float(value) < 1.0:
+        raise click.BadParameter(f"an occupancy threshold must lie strictly between 0 and 1, got {value}")
+    return float(value)
+
+
+@click.command(short_help="Fuse every position of a log into one world map (Nav2, Foxglove, GeoJSON).")
+@click.argument("source", metavar="LOG|MODELS", type=click.Path(exists=True, dir_okay=True))
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
+              help="Output folder (created if missing).")
+@click.option("--resolution", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.05,
+              show_default=True, help="Cell size of the Nav2 map and the Foxglove grid, metres.")
+@click.option("--threshold", type=float, default=0.6, show_default=True, callback=_occupancy,
+              help="Fused occupancy at or above which a cell is occupied, in (0, 1).")
+@click.option("--combination", type=click.Choice(["log_odds", "dempster_shafer", "mean"]), default="log_odds",
+              show_default=True, help="How the positions that observed a place are combined.")
+@click.option("--max-range", type=click.FloatRange(min=0.0, min_open=True), default=1.5, show_default=True,
+              help="Radius of each position's navigation polygon, metres.")
+@click.option("--simplify", type=click.FloatRange(min=0.0), default=None, metavar="METRES",
+              help="Simplify the navigation polygons in the GeoJSON to this tolerance.")
+@click.option("--precision", type=click.IntRange(min=0, max=17), default=None,
+              help="Decimal places of the GeoJSON coordinates (default: full precision).")
+@click.option("--origin", default=None, metavar="LAT,LON[,HEADING]",
+              help="Write the GeoJSON in WGS84 longitude/latitude: the map origin's latitude and longitude "
+                   "and the compass bearing of the map's +x axis, degrees (default 90: x east). Needs the geo extra.")
+@click.option("--mcap/--no-mcap", default=True, show_default=True,
+              help="Write map.mcap for Foxglove (needs the protobuf extra).")
+@fit_options
+@log_options
+@seed_option
+@overwrite_option
+@config_option
+def map_command(source: str, output: str, resolution: float, threshold: float, combination: str, max_range: float,
+                simplify: float | None, precision: int | None, origin: str | None, mcap: bool, seed: int,
+                overwrite: bool,
+                **kwargs: Any) -> None:
+    """Fuse every robot position of LOG (fitted here with the fit options) or of MODELS (a
+    folder written by `occtool fit LOG -o MODELS/`) into one world-frame map and write, in
+    the output folder: map.yaml + map.pgm (Nav2 map_server, trinary), map.mcap (Foxglove:
+    foxglove.Grid on /map, foxglove.SceneUpdate per position on /positions), the GeoJSON
+    layers navigation.geojson (polygons), obstacles.geojson and frontiers.geojson (points),
+    and summary.json.
+
+    Each local model speaks only where its position observed (in front of its first
+    obstacle, within its reach); places no position observed stay unknown (205 in the
+    Nav2 map), never free. For a 2D laser give its height: --sensor-height 0.3
+    --body-height 0.5 --no-return-range 5 (docs/map.md).
+    """
+    import logging
+    from pathlib import Path
+
+    from occtool.cli.options import fit_from_kwargs, read_log_from_kwargs
+    from occtool.errors import InputError
+    from occtool.features import Pose
+    from occtool.fuse import fuse_log, fuse_models
+    from occtool.io.model import load_model, read_model_set
+    from occtool.mapping import map_of_run, output_paths, write_run_map
+
+    logger = logging.getLogger("occtool.map")
+    georeference = None
+    if origin is not None:
+        from occtool.io.wgs84 import Georeference, parse_origin
+
+        try:
+            georeference = Georeference(*parse_origin(origin))
+        except InputError as exc:
+            raise click.BadParameter(str(exc), param_hint="--origin") from None
+        georeference.to_lonlat([[0.0, 0.0]])  # a missing pyproj is reported before any work
+    if not overwrite:
+        for path in output_paths(output):
+            if path.exists():
+                raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
+    if Path(output).exists() and not Path(output).is_dir():
+        raise click.ClickException(f"{output} exists and is not a folder")
+    is_models = Path(source).is_dir() or Path(source).name == "index.json"
+    if is_models:
+        folder, entries = read_model_set(source)
+        models, poses, stamps, positions = [], [], [], []
+        for entry in entries:
+            if entry.get("pose") is None:
+                raise InputError(f"{folder / 'index.json'}: position {entry['position']} has no pose for a world map")
+            try:
+                pose = Pose.from_dict(entry["pose"])
+            except (TypeError, ValueError):
+                raise InputError(
+                    f"{folder / 'index.json'}: position {entry['position']}'s pose is not numbers") from None
+            model = load_model(folder / entry["file"])
+            stamp = entry.get("stamp") if isinstance(entry.get("stamp"), (int, float)) else None
+            models.append(model)
+            poses.append(pose)
+            stamps.append(stamp)
+            positions.append((entry["position"], pose, stamp))
+        fused = fuse_models(models, poses, combination=combination, threshold=threshold, stamps=stamps)
+        logger.info("%d models read from %s", len(models), folder)
+        extra = {"source": str(source), "fitted_here": False}
+    else:
+        template = fit_from_kwargs(kwargs, seed=seed)
+        log = read_log_from_kwargs(source, kwargs)
+        fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold)
+        for note in report.notes:
+            logger.warning("%s: %s", Path(source).name, note)
+        for index, message in report.skipped:
+            logger.warning("position %d skipped: %s", index, message)
+        positions = list(zip(report.fitted, fused.poses, fused.stamps))
+        logger.info("%d positions fitted in %.1f s", report.positions, report.fit_seconds)
+        extra = {"source": str(source), "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
+                 "skipped_positions": [index for index, _ in report.skipped]}
+    run = map_of_run(fused, models, positions, resolution=resolution,
+                     navigation={"max_range": max_range, "threshold": threshold})
+    written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
+                            georeference=georeference, extra_summary=extra)
+    summary = run.summary()
+    logger.info("fused map: %d positions, %.1f KB; raster %dx%d: %s", summary["positions"],
+                summary["fused_map_bytes"] / 1e3, summary["raster"]["columns"], summary["raster"]["rows"],
+                summary["raster"]["cells"])
+    for path in written:
+        logger.debug("wrote %s", path)

@@ -1,0 +1,119 @@
+"""The map of a run as an MCAP that Foxglove draws with its standard schemas, no plugins.
+
+* ``/map`` — ``foxglove.Grid``: the rasterised fused map in frame ``map``, one int8 field
+  ``occupancy`` valued as ``nav_msgs/OccupancyGrid`` (0 free, 100 occupied, -1 unknown),
+  row 0 at the grid's pose (its lower-left corner), columns along +x.
+* ``/positions`` — ``foxglove.SceneUpdate``: one message per position on its timestamp,
+  an entity with the position's navigation polygon (line loops), its obstacle points
+  (red spheres) and exploration points (green spheres), in frame ``map``.
+
+Written with ``mcap-protobuf-support`` and ``foxglove-schemas-protobuf`` (the
+``protobuf`` extra).
+"""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import MissingDependencyError
+from occtool.fuse import FREE, OCCUPIED
+
+GRID_TOPIC = "/map"
+SCENE_TOPIC = "/positions"
+FRAME = "map"
+POINT_DIAMETER = 0.1
+
+
+def _imports() -> Any:
+    try:
+        from foxglove_schemas_protobuf import (
+            Color_pb2,
+            Grid_pb2,
+            LinePrimitive_pb2,
+            PackedElementField_pb2,
+            Point3_pb2,
+            Pose_pb2,
+            Quaternion_pb2,
+            SceneEntity_pb2,
+            SceneUpdate_pb2,
+            SpherePrimitive_pb2,
+            Vector2_pb2,
+            Vector3_pb2,
+        )
+        from mcap_protobuf.writer import Writer
+    except ImportError as exc:
+        raise MissingDependencyError("foxglove-schemas-protobuf", "protobuf", "writing the map's MCAP") from exc
+    return (Color_pb2, Grid_pb2, LinePrimitive_pb2, PackedElementField_pb2, Point3_pb2, Pose_pb2, Quaternion_pb2,
+            SceneEntity_pb2, SceneUpdate_pb2, SpherePrimitive_pb2, Vector2_pb2, Vector3_pb2, Writer)
+
+
+def _nanoseconds(stamp: float | None, fallback: int) -> int:
+    return round(stamp * 1e9) if stamp is not None and np.isfinite(stamp) and stamp >= 0 else fallback
+
+
+def run_map_mcap_bytes(run: Any) -> bytes:
+    """The MCAP file of a :class:`occtool.mapping.RunMap`, as bytes (the caller writes them atomically)."""
+    (Color_pb2, Grid_pb2, LinePrimitive_pb2, PackedElementField_pb2, Point3_pb2, Pose_pb2, Quaternion_pb2,
+     SceneEntity_pb2, SceneUpdate_pb2, SpherePrimitive_pb2, Vector2_pb2, Vector3_pb2, Writer) = _imports()
+    from google.protobuf.timestamp_pb2 import Timestamp
+
+    def stamp_of(ns: int) -> Any:
+        t = Timestamp()
+        t.FromNanoseconds(ns)
+        return t
+
+    identity = Quaternion_pb2.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+    red = Color_pb2.Color(r=0.85, g=0.1, b=0.1, a=1.0)
+    green = Color_pb2.Color(r=0.1, g=0.7, b=0.2, a=1.0)
+    blue = Color_pb2.Color(r=0.1, g=0.4, b=0.9, a=1.0)
+    size = Vector3_pb2.Vector3(x=POINT_DIAMETER, y=POINT_DIAMETER, z=POINT_DIAMETER)
+    buffer = io.BytesIO()
+    writer = Writer(buffer)
+    last = 0
+    for k, item in enumerate(run.placed):
+        ns = _nanoseconds(item.stamp, k * 100_000_000)
+        last = max(last, ns)
+        entity = SceneEntity_pb2.SceneEntity(timestamp=stamp_of(ns), frame_id=FRAME, id=f"position-{item.position}")
+        geometry = item.nav.polygon
+        polygons = [geometry] if geometry.geom_type == "Polygon" else list(getattr(geometry, "geoms", []))
+        for polygon in polygons:
+            if polygon.is_empty:
+                continue
+            for ring in [polygon.exterior, *polygon.interiors]:
+                xy = np.asarray(ring.coords)[:-1]
+                entity.lines.append(LinePrimitive_pb2.LinePrimitive(
+                    type=LinePrimitive_pb2.LinePrimitive.LINE_LOOP,
+                    pose=Pose_pb2.Pose(position=Vector3_pb2.Vector3(x=0.0, y=0.0, z=0.0), orientation=identity),
+                    thickness=0.03, scale_invariant=False, color=blue,
+                    points=[Point3_pb2.Point3(x=float(x), y=float(y), z=0.0) for x, y in xy]))
+        for points, color in ((item.nav.obstacle_points, red), (item.nav.exploration_points, green)):
+            for x, y in np.asarray(points, dtype=np.float64).reshape(-1, 2):
+                entity.spheres.append(SpherePrimitive_pb2.SpherePrimitive(
+                    pose=Pose_pb2.Pose(position=Vector3_pb2.Vector3(x=float(x), y=float(y), z=0.0),
+                                       orientation=identity), size=size, color=color))
+        writer.write_message(SCENE_TOPIC, SceneUpdate_pb2.SceneUpdate(entities=[entity]), log_time=ns,
+                             publish_time=ns)
+    raster = run.raster
+    values = np.full(raster.cells.shape, -1, dtype=np.int8)
+    values[raster.cells == FREE] = 0
+    values[raster.cells == OCCUPIED] = 100
+    _rows, cols = raster.shape
+    grid = Grid_pb2.Grid(
+        timestamp=stamp_of(last), frame_id=FRAME,
+        pose=Pose_pb2.Pose(position=Vector3_pb2.Vector3(x=raster.origin[0], y=raster.origin[1], z=0.0),
+                           orientation=identity),
+        column_count=cols, cell_size=Vector2_pb2.Vector2(x=raster.resolution, y=raster.resolution),
+        row_stride=cols, cell_stride=1,
+        fields=[PackedElementField_pb2.PackedElementField(name="occupancy", offset=0,
+                                                          type=PackedElementField_pb2.PackedElementField.INT8)],
+        data=values.tobytes(),
+    )
+    writer.write_message(GRID_TOPIC, grid, log_time=last, publish_time=last)
+    writer.finish()
+    return buffer.getvalue()
+
+
+__all__ = ["FRAME", "GRID_TOPIC", "SCENE_TOPIC", "run_map_mcap_bytes"]

@@ -1,0 +1,269 @@
+"""Scoring a fused map on a real log: the Hilbert-maps held-out protocol and Nav2 agreement.
+
+:func:`evaluate_log` holds out 10 % of a log's scans in blocks of 40 consecutive scans
+(Ramos and Ott's protocol for Hilbert maps, as used for BHM on the Intel lab), fuses
+the local models of the remaining scans (:func:`occtool.fuse.fuse_log`), builds a dense
+2D log-odds grid from the same training scans (OctoMap's hit/miss model, vectorised ray
+traversal of :mod:`occtool.grid`) and scores both on the held-out beams: each beam's end
+point is occupied; points drawn uniformly along the beam up to 0.1 m before its end are
+free. ROC AUC (:func:`occtool.compare.roc_auc`) with model bytes and build times.
+
+:func:`nav2_agreement` checks a rasterised map against scans: each return should fall
+on an occupied cell or one of its eight neighbours, and the cells along each beam up to
+0.1 m before its end should not be occupied.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.features import Position
+from occtool.fuse import COMBINATIONS, OCCUPIED, Raster
+
+FloatArray = NDArray[np.float64]
+
+HOLDOUT = 0.1
+BLOCK = 40
+#: Free test points stop this far before the beam's end (metres), as in the protocol.
+END_MARGIN = 0.1
+FREE_POINTS_PER_BEAM = 5
+#: Rays traversed per chunk when building the world grid (bounds the temporary arrays).
+RAYS_PER_CHUNK = 20_000
+
+
+def holdout_blocks(n_scans: int, holdout: float = HOLDOUT, block: int = BLOCK, seed: int = 0) -> NDArray[np.bool_]:
+    """Which of ``n_scans`` consecutive scans are held out: ``round(holdout * n / block)`` (at
+    least one) whole blocks of ``block`` scans, picked at random with ``seed``."""
+    if not 0.0 < holdout < 1.0:
+        raise InputError(f"the held-out share must lie strictly between 0 and 1, got {holdout}")
+    if block < 1:
+        raise InputError(f"block must be a whole number >= 1, got {block}")
+    n_blocks = math.ceil(n_scans / block)
+    take = max(1, round(holdout * n_scans / block))
+    if n_blocks < 2 or take >= n_blocks:
+        raise InputError(f"{n_scans} scans make {n_blocks} block(s) of {block}: too few to hold {holdout:.0%} out")
+    chosen = np.random.default_rng(seed).choice(n_blocks, size=take, replace=False)
+    held = np.zeros(n_scans, dtype=bool)
+    for b in chosen:
+        held[b * block:(b + 1) * block] = True
+    return held
+
+
+def _world_rays(scans: list[Position]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.intp]]:
+    """Start (pose), end (world point), is-a-return and scan number of every beam, ``(N, 3)`` each."""
+    starts, ends, returns, owner = [], [], [], []
+    for k, scan in enumerate(scans):
+        pose = scan.pose
+        assert pose is not None, "scored scans have poses"  # evaluate_log refuses a log without
+        points = scan.features.points @ pose.rotation.T + pose.translation
+        starts.append(np.broadcast_to(pose.translation, points.shape))
+        ends.append(points)
+        returns.append(scan.features.evidence > 0)
+        owner.append(np.full(points.shape[0], k, dtype=np.intp))
+    return np.concatenate(starts), np.concatenate(ends), np.concatenate(returns), np.concatenate(owner)
+
+
+def world_grid(scans: list[Position], resolution: float = 0.05) -> Any:
+    """A dense 2D log-odds grid in the world frame from scans with poses (OctoMap's hit/miss
+    model and clamping): an :class:`occtool.grid.OccupancyGrid` one cell thick, whose
+    ``occupancy`` reads points at any z in the scans' plane."""
+    from occtool.grid import (
+        OCTOMAP_DEFAULTS,
+        OccupancyGrid,
+        _observation_log_odds,
+        traverse,
+    )
+
+    starts, ends, returns, _ = _world_rays(scans)
+    flat_start = starts[:, :2]
+    flat_end = ends[:, :2]
+    lower = np.floor(np.minimum(flat_start.min(axis=0), flat_end.min(axis=0)) / resolution).astype(np.int64)
+    upper = np.floor(np.maximum(flat_start.max(axis=0), flat_end.max(axis=0)) / resolution).astype(np.int64)
+    shape = upper - lower + 1
+    log_odds = np.zeros(int(shape[0] * shape[1]), dtype=np.float32)
+    params = OCTOMAP_DEFAULTS
+    lengths = np.hypot(*(flat_end - flat_start).T)
+    for lo in range(0, lengths.size, RAYS_PER_CHUNK):
+        hi = min(lengths.size, lo + RAYS_PER_CHUNK)
+        start3 = np.column_stack([flat_start[lo:hi], np.full(hi - lo, 0.5 * resolution)])
+        end3 = np.column_stack([flat_end[lo:hi], np.full(hi - lo, 0.5 * resolution)])
+        seg = traverse(start3, end3, resolution)
+        values = _observation_log_odds(seg, lengths[lo:hi], returns[lo:hi].astype(np.float64),
+                                       returns[lo:hi], None, params)
+        index = (seg.cell[:, 0] - lower[0]) * shape[1] + (seg.cell[:, 1] - lower[1])
+        np.add.at(log_odds, index, values.astype(np.float32))
+    np.clip(log_odds, *params.clamp_log_odds, out=log_odds)
+    return OccupancyGrid(log_odds.reshape(int(shape[0]), int(shape[1]), 1), float(resolution),
+                         np.array([lower[0], lower[1], 0], dtype=np.int64), params=params)
+
+
+def holdout_test_points(scans: list[Position], seed: int = 0, per_beam: int = FREE_POINTS_PER_BEAM,
+                margin: float = END_MARGIN) -> tuple[FloatArray, FloatArray]:
+    """Occupied (each return's end point) and free (uniform along each return's beam, up to
+    ``margin`` before its end) world points of held-out scans."""
+    starts, ends, returns, _ = _world_rays(scans)
+    starts, ends = starts[returns], ends[returns]
+    length = np.linalg.norm(ends - starts, axis=1)
+    usable = length > margin
+    rng = np.random.default_rng(seed)
+    fraction = rng.uniform(0.0, 1.0, size=(int(usable.sum()), per_beam))
+    reach = ((length[usable] - margin) / length[usable])[:, None] * fraction
+    s, e = starts[usable], ends[usable]
+    free = (s[:, None, :] + reach[:, :, None] * (e - s)[:, None, :]).reshape(-1, 3)
+    return ends, free
+
+
+def nav2_agreement(raster: Raster, scans: list[Position], margin: float = END_MARGIN) -> dict[str, float]:
+    """How well a free/occupied/unknown raster agrees with scans.
+
+    Returns the share of returns on an occupied cell or an 8-neighbour, the share of
+    beams whose cells up to ``margin`` before the end are not occupied, and the share of
+    scans where at least 95 % of returns (resp. beams) pass.
+    """
+    from occtool.grid import traverse
+
+    starts, ends, returns, owner = _world_rays(scans)
+    starts, ends, owner = starts[returns], ends[returns], owner[returns]
+    occupied = raster.cells == OCCUPIED
+    padded = np.pad(occupied, 1)
+    near = np.zeros_like(occupied)
+    for dj in (-1, 0, 1):
+        for di in (-1, 0, 1):
+            near |= padded[1 + dj:1 + dj + occupied.shape[0], 1 + di:1 + di + occupied.shape[1]]
+    row, col, inside = raster.cell_of(ends[:, :2])
+    hit = inside & near[row, col]
+    # Beams: the cells crossed from the sensor to ``margin`` before the end.
+    length = np.hypot(*(ends[:, :2] - starts[:, :2]).T)
+    short = np.clip((length - margin) / np.maximum(length, 1e-12), 0.0, 1.0)[:, None]
+    stop = starts[:, :2] + short * (ends[:, :2] - starts[:, :2])
+    clear = np.ones(length.size, dtype=bool)
+    origin = np.array(raster.origin)
+    for lo in range(0, length.size, RAYS_PER_CHUNK):
+        hi = min(length.size, lo + RAYS_PER_CHUNK)
+        a = np.column_stack([starts[lo:hi, :2] - origin, np.full(hi - lo, 0.5 * raster.resolution)])
+        b = np.column_stack([stop[lo:hi] - origin, np.full(hi - lo, 0.5 * raster.resolution)])
+        seg = traverse(a, b, raster.resolution)
+        j, i = seg.cell[:, 1], seg.cell[:, 0]
+        valid = (j >= 0) & (j < occupied.shape[0]) & (i >= 0) & (i < occupied.shape[1])
+        blocked = np.zeros(seg.ray.size, dtype=bool)
+        blocked[valid] = occupied[j[valid], i[valid]]
+        bad = np.zeros(hi - lo, dtype=bool)
+        bad[seg.ray[blocked]] = True
+        clear[lo:hi] = ~bad
+    n_scans = len(scans)
+    per_scan = np.bincount(owner, minlength=n_scans).astype(np.float64)
+    has = per_scan > 0
+    hit_share = np.bincount(owner, weights=hit, minlength=n_scans)[has] / per_scan[has]
+    clear_share = np.bincount(owner, weights=clear, minlength=n_scans)[has] / per_scan[has]
+    return {
+        "returns_on_occupied": float(hit.mean()) if hit.size else math.nan,
+        "beams_clear": float(clear.mean()) if clear.size else math.nan,
+        "scans_returns_95": float((hit_share >= 0.95).mean()),
+        "scans_beams_95": float((clear_share >= 0.95).mean()),
+        "scans_both_95": float(((hit_share >= 0.95) & (clear_share >= 0.95)).mean()),
+        "scans": int(has.sum()),
+    }
+
+
+@dataclass
+class LogScore:
+    """The figures of :func:`evaluate_log` (``as_dict`` for JSON)."""
+
+    source: str
+    scans: int
+    held_out_scans: int
+    training_positions: int
+    occupied_points: int
+    free_points: int
+    auc: dict[str, float]
+    coverage: float
+    fused_bytes: int
+    grid_bytes: int
+    fit_s: float
+    raster_s: float
+    grid_s: float
+    nav2: dict[str, float]
+
+    def as_dict(self) -> dict[str, Any]:
+        from dataclasses import asdict
+
+        return asdict(self)
+
+
+def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: int = BLOCK, seed: int = 0,
+                 resolution: float = 0.05, no_return_range: float | None = 5.0, threshold: float = 0.6,
+                 read_options: dict[str, Any] | None = None, grid_resolutions: tuple[float, ...] = ()) -> LogScore:
+    """Score the fused map of ``path``'s training scans against a dense 2D grid on held-out blocks.
+
+    Parameters
+    ----------
+    path
+        A range log with poses (a CARMEN log, say).
+    template
+        An unfitted :class:`occtool.fit.OccupancyRegressor` (robot, sensor, fit settings).
+    holdout, block, seed
+        The share of scans held out, in blocks of ``block`` consecutive scans, picked with ``seed``.
+    resolution
+        Cell size of the grid and of the fused map's raster (for the Nav2 agreement), metres.
+    no_return_range
+        Beams without a return become free rays this long (training only; only returns are tested).
+    grid_resolutions
+        Further grid cell sizes to score (``auc["grid_0.1m"]`` ...); ``auc["grid"]`` is at ``resolution``.
+    """
+    from occtool.compare import roc_auc
+    from occtool.fuse import fuse_log
+    from occtool.io import read_log
+    from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+
+    options = dict(read_options or {})
+    tolerance = options.pop("position_tolerance", DEFAULT_POSITION_TOLERANCE)
+    options.pop("group_by", None)
+    scan_log = read_log(path, group_by="message", no_return_range=no_return_range, **options)
+    scans = scan_log.positions
+    if any(s.pose is None for s in scans):
+        raise InputError(f"{path}: scans without poses cannot be placed in a world map")
+    held = holdout_blocks(len(scans), holdout, block, seed)
+    train = [s for s, out in zip(scans, held) if not out]
+    test = [s for s, out in zip(scans, held) if out]
+    train_log = build_log([Scan(s.features.points, s.features.evidence, s.pose, s.stamp, s.source) for s in train],
+                          source=str(path), tolerance=tolerance)
+    fused, _, report = fuse_log(train_log, template, threshold=threshold)
+    started = time.perf_counter()
+    grid = world_grid(train, resolution)
+    grid_s = time.perf_counter() - started
+    occupied, free = holdout_test_points(test, seed=seed)
+    points = np.concatenate([occupied, free])
+    # One pass over the models gives every combination's figures.
+    sums = fused._sums(points)
+    auc = {}
+    for combination in COMBINATIONS:
+        p = sums.evidence(combination).probability
+        auc[f"fused_{combination}"] = roc_auc(p[:len(occupied)], p[len(occupied):])
+    observed = sums.count > 0
+    grid_p = grid.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * resolution)]))
+    auc["grid"] = roc_auc(grid_p[:len(occupied)], grid_p[len(occupied):])
+    # Coarser grids blur walls into the free points near them but fill gaps between beams:
+    # the grid is scored at each, so the comparison is with its best.
+    for size in grid_resolutions:
+        other = world_grid(train, size)
+        other_p = other.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * size)]))
+        auc[f"grid_{size:g}m"] = roc_auc(other_p[:len(occupied)], other_p[len(occupied):])
+    started = time.perf_counter()
+    raster = fused.rasterise(resolution)
+    raster_s = time.perf_counter() - started
+    return LogScore(
+        source=str(path), scans=len(scans), held_out_scans=int(held.sum()), training_positions=len(fused),
+        occupied_points=len(occupied), free_points=len(free), auc=auc, coverage=float(observed.mean()),
+        fused_bytes=fused.nbytes, grid_bytes=int(grid.nbytes), fit_s=report.fit_seconds, raster_s=raster_s,
+        grid_s=grid_s, nav2=nav2_agreement(raster, train),
+    )
+
+
+__all__ = ["LogScore", "evaluate_log", "holdout_blocks", "holdout_test_points", "nav2_agreement", "world_grid"]

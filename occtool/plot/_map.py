@@ -1,0 +1,78 @@
+"""The picture of a run's map (``occtool plot map``): the fused raster, the path, frontiers.
+
+Reads a folder written by ``occtool map`` (``map.yaml`` by map_server's rules,
+``summary.json`` for the path, ``frontiers.geojson``); drawing needs the ``plot`` extra.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import InputError
+
+DEFAULT_MAP_SIZE = (8.0, 8.0)
+
+
+def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndarray]:
+    """The Nav2 map, the path and the frontier points of an ``occtool map`` folder."""
+    from occtool.io.nav2 import read_nav2
+
+    folder = Path(folder)
+    if not (folder / "map.yaml").is_file():
+        raise InputError(f"{folder}: no map.yaml (write the folder with `occtool map LOG -o {folder}/`)")
+    nav2 = read_nav2(folder / "map.yaml")
+    path: list[list[float]] = []
+    frontiers = np.zeros((0, 2))
+    try:
+        if (folder / "summary.json").is_file():
+            path = json.loads((folder / "summary.json").read_text(encoding="utf-8")).get("path") or []
+        if (folder / "frontiers.geojson").is_file():
+            data = json.loads((folder / "frontiers.geojson").read_text(encoding="utf-8"))
+            if data.get("properties", {}).get("frame") == "map":
+                frontiers = np.array([f["geometry"]["coordinates"] for f in data["features"]],
+                                     dtype=np.float64).reshape(-1, 2)
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"{folder}: malformed summary.json or frontiers.geojson ({exc})") from None
+    return nav2, path, frontiers
+
+
+def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SIZE, dpi: float = 100.0,
+               title: str | None = None, path: bool = True, frontiers: bool = True) -> Any:
+    """Free (white), occupied (black) and unknown (grey) cells in the map frame, the run's
+    path (blue) and the frontier points (green)."""
+    from matplotlib.colors import ListedColormap
+
+    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED
+    from occtool.plot import new_figure
+
+    nav2, run_path, frontier_points = read_map_folder(folder)
+    figure = new_figure(size, dpi)
+    axes = figure.add_subplot(1, 1, 1)
+    rows, cols = nav2.cells.shape
+    shade = np.full(nav2.cells.shape, 1, dtype=np.int8)
+    shade[nav2.cells == CELL_FREE] = 2
+    shade[nav2.cells == CELL_OCCUPIED] = 0
+    x0, y0 = nav2.origin[0], nav2.origin[1]
+    extent = (x0, x0 + cols * nav2.resolution, y0, y0 + rows * nav2.resolution)
+    axes.imshow(shade, origin="lower", extent=extent, interpolation="nearest",
+                cmap=ListedColormap(["black", "0.75", "white"]), vmin=0, vmax=2)
+    if path and run_path:
+        xy = np.asarray(run_path, dtype=np.float64).reshape(-1, 2)
+        axes.plot(xy[:, 0], xy[:, 1], color="tab:blue", linewidth=0.8, label="path")
+    if frontiers and len(frontier_points):
+        axes.scatter(frontier_points[:, 0], frontier_points[:, 1], s=6, color="tab:green", label="frontiers")
+    axes.set_aspect("equal")
+    axes.set_xlabel("x (m, map)")
+    axes.set_ylabel("y (m, map)")
+    axes.set_title(title if title is not None else
+                   f"{Path(folder).name}: free / occupied / unknown at {nav2.resolution:g} m")
+    if axes.get_legend_handles_labels()[0]:
+        axes.legend(loc="upper right", fontsize="small")
+    return figure
+
+
+__all__ = ["map_figure", "read_map_folder"]

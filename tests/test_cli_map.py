@@ -1,0 +1,178 @@
+"""`occtool map` and `occtool evaluate-log` end to end on a synthetic room log."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from _room_log import ROOM, write_room_log
+from click.testing import CliRunner
+
+from occtool.cli.main import cli
+
+LASER = ("--sensor-height", "0.3", "--body-height", "0.5")
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def mapped(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("map")
+    log = folder / "room.log"
+    write_room_log(log, scans=40)
+    out = folder / "out" / "deeper"
+    result = run("map", log, "-o", out, *LASER)
+    assert result.exit_code == 0, result.output
+    return log, out
+
+
+def test_writes_every_output(mapped):
+    _, out = mapped
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["frontiers.geojson", "map.mcap", "map.pgm", "map.yaml", "navigation.geojson",
+                     "obstacles.geojson", "summary.json"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["positions"] >= 10 and summary["fused_map_bytes"] > 0 and summary["frame"] == "map"
+
+
+def test_nav2_map_puts_walls_where_they_are(mapped):
+    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
+
+    _, out = mapped
+    loaded = read_nav2(out / "map.yaml")
+
+    def cell(x, y):
+        i = int(np.floor((x - loaded.origin[0]) / loaded.resolution))
+        j = int(np.floor((y - loaded.origin[1]) / loaded.resolution))
+        return loaded.cells[j, i]
+
+    _x0, _y0, _x1, y1 = ROOM
+    assert cell(1.0, y1 + 0.02) == CELL_OCCUPIED
+    assert cell(1.0, 0.25) == CELL_FREE
+    assert cell(1.0, y1 + 1.5) == CELL_UNKNOWN
+
+
+def test_geojson_layers_hold_one_geometry_type_each(mapped):
+    _, out = mapped
+    for name, kind in (("navigation", "Polygon"), ("obstacles", "Point"), ("frontiers", "Point")):
+        data = json.loads((out / f"{name}.geojson").read_text())
+        assert data["type"] == "FeatureCollection" and data["properties"]["frame"] == "map"
+        assert {f["geometry"]["type"] for f in data["features"]} <= {kind}
+    assert json.loads((out / "navigation.geojson").read_text())["features"]
+
+
+def test_mcap_uses_foxglove_schemas_and_decodes(mapped):
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    _log, out = mapped
+    with open(out / "map.mcap", "rb") as handle:
+        reader = make_reader(handle, decoder_factories=[DecoderFactory()])
+        messages = list(reader.iter_decoded_messages())
+    by_topic = {}
+    for schema, channel, message, decoded in messages:
+        by_topic.setdefault(channel.topic, []).append((schema.name, message, decoded))
+    assert {name for name, _, _ in by_topic["/map"]} == {"foxglove.Grid"}
+    assert {name for name, _, _ in by_topic["/positions"]} == {"foxglove.SceneUpdate"}
+    summary = json.loads((out / "summary.json").read_text())
+    scenes = by_topic["/positions"]
+    assert len(scenes) == summary["positions"]
+    # One message per position on its own time: the log's stamps start at 10 s.
+    times = [message.log_time for _, message, _ in scenes]
+    assert times == sorted(times) and times[0] == 10_000_000_000
+    entity = scenes[0][2].entities[0]
+    assert entity.frame_id == "map" and entity.lines
+    (_, _, grid), = by_topic["/map"]
+    assert grid.frame_id == "map" and grid.column_count == summary["raster"]["columns"]
+    values = np.frombuffer(grid.data, dtype=np.int8).reshape(-1, grid.column_count)
+    from occtool.io.nav2 import read_nav2
+
+    assert (values == read_nav2(out / "map.yaml").cells).all()
+
+
+def test_map_of_a_model_set(mapped, tmp_path):
+    log, _ = mapped
+    models = tmp_path / "models"
+    models.mkdir()
+    assert run("fit", log, "-o", f"{models}/", *LASER).exit_code == 0
+    result = run("map", models, "-o", tmp_path / "out", "--no-mcap")
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["fitted_here"] is False and summary["positions"] >= 10
+    assert not (tmp_path / "out" / "map.mcap").exists()
+
+
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path):
+    # Two positions without poses: they cannot be placed in one map.
+    log = tmp_path / "two.csv"
+    log.write_text("x,y,z,m,position\n1,0,0,0.9,0\n0,1,0,0.9,0\n1,0,0,0.9,1\n0,1,0,0.9,1\n")
+    result = CliRunner().invoke(cli, ["-q", "map", str(log), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert len(result.output.strip().splitlines()) == 1 and "no pose" in result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_log_without_poses_is_one_position_at_the_origin(tmp_path):
+    from _room_log import room_ranges
+
+    ranges = room_ranges(1.0, 0.25, 0.0)
+    angles = -np.pi / 2 + np.arange(180) * np.pi / 180
+    log = tmp_path / "scan.xyz"
+    log.write_text("".join(f"{r * np.cos(a):.4f} {r * np.sin(a):.4f} 0\n" for r, a in zip(ranges, angles)))
+    result = run("-q", "map", log, "-o", tmp_path / "out", "--no-mcap", "--evidence", "0.9", *LASER)
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["positions"] == 1 and summary["path"] == [[0.0, 0.0]]
+
+
+def test_no_overwrite_refuses_before_work(mapped):
+    log, out = mapped
+    before = (out / "map.pgm").stat().st_mtime_ns
+    result = CliRunner().invoke(cli, ["map", str(log), "-o", str(out), "--no-overwrite", *LASER])
+    assert result.exit_code == 1 and "exists already" in result.output
+    assert (out / "map.pgm").stat().st_mtime_ns == before
+
+
+def test_evaluate_log_prints_the_figures(mapped):
+    log, _ = mapped
+    result = run("evaluate-log", log, "--block", "5", "--holdout", "0.2", "--json", *LASER)
+    assert result.exit_code == 0, result.output
+    figures = json.loads(result.output)
+    assert set(figures["auc"]) == {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid"}
+    assert figures["auc"]["fused_log_odds"] > 0.9
+
+
+def test_origin_writes_wgs84_that_round_trips(mapped, tmp_path):
+    pytest.importorskip("pyproj")
+    from occtool.io.wgs84 import Georeference
+
+    log, out = mapped
+    result = run("map", log, "-o", tmp_path / "geo", "--origin", "47.0,8.0,30", "--no-mcap", *LASER)
+    assert result.exit_code == 0, result.output
+    metric = json.loads((out / "obstacles.geojson").read_text())
+    geo = json.loads((tmp_path / "geo" / "obstacles.geojson").read_text())
+    assert geo["properties"]["frame"] == "WGS84"
+    xy = np.array([f["geometry"]["coordinates"] for f in metric["features"]])
+    lonlat = np.array([f["geometry"]["coordinates"] for f in geo["features"]])
+    back = Georeference(47.0, 8.0, 30.0).from_lonlat(lonlat)
+    assert np.abs(back - xy).max() < 0.01
+
+
+def test_bad_origin_is_a_usage_error(mapped, tmp_path):
+    log, _ = mapped
+    result = CliRunner().invoke(cli, ["map", str(log), "-o", str(tmp_path / "x"), "--origin", "95,0"])
+    assert result.exit_code == 2 and not (tmp_path / "x").exists()
+
+
+def test_plot_map_draws_the_folder(mapped, tmp_path):
+    pytest.importorskip("matplotlib")
+    _, out = mapped
+    picture = tmp_path / "map.png"
+    result = run("plot", "map", out, "-o", picture, "--size", "300,300px")
+    assert result.exit_code == 0, result.output
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    summary = json.loads((out / "summary.json").read_text())
+    assert len(summary["path"]) == summary["positions"]

@@ -1,0 +1,139 @@
+"""The fused world map: where local models speak, how they combine, the raster, log scoring."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _room_log import ROOM, write_room_log
+
+from occtool.errors import InputError
+from occtool.fit import OccupancyRegressor
+from occtool.fuse import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    FusedMap,
+    fuse_log,
+    fuse_models,
+    observed_reach,
+)
+from occtool.io import read_log
+from occtool.log_score import evaluate_log, holdout_blocks
+from occtool.robot import Robot
+
+LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory):
+    path = tmp_path_factory.mktemp("room") / "room.log"
+    write_room_log(path, scans=60)
+    log = read_log(path)
+    fused, models, report = fuse_log(log, OccupancyRegressor(robot=LASER_ROBOT))
+    return path, log, fused, models, report
+
+
+def test_free_inside_occupied_at_walls_unknown_behind(room):
+    _, _, fused, _, report = room
+    assert report.skipped == []
+    _x0, y0, x1, y1 = ROOM
+    inside = np.array([[1.0, 0.25, 0.0], [0.0, 0.0, 0.0], [2.0, 1.0, 0.0]])
+    walls = np.array([[x1 + 0.02, 0.3, 0.0], [1.0, y1 + 0.02, 0.0], [1.0, y0 - 0.02, 0.0]])
+    behind = np.array([[x1 + 1.5, 0.3, 0.0], [1.0, y1 + 1.5, 0.0]])
+    ev = fused.evidence(np.vstack([inside, walls, behind]))
+    assert ev.observed[:6].all()
+    assert (ev.probability[:3] < fused.threshold).all()
+    assert (ev.probability[3:6] >= fused.threshold).all()
+    # Behind a wall nobody observed: unknown, not free.
+    assert not ev.observed[6:].any()
+    assert np.allclose(ev.probability[6:], 0.5)
+
+
+def test_dempster_shafer_masses_are_normalised(room):
+    _, _, fused, _, _ = room
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(-4, 6, 2000), rng.uniform(-3, 3.5, 2000), np.zeros(2000)])
+    for combination in ("log_odds", "dempster_shafer", "mean"):
+        ev = fused.evidence(points, combination=combination)
+        seen = ev.observed
+        total = ev.belief_occupied + ev.belief_free + ev.unknown_mass
+        assert np.allclose(total[seen], 1.0)
+        assert ((ev.conflict >= 0) & (ev.conflict <= 1)).all()
+        assert ((ev.probability >= 0) & (ev.probability <= 1)).all()
+        assert np.allclose(ev.probability[~seen], 0.5)
+
+
+def test_memory_is_the_trees_poses_and_reaches(room):
+    from occtool.compare import tree_bytes
+
+    _, _log, fused, models, _ = room
+    expected = sum(tree_bytes(m.tree_) for m in models) + 32 * len(models) + fused.reaches.nbytes
+    assert fused.nbytes == expected
+    assert fused.reaches.shape == (len(models), 2, 120)
+
+
+def test_raster_rows_grow_with_y_and_walls_are_occupied(room):
+    _, _, fused, _, _ = room
+    raster = fused.rasterise(0.05)
+    _x0, _y0, x1, y1 = ROOM
+    row, col, inside = raster.cell_of(np.array([[1.0, y1 + 0.02], [1.0, 0.25], [x1 + 1.5, 0.3]]))
+    assert inside.all()
+    assert raster.cells[row[0], col[0]] == OCCUPIED
+    assert raster.cells[row[1], col[1]] == FREE
+    assert raster.cells[row[2], col[2]] == UNKNOWN
+    # Rows go up in y: the top wall lies in a higher row than the robot's path.
+    assert row[0] > row[1]
+
+
+def test_models_from_files_fuse_like_fresh_ones(room, tmp_path):
+    from occtool.io.model import load_model, save_model
+
+    _, log, _fused, models, report = room
+    loaded = []
+    for k, model in enumerate(models):
+        save_model(model, tmp_path / f"m{k}.json")
+        loaded.append(load_model(tmp_path / f"m{k}.json"))
+    poses = [log.positions[index].pose for index in report.fitted]
+    again = fuse_models(loaded, poses)
+    points = np.array([[1.0, 0.25, 0.0], [ROOM[2] + 0.02, 0.3, 0.0]])
+    p = again.predict(points)
+    assert p[0] < 0.6 <= p[1]
+
+
+def test_reach_is_zero_where_nothing_was_seen():
+    from occtool.features import Features
+
+    # Returns straight ahead only: every other pan bin is unobserved.
+    features = Features.from_xyz(np.full(50, 2.0), np.linspace(-0.05, 0.05, 50), np.zeros(50), 0.9)
+    reach = observed_reach(features, LASER_ROBOT)
+    assert reach[0].max() >= 199 and (reach[0] > 0).sum() <= 3
+    assert (reach[1][reach[0] == 0] == np.iinfo(np.uint16).max).all()
+
+
+def test_fused_map_refuses_positions_without_poses(room):
+    _, _, fused, _, _ = room
+    with pytest.raises(InputError, match="pose"):
+        FusedMap(fused.trees[:1], [None], fused.reaches[:1], LASER_ROBOT)
+    with pytest.raises(InputError, match="combination"):
+        fused.predict(np.zeros((1, 3)), combination="max")
+
+
+def test_holdout_blocks_are_whole_consecutive_blocks():
+    held = holdout_blocks(910, 0.1, 40, seed=3)
+    assert held.sum() == 80
+    starts = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int)])) == 1)
+    assert all(s % 40 == 0 for s in starts)
+    assert (holdout_blocks(910, 0.1, 40, seed=3) == held).all()
+    with pytest.raises(InputError):
+        holdout_blocks(30, 0.1, 40)
+
+
+def test_evaluate_log_scores_the_fused_map(room):
+    path = room[0]
+    score = evaluate_log(str(path), OccupancyRegressor(robot=LASER_ROBOT), holdout=0.2, block=10, seed=0,
+                         no_return_range=None)
+    assert score.held_out_scans == 10
+    assert score.auc["fused_log_odds"] > 0.9
+    assert score.auc["grid"] > 0.5
+    assert 0 < score.coverage <= 1
+    assert score.nav2["returns_on_occupied"] > 0.5
