@@ -104,6 +104,18 @@ def group_by_bin(bins: NDArray[np.intp], n_bins: int) -> tuple[NDArray[np.intp],
     return order, bounds
 
 
+def order_within_bins(bins: NDArray[np.intp], values: FloatArray,
+                      n_bins: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The order that sorts by bin, then value (stable, as ``np.lexsort((values, bins))``),
+    and the ``n_bins + 1`` bounds of the bins' runs in it: a radix grouping, then each run
+    sorted on its own (at 10M values several times faster than the two-key sort)."""
+    order, bounds = group_by_bin(bins, n_bins)
+    for first, end in zip(bounds[:-1], bounds[1:]):  # a loop over bins; each run sorts on its own
+        run = order[first:end]
+        order[first:end] = run[np.argsort(values[run], kind="stable")]
+    return order, bounds
+
+
 def sorted_within_bins(bins: NDArray[np.intp], values: FloatArray,
                        n_bins: int) -> tuple[FloatArray, NDArray[np.intp]]:
     """``values`` grouped by bin (bin 0 first), ascending within each bin.

@@ -41,6 +41,9 @@ DEFAULT_BASIS = "trig"
 #: IoU (0.80 against 0.81), in a model of about 13 KB.
 DEFAULT_PIECES = 64
 DEFAULT_FOCUS_RANGE = 4.0
+#: Features the pieces are placed from, at most (an even subsample beyond; the screen and the
+#: return guard see every feature).
+FIT_FEATURES = 1_000_000
 
 
 def features_digest(features: Features) -> str:
@@ -294,6 +297,11 @@ class OccupancyRegressor:
                                 np.hypot(points[:, 0], points[:, 1]) * scale[mask], self.level,
                                 reach=SPREAD_SHARE * spacing)
         origin = screen.origin
+        if len(usable) > FIT_FEATURES:
+            # The pieces are placed from an even subsample: a few dozen linear pieces need no
+            # more, and the samples of every feature would not fit in memory (10M features:
+            # 50M samples, 5 GB). The screen and the return guard above saw every feature.
+            usable = usable.select(np.arange(0, len(usable), -(-len(usable) // FIT_FEATURES)))
         samples = sensor.samples(usable, robot, rng)
         if samples.count("hit") + samples.count("near") + samples.count("floor") == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from occtool import guard as guard_module
 from occtool.features import Features, wrap_angle
-from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction
+from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction, order_within_bins
 from occtool.fit._sight import contradicted_features
 from occtool.guard import GUARD_BINS, Support, guard_candidates, is_planar_scan, ray_spacing, support_count
 from occtool.robot import Robot
@@ -109,8 +109,8 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # million features: 0.9 s of the fit for the support test of every return).
     bins = np.mod(np.floor((np.arctan2(candidates[:, 1], candidates[:, 0]) + math.pi)
                            * (GUARD_BINS / (2.0 * math.pi))).astype(np.int64), GUARD_BINS)
-    order = np.lexsort((distance, bins))
-    starts = np.searchsorted(bins[order], np.arange(GUARD_BINS))
+    order, bounds = order_within_bins(bins, distance, GUARD_BINS)
+    starts = bounds[:-1]
     rank = np.empty(order.size, dtype=np.int64)
     rank[order] = np.arange(order.size) - starts[bins[order]]
     confirmed = np.zeros(index.size, dtype=bool)

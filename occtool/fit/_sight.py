@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.features import Features
-from occtool.fit._profile import FOCUS_WINDOW, FOCUS_WINDOW_ABS, angle_bins
+from occtool.fit._profile import FOCUS_WINDOW, FOCUS_WINDOW_ABS, angle_bins, group_by_bin
 
 FloatArray = NDArray[np.float64]
 
@@ -57,7 +57,7 @@ def contradicted_features(features: Features, origin: float = 0.0,
         return contradicted
     distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
     bins = angle_bins(alpha - origin, SIGHT_BINS)
-    order = np.argsort(bins, kind="stable")
+    order, _ = group_by_bin(bins, SIGHT_BINS)
     counts = np.bincount(bins, minlength=SIGHT_BINS)
     starts = np.cumsum(counts) - counts
     # Each bin's rays: all its features, or an even subsample of them.
