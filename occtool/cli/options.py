@@ -119,9 +119,27 @@ def refuse_existing(overwrite: bool, *paths: Any) -> None:
         if path is not None and str(path) != "-" and Path(path).exists():
             raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
 
+# --- where positions run (owner: model sets) -------------------------------------------
+
+def _jobs(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> int | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or int(value) != value or int(value) < 1:
+        raise click.BadParameter(f"must be a whole number >= 1, got {value}")
+    return int(value)
+
+
+jobs_options = _compose(
+    click.option("-j", "--jobs", type=int, default=None, callback=_jobs, metavar="N",
+                 help="Model sets: positions fitted at once, in local processes [default: the cores]."),
+    click.option("--scheduler", default=None, metavar="ADDRESS",
+                 help="Model sets: run the positions on the Dask cluster at ADDRESS (tcp://host:8786) "
+                      "instead; needs occtool[dask] here and occtool on the workers."),
+)
+
 # --- range-log reading (owner: readers) ------------------------------------------------
 
-from typing import TYPE_CHECKING  # noqa: E402  (kept inside this section)
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from occtool.features import RangeLog
@@ -216,7 +234,12 @@ def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
     options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
     if "topics" in options:
         options["topics"] = list(options["topics"]) or None
-    log = read_log(path, **options)
+    if str(path) == "-":
+        from occtool.io.stream import read_log_stream
+
+        log = read_log_stream(**options)
+    else:
+        log = read_log(path, **options)
     logger = logging.getLogger("occtool.io")
     for note in log.notes:
         logger.warning("%s: %s", Path(path).name, note)
