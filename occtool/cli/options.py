@@ -178,12 +178,12 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
 
 log_options = _compose(
     click.option(
-        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply"], case_sensitive=False),
+        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag"], case_sensitive=False),
         default=None, help="Log format (default: from the content and extension).",
     ),
     click.option(
         "--topic", "topics", multiple=True,
-        help="MCAP topic to read (repeatable; default: the one supported range channel).",
+        help="MCAP or ROS bag topic to read (repeatable; default: the one supported range channel).",
     ),
     click.option(
         "--evidence-field", default="evidence", show_default=True,
