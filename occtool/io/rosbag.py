@@ -97,4 +97,4 @@ def read_rosbag(path: str | os.PathLike[str], **options: Any) -> Any:
     return read_mcap(path, opener=BagReader, **options)
 
 
-__all__ = ["BagReader", "ROS1_MAGIC", "SQLITE_MAGIC", "read_rosbag"]
+__all__ = ["ROS1_MAGIC", "SQLITE_MAGIC", "BagReader", "read_rosbag"]
