@@ -12,7 +12,9 @@ goes keeps memory bounded however many logs there are.
   ``dask.distributed`` cluster (the ``dask`` extra); every worker must have occtool
   installed.
 
-The functions must be module-level (picklable). The results do not depend on the
+The functions must be module-level (picklable). Local processes are spawned: a script
+that calls the model-set functions with ``jobs > 1`` needs the usual
+``if __name__ == "__main__":`` guard, as for any ``multiprocessing`` program. The results do not depend on the
 executor: each task is a pure function of its arguments.
 """
 

@@ -84,6 +84,17 @@ def test_jobs_1_and_2_give_the_same_models_and_a_complete_index(tmp_path):
     assert all(len(m["features_sha256"]) == 64 for m in index["models"])
 
 
+def test_progress_counts_every_position_of_every_log(tmp_path):
+    logs = [write_log(tmp_path / "a.csv", 2), write_log(tmp_path / "b.csv", 3, seed=2)]
+    events = []
+    summary = fit_model_set(logs, tmp_path / "sets", estimator=ESTIMATOR, jobs=2, progress=events.append)
+    assert summary.positions == 5 and summary.done == 5
+    assert [e.status for e in events].count("read") == 2 and [e.status for e in events].count("fitted") == 5
+    assert events[-1].done == events[-1].total == 5 and events[-1].logs_read == 2
+    assert all(later.done >= earlier.done for earlier, later in zip(events, events[1:]))
+    assert run("fit", str(logs[0]), "-o", f"{tmp_path}/x/", "-j", "0").exit_code == 2
+
+
 def test_a_dask_local_cluster_gives_the_same_models(tmp_path):
     distributed = pytest.importorskip("distributed")
     log = write_log(tmp_path / "room.csv", 3)
