@@ -198,19 +198,44 @@ def _terminate_as_interrupt() -> Iterator[None]:
 
 # --- fitting ------------------------------------------------------------------------------
 
-def _fit_task(params: dict[str, Any], features: Any) -> tuple[str, dict[str, Any], float, str]:
-    """Fit one position (runs in a worker): the model file's text (its run object a
-    placeholder), a few facts for the log, the seconds and the host."""
+@dataclass(frozen=True)
+class _Failed:
+    """A position's failure inside a chunk (an exception may not survive pickling)."""
+
+    reason: str
+
+
+def _reason(exc: BaseException) -> str:
+    return str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
+
+
+def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
+    """Fit a few positions (runs in a worker). For each: the model file's text (its run
+    object a placeholder), a few facts for the log, the seconds and the host; or a
+    :class:`_Failed`."""
     import platform
 
     from occtool.fit import OccupancyRegressor
     from occtool.io.model import RUN_PLACEHOLDER, model_text
 
-    start = time.perf_counter()
-    model = OccupancyRegressor(**params).fit(features)
-    seconds = time.perf_counter() - start
-    facts = {"features": model.n_features_, "rmse": model.rmse_}
-    return model_text(model, run=RUN_PLACEHOLDER), facts, seconds, platform.node()
+    out: list[Any] = []
+    for features in chunk:
+        start = time.perf_counter()
+        try:
+            model = OccupancyRegressor(**params).fit(features)
+        except (InputError, ValueError, ArithmeticError, MemoryError) as exc:
+            out.append(_Failed(_reason(exc)))
+            continue
+        seconds = time.perf_counter() - start
+        facts = {"features": model.n_features_, "rmse": model.rmse_}
+        out.append((model_text(model, run=RUN_PLACEHOLDER), facts, seconds, platform.node()))
+    return out
+
+
+#: A task holds consecutive positions up to this many features (or CHUNK_POSITIONS
+#: positions): small positions travel together, so a cluster's per-task cost is shared.
+CHUNK_FEATURES = 20_000
+CHUNK_POSITIONS = 16
 
 
 def log_set_name(source: Any) -> str:
@@ -372,6 +397,7 @@ def fit_model_set(
             summary.positions += len(chosen)
             outstanding[number] = len(chosen)
             notify("read", name)
+            chunk: list[tuple[dict[str, Any], Any]] = []
             for item in chosen:
                 digest = features_digest(item.features)
                 model_file = f"model_{item.index:04d}.json"
@@ -384,7 +410,13 @@ def fit_model_set(
                     outstanding[number] -= 1
                     notify("reused", name, item.index)
                     continue
-                yield (number, entry), _fit_task, (params, item.features)
+                chunk.append((entry, item.features))
+                if len(chunk) >= CHUNK_POSITIONS or sum(len(f) for _, f in chunk) >= CHUNK_FEATURES:
+                    yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
+                    chunk = []
+            if chunk:
+                yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
+                chunk = []
             writer.all_submitted = True
             del range_log, chosen
 
@@ -393,16 +425,19 @@ def fit_model_set(
     interrupted = True
     try:
         with _terminate_as_interrupt(), executor:
-            for (number, entry), outcome in executor.run_unordered(tasks()):
+            for (number, entries), outcomes in executor.run_unordered(tasks()):
                 writer = writers[number]
-                outstanding[number] -= 1
-                if isinstance(outcome, BaseException):
-                    reason = str(outcome) if isinstance(outcome, InputError) else f"{type(outcome).__name__}: {outcome}"
-                    summary.failures.append(Failure(writer.source, entry["position"], reason))
-                    writer.fail(entry["position"], reason)
-                    log.warning("%s, position %d: %s", Path(writer.source).name, entry["position"], reason)
-                    notify("failed", writer.source, entry["position"])
-                else:
+                if isinstance(outcomes, BaseException):  # the whole chunk: a worker died, a cluster error
+                    outcomes = [_Failed(_reason(outcomes))] * len(entries)
+                for entry, outcome in zip(entries, outcomes):
+                    outstanding[number] -= 1
+                    if isinstance(outcome, _Failed):
+                        summary.failures.append(Failure(writer.source, entry["position"], outcome.reason))
+                        writer.fail(entry["position"], outcome.reason)
+                        log.warning("%s, position %d: %s", Path(writer.source).name, entry["position"],
+                                    outcome.reason)
+                        notify("failed", writer.source, entry["position"])
+                        continue
                     text, facts, seconds, host = outcome
                     run = {
                         "seconds": round(seconds, 3),
