@@ -313,3 +313,13 @@ def small_set_path(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("fuzzset")
     fit_model_set(write_log(folder / "room.csv", 1), folder / "set", estimator=ESTIMATOR, jobs=1)
     return folder / "set"
+
+
+def test_extract_reports_a_broken_model_and_writes_the_others(tmp_path):
+    log = write_log(tmp_path / "room.csv", 3)
+    fit_model_set(log, tmp_path / "set", estimator=ESTIMATOR, jobs=1)
+    (tmp_path / "set" / "model_0001.json").write_text('{"format": "occtool-model", "format_version": 1}')
+    result = run("extract", str(tmp_path / "set"), "-o", f"{tmp_path}/navs/", "--heights=-0.5", "-j", "2")
+    assert result.exit_code == 1 and "1 of 3 position(s) failed" in result.output
+    assert sorted(p.name for p in (tmp_path / "navs").iterdir()) == ["nav_0000.geojson", "nav_0002.geojson"]
+    assert no_temp_files(tmp_path)

@@ -120,9 +120,10 @@ def _report(summary, logger, verb: str) -> None:
         logger.warning("... and %d more failures (listed in each set's index.json)", len(summary.failures) - 20)
     logger.info("%s", summary.describe(verb))
     if summary.failures:
+        where = "; see 'failed' in index.json" if verb == "fitted" else ""
         raise click.ClickException(
             f"{len(summary.failures)} of {summary.positions or len(summary.failures)} position(s) failed "
-            f"(the rest is written; see 'failed' in index.json): {summary.failures[0].reason}"
+            f"(the rest is written{where}): {summary.failures[0].reason}"
         )
     if logger.getEffectiveLevel() > 20:
         import sys
