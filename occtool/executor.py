@@ -63,10 +63,10 @@ class Executor:
     def close(self, *, cancel: bool = False) -> None:
         """Release the workers; ``cancel`` drops tasks not yet finished (after an interrupt)."""
 
-    def __enter__(self) -> Executor:
+    def __enter__(self) -> Executor:  # noqa: PYI034 - subclasses return themselves too
         return self
 
-    def __exit__(self, exc_type: Any, *rest: object) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *rest: object) -> None:
         self.close(cancel=exc_type is not None)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
@@ -91,7 +92,7 @@ def test_progress_counts_every_position_of_every_log(tmp_path):
     assert summary.positions == 5 and summary.done == 5
     assert [e.status for e in events].count("read") == 2 and [e.status for e in events].count("fitted") == 5
     assert events[-1].done == events[-1].total == 5 and events[-1].logs_read == 2
-    assert all(later.done >= earlier.done for earlier, later in zip(events, events[1:]))
+    assert all(later.done >= earlier.done for earlier, later in itertools.pairwise(events))
     assert run("fit", str(logs[0]), "-o", f"{tmp_path}/x/", "-j", "0").exit_code == 2
 
 
