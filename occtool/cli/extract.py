@@ -7,7 +7,13 @@ from typing import Any
 import click
 
 from occtool.cli.options import (
-    config_option, extract_from_kwargs, extract_options, geojson_options, output_option, overwrite_option,
+    config_option,
+    extract_from_kwargs,
+    extract_options,
+    geojson_options,
+    jobs_options,
+    output_option,
+    overwrite_option,
     refuse_existing,
 )
 
@@ -30,7 +36,7 @@ def _robot_given(ctx: click.Context) -> set[str]:
 
 
 @click.command(short_help="Extract the navigation polygon and points as GeoJSON.")
-@click.argument("model", type=click.Path(exists=True, dir_okay=True))
+@click.argument("models", metavar="MODEL...", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=True))
 @output_option
 @extract_options
 @geojson_options
@@ -42,11 +48,12 @@ def _robot_given(ctx: click.Context) -> set[str]:
                    "promise), or every point where the body fits.")
 @click.option("--world", is_flag=True, default=False,
               help="Model set: move each position's map into the world (map) frame by its pose.")
+@jobs_options
 @overwrite_option
 @config_option
 def extract(
-    model: str, output: str | None, ignore_bounds: bool, straight_line: bool, world: bool, overwrite: bool,
-    **kwargs: Any,
+    models: tuple[str, ...], output: str | None, ignore_bounds: bool, straight_line: bool, world: bool,
+    overwrite: bool, jobs: int | None, scheduler: str | None, **kwargs: Any,
 ) -> None:
     """Extract the navigation map of MODEL (a model file from `occtool fit`, or an inverse).
 
@@ -61,7 +68,10 @@ def extract(
     MODEL may be a model set (a folder from `occtool fit -o DIR/`, or its index.json): one
     map per position, all in one file with each feature's "position" (or, with -o DIR/,
     one DIR/nav_NNNN.geojson per position). --world moves each map into the world frame
-    by its position's pose.
+    by its position's pose. Several model sets (or a folder of them, as `occtool fit A B
+    -o DIR/` writes) need -o OUT/: one sub-folder per set. Positions run on -j local
+    processes or a Dask cluster (--scheduler); a failing position is reported and the
+    others are written.
 
     The robot's geometry defaults to the one the model was fitted for; the --robot-radius,
     --sensor-height, --body-height and --ground-clearance given override it.
@@ -71,83 +81,49 @@ def extract(
     """
     import logging
     import os
-    import warnings
-    from dataclasses import replace
     from pathlib import Path
 
-    from occtool.errors import InputError
-    from occtool.features import Pose
-    from occtool.io.geojson import write_navigation, write_navigation_set
-    from occtool.io.model import read_model_set, read_navigable
-    from occtool.navigation import NavigationWarning, navigation_map
+    from occtool.io.geojson import write_navigation
+    from occtool.modelset import navigation_map_of_file
 
     logger = logging.getLogger("occtool.extract")
+    fields = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
+              "ground_clearance": "ground_clearance"}
     given = _robot_given(click.get_current_context())
     options = extract_from_kwargs(kwargs)
+    navigation = {
+        **{k: v for k, v in options.items() if k != "robot"}, "robot": options["robot"],
+        # The model was fitted for a robot (its floor, its body): keep what the user did not override.
+        "robot_overrides": {field: getattr(options["robot"], field) for name, field in fields.items() if name in given},
+        "straight_line": straight_line, "bounds": not ignore_bounds,
+    }
     written = {
         "sequence": kwargs["sequence"], "indent": kwargs["indent"], "precision": kwargs["precision"],
         "include_slices": kwargs["include_slices"], "overwrite": overwrite,
     }
-
-    def one_map(path: Any) -> Any:
-        navigable = read_navigable(path)
-        model_robot = navigable.robot
-        settings = dict(options)
-        if model_robot is not None:
-            # The model was fitted for a robot (its floor, its body): keep what the user did not override.
-            fields = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
-                      "ground_clearance": "ground_clearance"}
-            settings["robot"] = replace(
-                model_robot,
-                **{field: getattr(options["robot"], field) for name, field in fields.items() if name in given},
-            )
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", NavigationWarning)
-            nav = navigation_map(navigable.inverse_range, straight_line=straight_line,
-                                 **navigable.navigation_options(bounds=not ignore_bounds), **settings)
-        for warning in caught:
-            logger.warning("%s: %s", path, warning.message)
-        if nav.margin > 0:
-            logger.info(
-                "%s: cut at %d heights, threshold %.3g lowered by %.3g to %.3g so the map holds between them",
-                path, len(nav.slice_heights), nav.threshold, nav.margin, nav.effective_threshold,
-            )
-        logger.info(
-            "%s: navigation polygon %.3g m2, %d obstacle and %d exploration points",
-            path, nav.polygon.area, len(nav.obstacle_points), len(nav.exploration_points),
-        )
-        return nav
-
-    if not _is_model_set(model):
+    paths = list(models)
+    if len(paths) == 1 and not _is_model_set(paths[0]):
         if world:
             raise click.UsageError("--world needs a model set (a folder from `occtool fit -o DIR/`) with poses")
+        if jobs is not None or scheduler is not None:
+            logger.debug("-j/--scheduler apply to model sets only")
         refuse_existing(overwrite, output)
-        write_navigation(one_map(model), output or "-", **written)
+        nav, messages = navigation_map_of_file(paths[0], **navigation)
+        for level, text in messages:
+            logger.log(level, "%s", text)
+        write_navigation(nav, output or "-", **written)
         return
+    for path in paths:
+        if not _is_model_set(path):
+            raise click.UsageError(f"{path} is not a model set: several MODELs must all be model sets")
 
-    folder, entries = read_model_set(model)
-    to_folder = output is not None and (output.endswith(("/", os.sep)) or Path(output).is_dir())
-    if to_folder:
-        refuse_existing(overwrite, *(Path(output) / f"nav_{entry['position']:04d}.geojson" for entry in entries))
-    else:
-        refuse_existing(overwrite, output)
-    maps = []
-    for entry in entries:
-        nav = one_map(folder / entry["file"])
-        if world:
-            if entry.get("pose") is None:
-                raise InputError(f"{folder / 'index.json'}: position {entry['position']} has no pose for --world")
-            try:
-                pose = Pose.from_dict(entry["pose"])
-            except (TypeError, ValueError):
-                index = folder / "index.json"
-                raise InputError(f"{index}: position {entry['position']}'s pose is not numbers") from None
-            nav = nav.in_world(pose)
-        maps.append((entry["position"], nav))
-    if to_folder:
-        if not Path(output).is_dir():
-            raise InputError(f"output folder {output} does not exist")
-        for position, nav in maps:
-            write_navigation(nav, Path(output) / f"nav_{position:04d}.geojson", **written)
-    else:
-        write_navigation_set(maps, output or "-", **written)
+    from occtool.cli.fit import _progress_bar, _report
+    from occtool.modelset import extract_model_set
+
+    per_position = output is not None and (output.endswith(("/", os.sep)) or Path(output).is_dir())
+    written.pop("overwrite")
+    with _progress_bar("extracting") as progress:
+        summary = extract_model_set(paths, output, per_position=per_position, world=world, jobs=jobs,
+                                    scheduler=scheduler, overwrite=overwrite, progress=progress, geojson=written,
+                                    **navigation)
+    _report(summary, logger, "extracted")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
@@ -31,6 +31,9 @@ from occtool.limits import (
 )
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+if TYPE_CHECKING:
+    from occtool.features import RangeLog
 
 
 def _compose(*decorators: Callable[[F], F]) -> Callable[[F], F]:
@@ -129,12 +132,25 @@ def refuse_existing(overwrite: bool, *paths: Any) -> None:
         if path is not None and str(path) != "-" and Path(path).exists():
             raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
 
+# --- where positions run (owner: model sets) -------------------------------------------
+
+def _jobs(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> int | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or int(value) != value or int(value) < 1:
+        raise click.BadParameter(f"must be a whole number >= 1, got {value}")
+    return int(value)
+
+
+jobs_options = _compose(
+    click.option("-j", "--jobs", type=int, default=None, callback=_jobs, metavar="N",
+                 help="Model sets: positions fitted at once, in local processes [default: the cores]."),
+    click.option("--scheduler", default=None, metavar="ADDRESS",
+                 help="Model sets: run the positions on the Dask cluster at ADDRESS (tcp://host:8786) "
+                      "instead; needs occtool[dask] here and occtool on the workers."),
+)
+
 # --- range-log reading (owner: readers) ------------------------------------------------
-
-from typing import TYPE_CHECKING  # noqa: E402  (kept inside this section)
-
-if TYPE_CHECKING:
-    from occtool.features import RangeLog
 
 LOG_OPTION_NAMES = (
     "format", "topics", "evidence_field", "evidence", "use_intensities", "sensor_frame", "base_frame",
@@ -170,12 +186,12 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
 
 log_options = _compose(
     click.option(
-        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply"], case_sensitive=False),
+        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag"], case_sensitive=False),
         default=None, help="Log format (default: from the content and extension).",
     ),
     click.option(
         "--topic", "topics", multiple=True,
-        help="MCAP topic to read (repeatable; default: the one supported range channel).",
+        help="MCAP or ROS bag topic to read (repeatable; default: the one supported range channel).",
     ),
     click.option(
         "--evidence-field", default="evidence", show_default=True,
@@ -226,7 +242,12 @@ def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
     options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
     if "topics" in options:
         options["topics"] = list(options["topics"]) or None
-    log = read_log(path, **options)
+    if str(path) == "-":
+        from occtool.io.stream import read_log_stream
+
+        log = read_log_stream(**options)
+    else:
+        log = read_log(path, **options)
     logger = logging.getLogger("occtool.io")
     for note in log.notes:
         logger.warning("%s: %s", Path(path).name, note)
@@ -318,42 +339,6 @@ def fit_from_kwargs(kwargs: dict[str, Any], *, seed: int = 0) -> Any:
     robot = robot_from_kwargs(kwargs)
     values = {name: kwargs.pop(name) for name in FIT_OPTION_NAMES if name in kwargs}
     return OccupancyRegressor(**{k: v for k, v in values.items() if v is not None}, sensor=sensor, robot=robot, seed=seed)
-
-def fit_template_for_log(template: Any, log: RangeLog, positions: list[Any]) -> Any:
-    """Adapt the fit to the log's sensor and warn where the data and the geometry disagree.
-
-    A log whose returns all lie in one plane (a 2D laser, as CARMEN logs) gets a planar
-    scanner's robot (:data:`occtool.robot.PLANAR_LASER_SENSOR_HEIGHT`, ``..._BODY_HEIGHT``)
-    unless --sensor-height or --body-height was given (on the command line or in --config).
-    Then each finding of :func:`occtool.sensor.geometry_findings` is a one-line warning
-    (the first position's, with a count of the others that have findings too).
-    """
-    import logging
-    from dataclasses import replace
-
-    from click.core import ParameterSource
-
-    from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT
-    from occtool.sensor import geometry_findings, is_planar
-
-    logger = logging.getLogger("occtool.fit")
-    ctx = click.get_current_context(silent=True)
-    given = ctx is not None and any(
-        ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None) for name in ("sensor_height", "body_height"))
-    robot = template.robot
-    if not given and positions and all(is_planar(p.features) for p in positions):
-        robot = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT, body_height=PLANAR_LASER_BODY_HEIGHT)
-        template = type(template)(**{**template.get_params(), "robot": robot})
-        logger.info("a planar laser log: sensor height %g m, body height %g m (--sensor-height, --body-height "
-                    "change them)", robot.sensor_height, robot.body_height)
-    flagged = [(p, findings) for p in positions if (findings := geometry_findings(p.features, robot))]
-    if flagged:
-        position, findings = flagged[0]
-        where = f"position {position.index}: " if len(positions) > 1 else ""
-        more = f" (and {len(flagged) - 1} more position(s))" if len(flagged) > 1 else ""
-        for finding in findings:
-            logger.warning("%s%s%s", where, finding, more)
-    return template
 
 # --- navigation extraction (owner: navigation) ----------------------------------------
 

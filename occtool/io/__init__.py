@@ -16,6 +16,9 @@ sensor-centred robot frame. Supported formats (docs/formats.md):
     plain ``x y z`` point lines, as OctoMap's ``scan.dat`` (``.dat``, ``.xyz``, ``.bz2``/``.gz``).
 ``pcd``, ``ply``
     point-cloud files, ASCII or binary.
+``rosbag``
+    ROS 1 ``.bag`` and ROS 2 ``.db3`` bags (with their ``metadata.yaml``), through
+    ``rosbags``: the same messages and ``--topic`` as MCAP.
 
 The readers are imported only when used, and nothing here imports the model or
 GeoJSON writers.
@@ -41,7 +44,7 @@ if TYPE_CHECKING:
 
 __all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "read_log", "write_csv", "write_mcap"]
 
-FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply")
+FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 DEFAULT_CONSTANT_EVIDENCE = 0.9
 CARMEN_RECORDS = (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"NEFF", b"SYNC", b"TRUEPOS")
@@ -83,6 +86,8 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         raise InputError(f"{target} is empty")
     if head.startswith(MCAP_MAGIC):
         return "mcap"
+    if head.startswith((b"#ROSBAG V2.0\n", b"SQLite format 3\x00")):  # ROS 1 bag, ROS 2 .db3
+        return "rosbag"
     if head.startswith(b"ply") and head[3:4] in (b"\n", b"\r"):
         return "ply"
     text_lines = [line.strip() for line in head.splitlines()[:-1] or head.splitlines()]
@@ -103,12 +108,12 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     suffixes = [s.lower() for s in target.suffixes]
     for suffix in reversed([s for s in suffixes if s not in (".gz", ".bz2")]):
         by_suffix = {".csv": "csv", ".mcap": "mcap", ".log": "carmen", ".dat": "xyz", ".xyz": "xyz",
-                     ".pcd": "pcd", ".ply": "ply"}.get(suffix)
+                     ".pcd": "pcd", ".ply": "ply", ".bag": "rosbag", ".db3": "rosbag"}.get(suffix)
         if by_suffix:
             return by_suffix
     raise InputError(
         f"cannot tell the format of {target}: expected CSV with an x,y,z header, MCAP, "
-        "a CARMEN log, x y z point lines, PCD or PLY (or give --format)"
+        "a CARMEN log, x y z point lines, PCD, PLY or a ROS bag (or give --format)"
     )
 
 
@@ -225,7 +230,7 @@ def read_log(
         fmt = "xyz"
     if fmt not in FORMATS:
         raise InputError(f"unknown format {format!r}: expected one of {', '.join(FORMATS)}")
-    if topics and fmt != "mcap":
+    if topics and fmt not in ("mcap", "rosbag"):
         raise InputError(f"--topic applies to MCAP logs only, and {path} is {fmt}")
     no_return_range = check_no_return_range(no_return_range)
     options: ReadOptions = dict(
@@ -268,6 +273,14 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
         from occtool.io.mcap import read_mcap
 
         return read_mcap(
+            path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
+            sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
+            skip_invalid=skip_invalid, no_return_range=no_return_range,
+        )
+    if fmt == "rosbag":
+        from occtool.io.rosbag import read_rosbag
+
+        return read_rosbag(
             path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
             sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
             skip_invalid=skip_invalid, no_return_range=no_return_range,

@@ -457,7 +457,9 @@ def _decode_laserscan(message: Any, options: _Options, where: str) -> _Decoded:
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max) & (ranges > 0)
         missing = np.isposinf(ranges) | (np.isfinite(ranges) & (ranges > top))
-    evidence = _scan_evidence(message.intensities or None, ranges.size, valid, options, where)
+    intensities = message.intensities  # a list (mcap-ros2) or a numpy array (rosbags): no truth value
+    evidence = _scan_evidence(intensities if intensities is not None and len(intensities) else None, ranges.size,
+                              valid, options, where)
     reach = min(options.no_return_range, top) if options.no_return_range is not None else np.inf
     points, evidence = _scan_points(ranges, angles, valid, missing, reach, evidence, options)  # type: ignore[arg-type]  # angles are float64
     header = message.header
@@ -744,10 +746,13 @@ def read_mcap(
     group_by: str = "position",
     skip_invalid: bool = False,
     no_return_range: float | None = None,
+    opener: Callable[[str | os.PathLike[str]], Any] | None = None,
 ) -> RangeLog:
     """Read the range channels of an MCAP file into positions of features.
 
-    Parameters are those of :func:`occtool.io.read_log`.
+    Parameters are those of :func:`occtool.io.read_log`; ``opener`` opens another
+    container with the same ``channels``/``messages`` interface (ROS bags,
+    :mod:`occtool.io.rosbag`).
 
     Raises
     ------
@@ -759,7 +764,7 @@ def read_mcap(
 
     name = str(path)
     no_return_range = check_no_return_range(no_return_range)
-    with _Reader(path) as reader:
+    with (opener or _Reader)(path) as reader:
         channel_list = reader.channels()
         protobuf = _protobuf_available()
         rows = []

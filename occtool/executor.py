@@ -1,0 +1,193 @@
+"""Where a model set's positions are computed: this process, local processes, or a Dask cluster.
+
+One small interface, :class:`Executor`, with one method: :meth:`Executor.run_unordered`
+takes a (lazy) iterable of ``(key, function, args)`` tasks and yields ``(key, outcome)``
+as tasks finish, where ``outcome`` is the function's result or the exception it raised.
+At most ``window`` tasks are in flight, so a generator of tasks that reads logs as it
+goes keeps memory bounded however many logs there are.
+
+- ``jobs=1``: in this process, one task after another (no pickling, no start-up).
+- ``jobs=N``: :class:`concurrent.futures.ProcessPoolExecutor` with N spawned processes.
+- ``scheduler="tcp://host:8786"`` (or a ``distributed.Client``): an existing
+  ``dask.distributed`` cluster (the ``dask`` extra); every worker must have occtool
+  installed.
+
+The functions must be module-level (picklable). Local processes are spawned: a script
+that calls the model-set functions with ``jobs > 1`` needs the usual
+``if __name__ == "__main__":`` guard, as for any ``multiprocessing`` program. The results do not depend on the
+executor: each task is a pure function of its arguments.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+Task = tuple[Any, Callable[..., Any], tuple[Any, ...]]
+
+
+def default_jobs() -> int:
+    """The cores this process may use (its CPU affinity mask, else ``os.cpu_count()``)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_jobs(jobs: Any) -> int:
+    """``jobs`` as a whole number >= 1 (``None``: :func:`default_jobs`)."""
+    if jobs is None:
+        return default_jobs()
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        from occtool.errors import InputError
+
+        raise InputError(f"jobs must be a whole number >= 1, got {jobs!r}")
+    return jobs
+
+
+class Executor:
+    """Runs tasks and yields their outcomes as they finish (see the module's docstring)."""
+
+    #: Where the tasks run, for messages and run records.
+    description = "this process"
+
+    def run_unordered(self, tasks: Iterable[Task]) -> Iterator[tuple[Any, Any]]:
+        for key, function, args in tasks:
+            try:
+                outcome = function(*args)
+            except Exception as exc:  # noqa: BLE001 - reported per task, the others go on
+                outcome = exc
+            yield key, outcome
+
+    def close(self, *, cancel: bool = False) -> None:
+        """Release the workers; ``cancel`` drops tasks not yet finished (after an interrupt)."""
+
+    def __enter__(self) -> Executor:  # noqa: PYI034 - subclasses return themselves too
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, *rest: object) -> None:
+        self.close(cancel=exc_type is not None)
+
+
+def _ignore_interrupts() -> None:
+    # Ctrl-C reaches the whole process group: the parent stops the run and writes what is
+    # done; the workers must not print tracebacks of their own.
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class ProcessExecutor(Executor):
+    """``jobs`` local processes (spawned, so no thread or lock of the parent is inherited)."""
+
+    def __init__(self, jobs: int, *, window: int | None = None) -> None:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.jobs = jobs
+        self.window = window or 4 * jobs
+        self.description = f"{jobs} local processes"
+        self.pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=_ignore_interrupts)
+
+    def run_unordered(self, tasks: Iterable[Task]) -> Iterator[tuple[Any, Any]]:
+        from concurrent.futures import FIRST_COMPLETED, wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        pending: dict[Any, Any] = {}
+        source = iter(tasks)
+        exhausted = False
+        while True:
+            while not exhausted and len(pending) < self.window:
+                try:
+                    key, function, args = next(source)
+                except StopIteration:
+                    exhausted = True
+                    break
+                pending[self.pool.submit(function, *args)] = key
+            if not pending:
+                return
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                key = pending.pop(future)
+                exc = future.exception()
+                if isinstance(exc, BrokenProcessPool):
+                    exc = RuntimeError("a worker process died (out of memory, or killed)")
+                yield key, future.result() if exc is None else exc
+
+    def close(self, *, cancel: bool = False) -> None:
+        if cancel:
+            # Running tasks would finish for nothing: the parent writes the results.
+            for process in list(getattr(self.pool, "_processes", {}).values()):
+                process.terminate()
+        self.pool.shutdown(wait=True, cancel_futures=cancel)
+
+
+class DaskExecutor(Executor):
+    """Tasks on an existing ``dask.distributed`` cluster, results streamed back as they finish."""
+
+    def __init__(self, scheduler: Any, *, window: int | None = None) -> None:
+        try:
+            from distributed import Client
+        except ImportError:
+            from occtool.errors import MissingDependencyError
+
+            raise MissingDependencyError("dask[distributed]", "dask", "running on a Dask cluster") from None
+        if isinstance(scheduler, Client):
+            self.client, self.own_client = scheduler, False
+        else:
+            try:
+                self.client = Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                from occtool.errors import InputError
+
+                raise InputError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
+            self.own_client = True
+        workers = max(1, sum(self.client.nthreads().values()))
+        self.window = window or 4 * workers
+        self.description = f"Dask cluster {self.client.scheduler.address} ({workers} worker threads)"
+
+    def run_unordered(self, tasks: Iterable[Task]) -> Iterator[tuple[Any, Any]]:
+        from distributed import as_completed
+
+        source = iter(tasks)
+        pending: dict[Any, Any] = {}
+        finished = as_completed()
+
+        def submit_more() -> None:
+            while len(pending) < self.window:
+                try:
+                    key, function, args = next(source)
+                except StopIteration:
+                    return
+                future = self.client.submit(function, *args, pure=False)
+                pending[future] = key
+                finished.add(future)
+
+        submit_more()
+        while pending:
+            future = next(finished)
+            key = pending.pop(future)
+            if future.status == "error":
+                outcome = future.exception()
+            else:
+                outcome = future.result()
+            future.release()
+            yield key, outcome
+            submit_more()
+
+    def close(self, *, cancel: bool = False) -> None:
+        if self.own_client:
+            self.client.close()
+
+
+def make_executor(jobs: int | None = None, scheduler: Any = None) -> Executor:
+    """The executor for ``jobs`` local processes, or for the Dask cluster at ``scheduler``."""
+    if scheduler is not None:
+        return DaskExecutor(scheduler)
+    jobs = check_jobs(jobs)
+    return Executor() if jobs == 1 else ProcessExecutor(jobs)
+
+
+__all__ = ["DaskExecutor", "Executor", "ProcessExecutor", "check_jobs", "default_jobs", "make_executor"]

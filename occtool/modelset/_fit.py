@@ -1,0 +1,365 @@
+"""Fitting model sets: one model per position of one or more logs (see :mod:`occtool.modelset`)."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import stat
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from occtool.errors import InputError
+from occtool.modelset._common import (
+    Failure,
+    ProgressCallback,
+    ProgressEvent,
+    SetSummary,
+    _IndexWriter,
+    _terminate_as_interrupt,
+    log,
+    log_set_name,
+)
+
+# --- settings and reuse -------------------------------------------------------------------
+
+def settings_digest(estimator: Any) -> str:
+    """sha256 of everything besides the features that decides a model's bytes: the fit
+    parameters, sensor model, robot and occtool's version."""
+    from occtool import __version__
+    from occtool.robot import Robot
+    from occtool.sensor import SensorModel
+
+    params = {k: v for k, v in estimator.get_params().items() if k not in ("progress", "sensor", "robot")}
+    sensor = estimator.sensor if estimator.sensor is not None else SensorModel()
+    robot = estimator.robot if estimator.robot is not None else Robot()
+    content = {
+        "fit": params,
+        "sensor": sensor.to_dict(),
+        "robot": {k: float(getattr(robot, k)) for k in ("radius", "sensor_height", "body_height", "ground_clearance")},
+        "occtool": __version__,
+    }
+    return hashlib.sha256(json.dumps(content, sort_keys=True, default=repr).encode()).hexdigest()
+
+
+def _reusable(target: Path, digest: str, settings: str) -> bool:
+    """Whether ``target`` is a readable model of these features fitted with these settings."""
+    from occtool.io.model import load_model
+
+    try:
+        if not stat.S_ISREG(os.stat(target).st_mode):
+            return False
+        model = load_model(target)
+    except (OSError, ValueError):
+        return False
+    return model.features_digest_ == digest and model.run_.get("settings_sha256") == settings
+
+
+# --- fitting ------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Failed:
+    """A position's failure inside a chunk (an exception may not survive pickling)."""
+
+    reason: str
+
+
+def _reason(exc: BaseException) -> str:
+    return str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
+
+
+def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
+    """Fit a few positions (runs in a worker). For each: the model file's text (its run
+    object a placeholder), a few facts for the log, the seconds and the host; or a
+    :class:`_Failed`."""
+    import platform
+
+    from occtool.fit import OccupancyRegressor
+    from occtool.io.model import RUN_PLACEHOLDER, model_text
+
+    out: list[Any] = []
+    for features in chunk:
+        start = time.perf_counter()
+        try:
+            model = OccupancyRegressor(**params).fit(features)
+        except (InputError, ValueError, ArithmeticError, MemoryError) as exc:
+            out.append(_Failed(_reason(exc)))
+            continue
+        seconds = time.perf_counter() - start
+        facts = {"features": model.n_features_, "rmse": model.rmse_}
+        out.append((model_text(model, run=RUN_PLACEHOLDER), facts, seconds, platform.node()))
+    return out
+
+
+#: A task holds consecutive positions up to this many features (or CHUNK_POSITIONS
+#: positions): small positions travel together, so a cluster's per-task cost is shared.
+CHUNK_FEATURES = 20_000
+CHUNK_POSITIONS = 16
+
+
+def _read_source(source: Any, read_options: dict[str, Any]) -> Any:
+    from occtool.features import RangeLog
+
+    if isinstance(source, RangeLog):
+        return source
+    if str(source) == "-":
+        from occtool.io.stream import read_log_stream
+
+        return read_log_stream(**read_options)
+    from occtool.io import read_log
+
+    return read_log(source, **read_options)
+
+
+def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False) -> Any:
+    """The estimator a log's positions are fitted with, and a warning for each place the
+    data and the sensor geometry disagree.
+
+    With ``planar_defaults``, a log whose returns all lie in one plane (a 2D laser, as
+    CARMEN logs) gets a planar scanner's robot (:data:`occtool.robot.PLANAR_LASER_SENSOR_HEIGHT`,
+    ``..._BODY_HEIGHT``) instead of the estimator's: the command line does so unless the
+    user gave a sensor or body height. Each finding of
+    :func:`occtool.sensor.geometry_findings` is logged as one warning (the first position's,
+    with a count of the others that have findings too).
+    """
+    from dataclasses import replace
+
+    from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
+    from occtool.sensor import geometry_findings, is_planar
+
+    robot = estimator.robot if estimator.robot is not None else Robot()
+    if planar_defaults and positions and all(is_planar(p.features) for p in positions):
+        robot = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT, body_height=PLANAR_LASER_BODY_HEIGHT)
+        estimator = type(estimator)(**{**estimator.get_params(deep=False), "robot": robot})
+        log.info("a planar laser log: sensor height %g m, body height %g m", robot.sensor_height,
+                 robot.body_height)
+    flagged = [(p, findings) for p in positions if (findings := geometry_findings(p.features, robot))]
+    if flagged:
+        position, findings = flagged[0]
+        where = f"position {position.index}: " if len(positions) > 1 else ""
+        more = f" (and {len(flagged) - 1} more position(s))" if len(flagged) > 1 else ""
+        for finding in findings:
+            log.warning("%s%s%s", where, finding, more)
+    return estimator
+
+
+def fit_model_set(
+    logs: Any,
+    folder: str | os.PathLike[str],
+    *,
+    estimator: Any = None,
+    read_options: dict[str, Any] | None = None,
+    positions: Sequence[int] | None = None,
+    jobs: int | None = None,
+    scheduler: Any = None,
+    skip_existing: bool = False,
+    overwrite: bool = True,
+    progress: ProgressCallback | None = None,
+    command: str | None = None,
+    planar_defaults: bool = False,
+) -> SetSummary:
+    """Fit one model per robot position of one or more logs and write them as model sets.
+
+    Parameters
+    ----------
+    logs
+        A log (a path, ``"-"`` for standard input, or a :class:`~occtool.features.RangeLog`)
+        or a list of them. Several logs give one sub-folder each (:func:`log_set_name`).
+    folder
+        The set's folder; created if missing.
+    estimator
+        An unfitted :class:`~occtool.fit.OccupancyRegressor` whose parameters every
+        position is fitted with (default: the defaults).
+    read_options
+        Keyword arguments of :func:`occtool.io.read_log` (``topics``, ``group_by``, ...).
+    positions
+        Position indices to fit (default: all).
+    jobs, scheduler
+        ``jobs`` local processes (default: the cores), or a Dask scheduler address or
+        ``distributed.Client``; see :func:`occtool.executor.make_executor`.
+    skip_existing
+        Reuse a model file whose features digest and settings digest match.
+    overwrite
+        If false, refuse (before any work) when a set folder already holds an index or a model.
+    progress
+        Called with a :class:`ProgressEvent` after every log read and position done.
+    command
+        The command line, recorded in each model's ``run`` object.
+    planar_defaults
+        Fit a log of planar scans with a planar scanner's robot (:func:`estimator_for_log`);
+        every log's geometry findings are logged either way.
+
+    Returns
+    -------
+    SetSummary
+        Positions, fitted, reused, failures (with reasons) and time. Failures do not raise:
+        the caller decides (the CLI exits non-zero).
+
+    Raises
+    ------
+    InputError
+        For invalid settings, a set folder that exists as a file, two logs of the same
+        name, or (a single log) a log that cannot be read. An unreadable log among
+        several is a failure of that log and the others go on.
+    KeyboardInterrupt
+        After writing the finished part (Ctrl-C, or SIGTERM when not handled elsewhere).
+    """
+    from occtool import __version__
+    from occtool.executor import check_jobs, make_executor
+    from occtool.fit import OccupancyRegressor, features_digest
+    from occtool.io.model import save_model_text, with_run
+
+    start = time.perf_counter()
+    sources = list(logs) if isinstance(logs, (list, tuple)) else [logs]
+    if not sources:
+        raise InputError("no logs to fit")
+    if scheduler is None:
+        check_jobs(jobs)
+    template = estimator if estimator is not None else OccupancyRegressor()
+    OccupancyRegressor(**template.get_params(deep=False))._validate()
+    log_settings: dict[int, str] = {}
+    read_options = dict(read_options or {})
+    root = Path(folder)
+    if len(sources) == 1:
+        folders = [root]
+    else:
+        names = [log_set_name(s) for s in sources]
+        seen: dict[str, Any] = {}
+        for name, source in zip(names, sources):
+            if name in seen:
+                raise InputError(f"two logs would share the sub-folder {root / name}: {seen[name]} and {source}")
+            seen[name] = source
+        folders = [root / name for name in names]
+    for target in folders:
+        if target.exists() and not target.is_dir():
+            raise InputError(f"{target} exists and is not a folder")
+        if not overwrite and not skip_existing and target.is_dir():
+            existing = [p for p in (target / "index.json", *sorted(target.glob("model_*.json"))) if p.exists()]
+            if existing:
+                raise FileExistsError(f"{existing[0]} exists already (pass --overwrite to replace it)")
+
+    summary = SetSummary(folders=folders)
+    writers: list[_IndexWriter] = []
+    outstanding: dict[int, int] = {}
+    state = {"logs_read": 0}
+
+    def notify(status: str, source: str = "", position: int | None = None) -> None:
+        if progress is not None:
+            progress(ProgressEvent(summary.done + summary.reused + len(summary.failures), summary.positions,
+                                   state["logs_read"], len(sources), status, source, position))
+
+    def tasks() -> Iterator[Any]:
+        for number, (source, target) in enumerate(zip(sources, folders)):
+            name = str(getattr(source, "source", source)) or f"log {number}"
+            writer = _IndexWriter(target, name)
+            writers.append(writer)
+            try:
+                range_log = _read_source(source, read_options)
+                chosen = list(range_log.positions)
+                if positions is not None:
+                    chosen = [range_log.single(p) for p in positions]
+                elif not chosen:
+                    range_log.single(None)  # the "no range data" error
+            except (InputError, OSError) as exc:
+                if len(sources) == 1:
+                    writers.pop()  # nothing of this set is written
+                    raise
+                reason = str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
+                summary.failures.append(Failure(name, None, reason))
+                writer.fail(None, reason)
+                writer.all_submitted = True
+                target.mkdir(parents=True, exist_ok=True)
+                state["logs_read"] += 1
+                notify("failed", name)
+                continue
+            for note in range_log.notes:
+                log.warning("%s: %s", Path(name).name, note)
+            log_template = estimator_for_log(template, chosen, planar_defaults=planar_defaults)
+            params = log_template.get_params(deep=False)
+            settings = log_settings[number] = settings_digest(log_template)
+            state["logs_read"] += 1
+            target.mkdir(parents=True, exist_ok=True)
+            summary.positions += len(chosen)
+            outstanding[number] = len(chosen)
+            notify("read", name)
+            chunk: list[tuple[dict[str, Any], Any]] = []
+            for item in chosen:
+                digest = features_digest(item.features)
+                model_file = f"model_{item.index:04d}.json"
+                entry = {"position": item.index, "file": model_file,
+                         "pose": item.pose.to_dict() if item.pose is not None else None,
+                         "stamp": item.stamp, "features": len(item.features), "features_sha256": digest}
+                if skip_existing and _reusable(target / model_file, digest, settings):
+                    writer.add(entry)
+                    summary.reused += 1
+                    outstanding[number] -= 1
+                    notify("reused", name, item.index)
+                    continue
+                chunk.append((entry, item.features))
+                if len(chunk) >= CHUNK_POSITIONS or sum(len(f) for _, f in chunk) >= CHUNK_FEATURES:
+                    yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
+                    chunk = []
+            if chunk:
+                yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
+                chunk = []
+            writer.all_submitted = True
+            del range_log, chosen
+
+    executor = make_executor(jobs, scheduler)
+    summary.executor = executor.description
+    interrupted = True
+    try:
+        with _terminate_as_interrupt(), executor:
+            for (number, entries), outcomes in executor.run_unordered(tasks()):
+                writer = writers[number]
+                if isinstance(outcomes, BaseException):  # the whole chunk: a worker died, a cluster error
+                    outcomes = [_Failed(_reason(outcomes))] * len(entries)
+                for entry, outcome in zip(entries, outcomes):
+                    outstanding[number] -= 1
+                    if isinstance(outcome, _Failed):
+                        summary.failures.append(Failure(writer.source, entry["position"], outcome.reason))
+                        writer.fail(entry["position"], outcome.reason)
+                        log.warning("%s, position %d: %s", Path(writer.source).name, entry["position"],
+                                    outcome.reason)
+                        notify("failed", writer.source, entry["position"])
+                        continue
+                    text, facts, seconds, host = outcome
+                    run = {
+                        "seconds": round(seconds, 3),
+                        "date": time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime()),
+                        "occtool_version": __version__,
+                        "python": _python_version(),
+                        "host": host,
+                        "executor": executor.description,
+                        "command": command or "occtool.modelset.fit_model_set",
+                        "input": writer.source,
+                        "position": entry["position"],
+                        "settings_sha256": log_settings[number],
+                    }
+                    save_model_text(with_run(text, run), writer.folder / entry["file"])
+                    writer.add(entry)
+                    summary.done += 1
+                    log.info("%s, position %d: %d features, RMSE %.4f, %.2f s", Path(writer.source).name,
+                             entry["position"], facts["features"], facts["rmse"], seconds)
+                    notify("fitted", writer.source, entry["position"])
+                writer.write(complete=writer.all_submitted and outstanding[number] == 0)
+        interrupted = False
+    finally:
+        for writer, number in zip(writers, range(len(writers))):
+            finished = not interrupted and writer.all_submitted and outstanding.get(number, 0) == 0
+            with contextlib.suppress(OSError):
+                writer.write(complete=finished, force=True)
+    summary.seconds = time.perf_counter() - start
+    return summary
+
+
+def _python_version() -> str:
+    import platform
+
+    return platform.python_version()
+
+
