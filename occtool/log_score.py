@@ -77,7 +77,7 @@ def world_grid(scans: list[Position], resolution: float = 0.05) -> Any:
     from occtool.grid import (
         OCTOMAP_DEFAULTS,
         OccupancyGrid,
-        _observation_log_odds,
+        observation_log_odds,
         traverse,
     )
 
@@ -95,8 +95,8 @@ def world_grid(scans: list[Position], resolution: float = 0.05) -> Any:
         start3 = np.column_stack([flat_start[lo:hi], np.full(hi - lo, 0.5 * resolution)])
         end3 = np.column_stack([flat_end[lo:hi], np.full(hi - lo, 0.5 * resolution)])
         seg = traverse(start3, end3, resolution)
-        values = _observation_log_odds(seg, lengths[lo:hi], returns[lo:hi].astype(np.float64),
-                                       returns[lo:hi], None, params)
+        values = observation_log_odds(seg, lengths[lo:hi], returns[lo:hi].astype(np.float64),
+                                      returns[lo:hi], None, params)
         index = (seg.cell[:, 0] - lower[0]) * shape[1] + (seg.cell[:, 1] - lower[1])
         np.add.at(log_odds, index, values.astype(np.float32))
     np.clip(log_odds, *params.clamp_log_odds, out=log_odds)

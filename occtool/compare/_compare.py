@@ -1,44 +1,26 @@
-"""The parametric model against occupancy grids, on the same features and the same output.
-
-:func:`compare_grid` fits the parametric model and builds the baselines from the same
-features (less a held-out share), extracts the navigation polygon from each with the
-same settings, and reports what each costs (samples, time, memory) and how each does
-(agreement with the parametric polygon, IoU and safety against a scene's truth, ROC AUC
-of occupancy on held-out features). The report is a plain dict, the layout of
-``occtool compare-grid --json`` (see docs/comparison.md).
-
-Baselines, each a :class:`Baseline` (a name, a build function, its samples and figures)
-whose built map offers the :class:`OccupancyMap` protocol (``inverse_range``,
-``occupancy``, ``memory_bytes``, ``file_bytes``); every baseline goes through the same
-build, extraction and scoring:
-
-* ``grid`` (:data:`GRID`): the dense 3D grid of :mod:`occtool.grid`, fed with the same
-  sensor model;
-* ``octomap`` (:data:`OCTOMAP`): OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`),
-  optional.
-
-Both get the parametric model's prior on the robot's footprint (it is free), since the
-robot's own sensor never sees the columns under it. Their navigation polygons read
-unobserved space as free (the default) or, with ``unknown="occupied"``, as a careful
-planner does: closed where no cell of the column was observed in the robot's body band.
-"""
+"""The comparison itself: :func:`compare_grid` builds, extracts and scores every model; the report."""
 
 from __future__ import annotations
 
 import json
 import logging
-import os
-import tempfile
-import time
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from occtool.compare._baselines import GRID, OCTOMAP, Baseline, BuildInputs, observation_band
+from occtool.compare._metrics import (
+    holdout_points,
+    in_front_of_first_obstacle,
+    polygon_iou,
+    roc_auc,
+    split_holdout,
+)
+from occtool.compare._results import ModelResult, _save_model_size, _timed, tree_bytes
 from occtool.errors import InputError
 from occtool.features import Features, polar
 from occtool.robot import Robot
@@ -48,8 +30,6 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
-#: Fractions of a held-out feature's range where the "free" test points lie.
-FREE_FRACTIONS = (0.25, 0.5, 0.75)
 
 REPORT_VERSION = 1
 
@@ -68,175 +48,6 @@ UNKNOWN_SPACE_NOTES = {
 logger = logging.getLogger("occtool.compare")
 
 
-def roc_auc(occupied: FloatArray, free: FloatArray) -> float:
-    """Area under the ROC curve of scores for "occupied" against "free" points.
-
-    The Mann-Whitney statistic: the probability that a random occupied point scores above
-    a random free one, ties counting half. NaN when either set is empty.
-    """
-    from scipy.stats import rankdata
-
-    occupied = np.asarray(occupied, dtype=np.float64)
-    free = np.asarray(free, dtype=np.float64)
-    n_occ, n_free = occupied.size, free.size
-    if n_occ == 0 or n_free == 0:
-        return float("nan")
-    ranks = rankdata(np.concatenate([occupied, free]))
-    return float((ranks[:n_occ].sum() - n_occ * (n_occ + 1) / 2.0) / (n_occ * n_free))
-
-
-def polygon_iou(a: shapely.Geometry, b: shapely.Geometry) -> float:
-    """Intersection over union of two areas; 1 when both are empty."""
-    area_a, area_b = float(a.area), float(b.area)
-    if area_a == 0.0 and area_b == 0.0:
-        return 1.0
-    overlap = float(shapely.intersection(a, b).area)
-    union = area_a + area_b - overlap
-    return overlap / union if union > 0 else 0.0
-
-
-def split_holdout(n: int, holdout: float, seed: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Indices of the features used to build the models and of the held-out ones.
-
-    Parameters
-    ----------
-    n
-        Number of features.
-    holdout
-        Share held out, in [0, 0.5].
-    seed
-        Seed of the random split.
-    """
-    if not 0.0 <= holdout <= 0.5:
-        raise InputError(f"the held-out share must lie in [0, 0.5], got {holdout}")
-    order = np.random.default_rng(seed).permutation(n)
-    n_out = int(round(holdout * n))
-    if n - n_out < 1:
-        raise InputError(f"{n} features leave none to build the models from")
-    return np.sort(order[n_out:]), np.sort(order[:n_out])
-
-
-def holdout_points(features: Features, free_ray: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-    """Test points from held-out features: their end points and points along their rays.
-
-    Free rays (floor features, which every model here reads as free space, and features
-    with evidence 0) are left out of the occupied points; their rays still give free
-    points.
-
-    Returns
-    -------
-    occupied, free
-        ``(K, 3)`` and ``(M, 3)`` points in the sensor frame.
-    """
-    points = features.points
-    occupied = points[~free_ray]
-    free = np.concatenate([points * f for f in FREE_FRACTIONS]) if len(points) else np.zeros((0, 3))
-    return occupied, free
-
-
-def in_front_of_first_obstacle(points: FloatArray, features: Features, robot: Robot, *,
-                               occupied: bool) -> NDArray[np.bool_]:
-    """Test points that lie in front of the first obstacle at their pan angle, in the body band.
-
-    A function increasing in range cannot show free space behind an obstacle at the same
-    pan angle (a ray passing over a low box to the wall beyond): those points are
-    unreachable for the parametric model by construction. Per pan-angle bin the first
-    obstacle is the nearest cluster of ``features``' returns in the body band (the fit's
-    :func:`occtool.fit.first_obstacle_distance`); free points count when nearer than it,
-    ``occupied`` points (returns) when no farther than it plus its cluster window.
-    """
-    from occtool.fit import (
-        FOCUS_ANGLE_BINS,
-        FOCUS_WINDOW,
-        FOCUS_WINDOW_ABS,
-        adaptive_support,
-        angle_bins,
-        first_obstacle_distance,
-    )
-
-    low, high = robot.body_band
-    x, y, z = features.points.T
-    band = (z >= low) & (z <= high) & (features.evidence > 0)
-    distance = np.hypot(x[band], y[band])
-    support, _ = adaptive_support(len(features))
-    # Each feature counts twice, as the fit's two hit samples do.
-    first = first_obstacle_distance(np.repeat(np.arctan2(y[band], x[band]), 2), np.repeat(distance, 2),
-                                     FOCUS_ANGLE_BINS, support)
-    px, py, pz = np.asarray(points, dtype=np.float64).reshape(-1, 3).T
-    limit = first[angle_bins(np.arctan2(py, px), FOCUS_ANGLE_BINS)]
-    if occupied:
-        limit = limit * (1.0 + FOCUS_WINDOW) + FOCUS_WINDOW_ABS
-        return (pz >= low) & (pz <= high) & (np.hypot(px, py) <= limit)
-    return (pz >= low) & (pz <= high) & (np.hypot(px, py) < limit)
-
-
-@dataclass
-class ModelResult:
-    """What one model cost and produced."""
-
-    name: str
-    samples: int
-    build_s: float
-    extract_s: float
-    memory_bytes: int
-    file_bytes: int
-    polygon: shapely.Geometry
-    extra: dict[str, Any] = field(default_factory=dict)
-    #: Why the navigation map is degenerate (an empty polygon: the robot in collision), if it is.
-    warnings: list[str] = field(default_factory=list)
-    #: A grid's polygon under each further reading of unobserved space (``also_unknown``).
-    readings: dict[str, shapely.Geometry] = field(default_factory=dict)
-
-    def figures(self) -> dict[str, Any]:
-        return {
-            "samples": int(self.samples),
-            "build_s": float(self.build_s),
-            "extract_s": float(self.extract_s),
-            "memory_bytes": int(self.memory_bytes),
-            "file_bytes": int(self.file_bytes),
-            "polygon_area": float(self.polygon.area),
-            **self.extra,
-            "warnings": list(self.warnings),
-        }
-
-
-def _timed(function: Callable[[], Any], repeat: int) -> tuple[Any, float]:
-    """Run ``function`` ``repeat`` times; its last result and the shortest time, seconds."""
-    best = float("inf")
-    result = None
-    for _ in range(max(1, repeat)):
-        start = time.perf_counter()
-        result = function()
-        best = min(best, time.perf_counter() - start)
-    return result, best
-
-
-def _file_size(write: Callable[[str], Any], suffix: str) -> int:
-    fd, name = tempfile.mkstemp(suffix=suffix)
-    os.close(fd)
-    try:
-        write(name)
-        return os.path.getsize(name)
-    finally:
-        os.unlink(name)
-
-
-def tree_bytes(tree: Any) -> int:
-    """Memory of a min/max tree's parameters: the piece coefficients plus one 8-byte
-    reference per node of the tree structure."""
-
-    def nodes(node: Any) -> int:
-        return 1 if isinstance(node, (int, np.integer)) else 1 + sum(nodes(c) for c in node.children)
-
-    return int(tree.coefficients.nbytes + 8 * nodes(tree.root))
-
-
-def _save_model_size(model: Any) -> int:
-    from occtool.io.model import save_model
-
-    return _file_size(lambda name: save_model(model, name), ".json")
-
-
 def _navigation(inverse_range: Callable[..., Any], navigation: Mapping[str, Any], **extra: Any) -> Any:
     """The navigation map, with the messages of its NavigationWarnings under ``notes``."""
     from occtool.navigation import NavigationWarning, navigation_map
@@ -248,148 +59,6 @@ def _navigation(inverse_range: Callable[..., Any], navigation: Mapping[str, Any]
         nav = navigation_map(inverse_range, **{**navigation, **extra})
     notes = list(dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, NavigationWarning)))
     return nav, notes
-
-
-# --- baselines -------------------------------------------------------------------------------
-
-
-class OccupancyMap(Protocol):
-    """What the comparison asks of a built baseline.
-
-    :class:`occtool.grid.OccupancyGrid` and :class:`occtool.octomap.OctoMapModel` offer it.
-    """
-
-    @property
-    def memory_bytes(self) -> int:
-        """Memory of the map, bytes."""
-        ...
-
-    def file_bytes(self) -> int:
-        """Size of the map saved to a file, bytes."""
-        ...
-
-    def occupancy(self, points: FloatArray) -> FloatArray:
-        """Occupancy probability at ``(N, 3)`` points; 0.5 where the map knows nothing."""
-        ...
-
-    def inverse_range(
-        self,
-        alpha: Any,
-        h: Any,
-        level: float,
-        max_range: float | None = None,
-        *,
-        unknown: str = "free",
-        band: tuple[float, float] | None = None,
-    ) -> FloatArray:
-        """As :meth:`occtool.grid.OccupancyGrid.inverse_range`."""
-        ...
-
-
-@dataclass(frozen=True)
-class BuildInputs:
-    """What every baseline is built from: the training features and the shared settings."""
-
-    features: Features
-    resolution: float
-    robot: Robot
-    sensor: Any
-    grid_bounds: tuple[Any, Any] | None = None
-    octomap_scans: int = 10
-
-
-def _no_figures(built: Any, inputs: BuildInputs) -> dict[str, Any]:
-    return {}
-
-
-@dataclass(frozen=True)
-class Baseline:
-    """An occupancy map the parametric model is compared with.
-
-    Attributes
-    ----------
-    name
-        Its key in the report (``models``, ``agreement``, ``ratios``, ``auc``, ...).
-    build
-        Builds the map from the inputs; timed as the baseline's build time.
-    samples
-        The samples (cell updates) the built map fused, for the report.
-    figures
-        Figures of its own for its ``models`` entry, after the common ones.
-    """
-
-    name: str
-    build: Callable[[BuildInputs], OccupancyMap]
-    samples: Callable[[Any, BuildInputs], int]
-    figures: Callable[[Any, BuildInputs], dict[str, Any]] = _no_figures
-
-
-def _build_grid(inputs: BuildInputs) -> OccupancyMap:
-    from occtool.grid import build_grid
-
-    return build_grid(
-        inputs.features,
-        resolution=inputs.resolution,
-        robot=inputs.robot,
-        sensor=inputs.sensor,
-        bounds=inputs.grid_bounds,
-    )
-
-
-def _build_octomap(inputs: BuildInputs) -> OccupancyMap:
-    from occtool.octomap import build_octomap
-
-    return build_octomap(
-        inputs.features,
-        resolution=inputs.resolution,
-        robot=inputs.robot,
-        scans=inputs.octomap_scans,
-        sensor=inputs.sensor,
-    )
-
-
-def _octomap_samples(tree: Any, inputs: BuildInputs) -> int:
-    from occtool.octomap import octomap_updates
-
-    return octomap_updates(
-        inputs.features, inputs.resolution, inputs.octomap_scans, robot=inputs.robot, sensor=inputs.sensor
-    )
-
-
-#: The dense 3D log-odds grid of :mod:`occtool.grid`.
-GRID = Baseline(
-    "grid",
-    build=_build_grid,
-    samples=lambda grid, inputs: grid.samples,
-    figures=lambda grid, inputs: {
-        "cells": int(np.prod(grid.shape)),
-        "observed_cells": grid.observed_cells,
-        "shape": list(grid.shape),
-    },
-)
-
-#: OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`); its samples are recounted cell updates.
-OCTOMAP = Baseline(
-    "octomap",
-    build=_build_octomap,
-    samples=_octomap_samples,
-    figures=lambda tree, inputs: {"leaves": tree.leaf_count, "scans": int(inputs.octomap_scans)},
-)
-
-
-def observation_band(robot: Robot, heights: Any = None) -> tuple[float, float]:
-    """Heights whose cells make a grid column observed with ``unknown="occupied"``.
-
-    The robot's body band, widened to any navigation heights asked for outside it: what
-    the sensor saw at one height of the band stands for the whole column there
-    (docs/comparison.md, "Unobserved space").
-    """
-    low, high = robot.body_band
-    if heights is not None:
-        requested = np.asarray(heights, dtype=np.float64).ravel()
-        if requested.size and np.isfinite(requested).all():
-            low, high = min(low, float(requested.min())), max(high, float(requested.max()))
-    return float(low), float(high)
 
 
 def _run_baseline(
