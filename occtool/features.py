@@ -225,7 +225,7 @@ class RangeLog:
             if len(self.positions) > 1:
                 raise InputError(
                     f"{self.source or 'the log'} holds {len(self.positions)} robot positions: "
-                    "pick one with --position N or write a model set to a folder"
+                    "pick one with position=N or write a model set to a folder"
                 )
             return self.positions[0]
         if not 0 <= position < len(self.positions):

@@ -216,7 +216,7 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
     if not overwrite:
         for path in output_paths(folder):
             if path.exists():
-                raise FileExistsError(f"{path} exists already (pass --overwrite to replace it)")
+                raise FileExistsError(f"{path} exists already (pass overwrite=True to replace it)")
     layers = layer_collections(run, simplify=simplify, precision=precision, georeference=georeference)
     summary = {**run.summary(), **(extra_summary or {})}
     mcap_bytes = None

@@ -47,7 +47,7 @@ def _pyoctomap() -> Any:
     try:
         import pyoctomap
     except ImportError:
-        raise MissingDependencyError("pyoctomap", "octomap", "The OctoMap baseline (--octomap)") from None
+        raise MissingDependencyError("pyoctomap", "octomap", "The OctoMap baseline (octomap=True)") from None
     return pyoctomap
 
 

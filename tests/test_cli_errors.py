@@ -563,3 +563,27 @@ def test_a_config_file_is_read_as_written_or_refused(content, fragment, inputs, 
     config.write_bytes(content)
     assert_fails(run("fit", inputs["csv"], "-o", out / "model.json", "--config", config), fragment)
     assert_nothing_written(out)
+
+
+def test_library_keywords_in_messages_read_as_flags_on_the_command_line():
+    from occtool.cli.wording import as_flags
+
+    assert as_flags("pass skip_invalid=True to drop bad rows") == "pass --skip-invalid to drop bad rows"
+    assert as_flags("pick one with position=N or write a model set") == "pick one with --position N or write a model set"
+    assert as_flags("(group_by='message' splits them)") == "(--group-by message splits them)"
+    assert as_flags("(no_return_range=5 m)") == "(--no-return-range 5 m)"
+    assert as_flags("topics= applies to MCAP logs only") == "--topic applies to MCAP logs only"
+    # Other words with '=' are left alone.
+    assert as_flags("n_angles=10 and positions=3") == "n_angles=10 and positions=3"
+
+
+def test_a_library_error_names_the_keyword_and_the_command_the_flag(tmp_path):
+    from occtool.errors import InputError
+    from occtool.io import read_log
+
+    log = tmp_path / "bad.csv"
+    log.write_text("x,y,z,m\n1,0,0,0.9\n1,0,0,abc\n")
+    with pytest.raises(InputError, match="skip_invalid=True"):
+        read_log(log)
+    result = CliRunner().invoke(cli, ["fit", str(log), "-o", str(tmp_path / "m.json")])
+    assert result.exit_code != 0 and "--skip-invalid" in result.output and "skip_invalid=" not in result.output

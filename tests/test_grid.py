@@ -214,7 +214,7 @@ def test_bad_input_is_a_clear_error() -> None:
     features = _wall(n=10)
     with pytest.raises(InputError, match="resolution"):
         build_grid(features, resolution=0.0)
-    with pytest.raises(InputError, match="coarser --resolution"):
+    with pytest.raises(InputError, match="coarser resolution="):
         build_grid(features, resolution=0.01, max_bytes=1000)
     with pytest.raises(InputError, match="no features"):
         build_grid(features.select(np.zeros(10, dtype=bool)))

@@ -326,7 +326,7 @@ def test_a_multi_position_log_is_drawn_in_the_world_frame():
 
 def test_a_multi_position_log_without_poses_asks_for_a_position():
     log = RangeLog([Position(0, ring_features(10)), Position(1, ring_features(10, 3))], source="two.csv")
-    with pytest.raises(InputError, match="--position"):
+    with pytest.raises(InputError, match="position=N"):
         plot.features_figure(log, size=SMALL, dpi=DPI)
 
 
@@ -582,5 +582,5 @@ def test_a_single_map_of_a_set_draws_its_own_positions_features():
     figure = plot.navigation_figure([hand_map(notched_disc())], positions=[2], log=log, size=SMALL, dpi=DPI)
     scatter = next(c for c in figure.axes[0].collections if c.get_gid() == "features")
     assert len(scatter.get_offsets()) == 12
-    with pytest.raises(InputError, match="--position"):
+    with pytest.raises(InputError, match="position=N"):
         plot.navigation_figure([hand_map(notched_disc())], log=log, size=SMALL, dpi=DPI)

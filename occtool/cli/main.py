@@ -63,12 +63,13 @@ class LazyGroup(click.Group):
             formatter.write_dl(rows)
 
     def invoke(self, ctx: click.Context) -> Any:
+        from occtool.cli.wording import as_flags
         from occtool.errors import OcctoolError
 
         try:
             return super().invoke(ctx)
         except OcctoolError as exc:
-            raise click.ClickException(str(exc)) from exc
+            raise click.ClickException(as_flags(str(exc))) from exc
         except KeyboardInterrupt as exc:
             raise click.ClickException("interrupted by SIGINT (Ctrl-C)") from exc
         except BrokenPipeError as exc:
@@ -93,7 +94,9 @@ def _describe_os_error(exc: OSError) -> str:
         hint = {errno.ENOSPC: " (the output device or disk is full)",
                 errno.EFBIG: " (the file-size limit, ulimit -f, was reached)"}.get(exc.errno or 0, "")
         return f"cannot write the output: {exc.strerror}{hint}"
-    return str(exc)
+    from occtool.cli.wording import as_flags
+
+    return as_flags(str(exc))
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -111,12 +114,12 @@ def cli(ctx: click.Context, verbosity: int, quietness: int) -> None:
     from rich.console import Console
     from rich.logging import RichHandler
 
-    logging.basicConfig(
-        level=level,
-        format="%(message)s",
-        handlers=[RichHandler(console=Console(stderr=True), show_time=False, show_path=False)],
-        force=True,
-    )
+    from occtool.cli.wording import FlagWording
+
+    handler = RichHandler(console=Console(stderr=True), show_time=False, show_path=False)
+    # The library names its keywords; the command line's messages name its flags.
+    handler.addFilter(FlagWording())
+    logging.basicConfig(level=level, format="%(message)s", handlers=[handler], force=True)
     # A numpy RuntimeWarning (or any other) is one log line, not a source line on stderr.
     warnings.showwarning = _log_warning
     ctx.ensure_object(dict)

@@ -170,7 +170,7 @@ def build_grid(
     if n_bytes > max_bytes:
         raise InputError(
             f"a {resolution} m grid over the features' extent needs {shape[0]}x{shape[1]}x{shape[2]} cells "
-            f"({n_bytes / 1e9:.1f} GB): use a coarser --resolution"
+            f"({n_bytes / 1e9:.1f} GB): use a coarser resolution="
         )
     # Summed in float32 like OctoMap's log-odds; the array becomes the grid in place.
     flat = np.zeros(int(np.prod(shape)), dtype=np.float32)

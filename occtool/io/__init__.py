@@ -113,7 +113,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
             return by_suffix
     raise InputError(
         f"cannot tell the format of {target}: expected CSV with an x,y,z header, MCAP, "
-        "a CARMEN log, x y z point lines, PCD, PLY or a ROS bag (or give --format)"
+        "a CARMEN log, x y z point lines, PCD, PLY or a ROS bag (or give format=)"
     )
 
 
@@ -231,7 +231,7 @@ def read_log(
     if fmt not in FORMATS:
         raise InputError(f"unknown format {format!r}: expected one of {', '.join(FORMATS)}")
     if topics and fmt not in ("mcap", "rosbag"):
-        raise InputError(f"--topic applies to MCAP logs only, and {path} is {fmt}")
+        raise InputError(f"topics= applies to MCAP logs only, and {path} is {fmt}")
     no_return_range = check_no_return_range(no_return_range)
     options: ReadOptions = dict(
         topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,

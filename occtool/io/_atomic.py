@@ -41,7 +41,7 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
         return
     target = Path(path)
     if not overwrite and target.exists():
-        raise FileExistsError(f"{target} exists already (pass --overwrite to replace it)")
+        raise FileExistsError(f"{target} exists already (pass overwrite=True to replace it)")
     if target.is_dir():
         raise IsADirectoryError(errno.EISDIR, "Is a directory (name an output file)", str(target))
     if target.exists() and not target.is_file():

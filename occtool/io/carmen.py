@@ -218,11 +218,11 @@ def read_carmen(
             at = f"{low:g} m" if low == high else f"{low:g} to {high:g} m"
             notes.append(
                 f"kept {no_return} of {all_ranges.size} readings with no return{where} as free rays "
-                f"at {at} with evidence 0 (--no-return-range {no_return_range:g})"
+                f"at {at} with evidence 0 (no_return_range={no_return_range:g})"
             )
         if invalid:
             notes.append(f"dropped {invalid} of {all_ranges.size} readings <= 0 or NaN")
-    notes.append(f"constant evidence {evidence} for laser readings (--evidence)")
+    notes.append(f"constant evidence {evidence} for laser readings (evidence=)")
     if skipped_lines:
         notes.append(f"skipped {skipped_lines} laser line(s) that do not parse")
     if unknown:

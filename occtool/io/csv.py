@@ -99,7 +99,7 @@ def _find_layout(handle: IO[str], name: str, evidence_field: str, constant_evide
     if evidence_column is None and constant_evidence is None:
         raise InputError(
             f"{name}, line {line_number}: no evidence column ('{wanted}'"
-            f"{' or m' if wanted in EVIDENCE_ALIASES else ''}): add one or give a constant with --evidence"
+            f"{' or m' if wanted in EVIDENCE_ALIASES else ''}): add one or give a constant with evidence="
         )
     pose = None
     if "pose_x" in index or "pose_y" in index or "pose_yaw" in index:
@@ -267,7 +267,7 @@ def read_csv(
             }[int(bad_reason[first])]
             problems.append((int(line_numbers[first]), reason))
         line, problem = min(problems)
-        raise InputError(f"{name}, line {line}: {problem} (pass --skip-invalid to drop bad rows)")
+        raise InputError(f"{name}, line {line}: {problem} (pass skip_invalid=True to drop bad rows)")
     if bad.any():
         keep = ~bad
         data, points, m = data[keep], points[keep], m[keep]

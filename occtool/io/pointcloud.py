@@ -48,7 +48,7 @@ def _points_and_evidence(values: dict[str, np.ndarray], evidence_field: str, con
     points = np.column_stack([values["x"], values["y"], values["z"]])
     if evidence_field in values:
         return points, values[evidence_field]
-    notes.append(f"no '{evidence_field}' {word}: constant evidence {constant} (--evidence)")
+    notes.append(f"no '{evidence_field}' {word}: constant evidence {constant} (evidence=)")
     return points, np.full(points.shape[0], constant)
 
 def _open_binary(path: str | os.PathLike[str]) -> io.BufferedIOBase:
@@ -121,7 +121,7 @@ def _checked(
         if not skip_invalid:
             i = int(np.argmax(far))
             raise InputError(f"{name}: point {i} lies at {tuple(float(v) for v in points[i])}, farther than "
-                             f"{MAX_COORDINATE:g} m from the sensor: not range data (pass --skip-invalid to drop such points)")
+                             f"{MAX_COORDINATE:g} m from the sensor: not range data (pass skip_invalid=True to drop such points)")
         counts["invalid"] += int(far.sum())
         points, evidence = points[~far], evidence[~far]
     bad = ~np.isfinite(evidence) | (evidence < 0.0) | (evidence > 1.0)
@@ -130,7 +130,7 @@ def _checked(
             i = int(np.argmax(bad))
             raise InputError(
                 f"{name}: point {i} has evidence {float(evidence[i])!r} outside [0, 1] "
-                "(pass --skip-invalid to drop such points)"
+                "(pass skip_invalid=True to drop such points)"
             )
         counts["invalid"] += int(bad.sum())
         points, evidence = points[~bad], evidence[~bad]
@@ -194,7 +194,7 @@ def _read_xyz(path: str | os.PathLike[str], name: str, constant: float, skip_inv
                 if not skip_invalid:
                     raise InputError(
                         f"{name}, line {start + 1}: the scan's pose is not finite: {node_line.strip()[:60]!r} "
-                        "(pass --skip-invalid to drop such scans)")
+                        "(pass skip_invalid=True to drop such scans)")
                 counts["scans"] = counts.get("scans", 0) + 1
                 continue
             pose = Pose(x, y, z, yaw)
@@ -431,7 +431,7 @@ def read_pointcloud(
     counts = {"nan": 0, "origin": 0, "invalid": 0, "lines": 0}
     if format == "xyz":
         scans, notes = _read_xyz(path, name, constant, skip_invalid, counts)
-        notes.append(f"constant evidence {constant} for plain x y z points (--evidence)")
+        notes.append(f"constant evidence {constant} for plain x y z points (evidence=)")
     elif format == "pcd":
         scans, notes = _read_pcd(path, name, evidence_field, constant, skip_invalid, counts)
     elif format == "ply":

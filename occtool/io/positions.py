@@ -181,7 +181,7 @@ def build_log(
     # several scans were merged on the assumption that the robot did not move.
     if len(scan_list) > 1 and not has_poses and group_by == "position":
         notes.append(
-            f"the log has no poses: its {len(scan_list)} scans form one position (--group-by message splits them)"
+            f"the log has no poses: its {len(scan_list)} scans form one position (group_by='message' splits them)"
         )
     positions: list[Position] = []
     dropped_at_origin = 0

@@ -136,7 +136,7 @@ def extract_model_set(
     for folder in folders:
         state = read_set_state(folder)
         if state["complete"] is False:
-            log.warning("%s: the model set is incomplete (an interrupted fit; resume it with --skip-existing)", folder)
+            log.warning("%s: the model set is incomplete (an interrupted fit; resume it with skip_existing=True)", folder)
     to_folder = per_position if per_position is not None else (
         out is not None and (str(out).endswith(("/", os.sep)) or Path(out).is_dir()))
     if len(sets) > 1 and not to_folder:
@@ -156,14 +156,14 @@ def extract_model_set(
                 for entry in entries:
                     candidate = target / f"nav_{entry['position']:04d}.geojson"
                     if candidate.exists():
-                        raise FileExistsError(f"{candidate} exists already (pass --overwrite to replace it)")
+                        raise FileExistsError(f"{candidate} exists already (pass overwrite=True to replace it)")
         for target in targets:
             if target.exists() and not target.is_dir():
                 raise InputError(f"{target} exists and is not a folder")
         for target in targets:
             target.mkdir(parents=True, exist_ok=True)
     elif not overwrite and out not in (None, "-") and Path(out).exists():
-        raise FileExistsError(f"{out} exists already (pass --overwrite to replace it)")
+        raise FileExistsError(f"{out} exists already (pass overwrite=True to replace it)")
     poses: dict[tuple[int, int], Any] = {}
     if world:
         for number, (folder, entries) in enumerate(sets):

@@ -240,7 +240,7 @@ def fit_model_set(
         if not overwrite and not skip_existing and target.is_dir():
             existing = [p for p in (target / "index.json", *sorted(target.glob("model_*.json"))) if p.exists()]
             if existing:
-                raise FileExistsError(f"{existing[0]} exists already (pass --overwrite to replace it)")
+                raise FileExistsError(f"{existing[0]} exists already (pass overwrite=True to replace it)")
 
     summary = SetSummary(folders=folders)
     writers: list[_IndexWriter] = []

@@ -156,7 +156,7 @@ def navigation_map(
     if cuts.margin > 0 and level <= 0:
         warnings.warn(
             f"the margin {cuts.margin:.3g} that makes the map hold between slices lowers the threshold "
-            f"{threshold:g} to {level:.3g}: expect an empty map; cut at more heights (--slice-spacing)",
+            f"{threshold:g} to {level:.3g}: expect an empty map; cut at more heights (a smaller slice_spacing=)",
             NavigationWarning,
             stacklevel=2,
         )

@@ -102,7 +102,7 @@ def features_figure(
     else:
         if not all(p.pose is not None for p in log.positions):
             raise InputError(f"{source} holds {len(log.positions)} positions without poses for all of them: "
-                             "pick one with --position N")
+                             "pick one with position=N")
         xy, evidence, path = _log_in_world(log)
         world_frame = "world"
         scatter = _scatter_evidence(ax, xy, evidence)
@@ -183,7 +183,7 @@ def model_figure(
     if heights is None:
         heights = tuple(np.linspace(low, high, 6))
     if pieces and active_piece_function(model) is None:
-        raise InputError("this model does not tell which linear piece is active, so --pieces cannot be drawn")
+        raise InputError("this model does not tell which linear piece is active, so they cannot be drawn (pieces=True)")
     panels = 3 if pieces else 2
     figure = new_figure(size or (4.6 * panels, 4.6), dpi)
     axes = figure.subplots(1, panels, squeeze=False)[0]
@@ -282,8 +282,8 @@ def navigation_figure(
         elif number is None and len(poses_in_order) == len(maps) and poses_in_order[index] is not None:
             placed.append(nav.in_world(poses_in_order[index]))  # type: ignore[arg-type]
         else:
-            raise InputError(f"{len(maps)} robot-frame navigation maps but no pose for each: give a --features "
-                             "log with the posed positions they were extracted from, or extract with --world")
+            raise InputError(f"{len(maps)} robot-frame navigation maps but no pose for each: give features= "
+                             "(a log with the posed positions they were extracted from), or extract with world=True")
     world = any(nav.frame_id != "base_link" for nav in placed)
     poses = [nav.pose if nav.frame_id != "base_link" and nav.pose is not None else Pose() for nav in placed]
 
