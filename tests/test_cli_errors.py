@@ -569,7 +569,7 @@ def test_library_keywords_in_messages_read_as_flags_on_the_command_line():
     from occtool.cli.wording import as_flags
 
     assert as_flags("pass skip_invalid=True to drop bad rows") == "pass --skip-invalid to drop bad rows"
-    assert as_flags("pick one with position=N or write a model set") == "pick one with --position N or write a model set"
+    assert as_flags("pick one with position=N or a model set") == "pick one with --position N or a model set"
     assert as_flags("(group_by='message' splits them)") == "(--group-by message splits them)"
     assert as_flags("(no_return_range=5 m)") == "(--no-return-range 5 m)"
     assert as_flags("topics= applies to MCAP logs only") == "--topic applies to MCAP logs only"

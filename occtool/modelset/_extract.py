@@ -136,7 +136,8 @@ def extract_model_set(
     for folder in folders:
         state = read_set_state(folder)
         if state["complete"] is False:
-            log.warning("%s: the model set is incomplete (an interrupted fit; resume it with skip_existing=True)", folder)
+            log.warning("%s: the model set is incomplete (an interrupted fit; resume it with skip_existing=True)",
+                        folder)
     to_folder = per_position if per_position is not None else (
         out is not None and (str(out).endswith(("/", os.sep)) or Path(out).is_dir()))
     if len(sets) > 1 and not to_folder:
