@@ -162,3 +162,11 @@ def test_a_reader_that_goes_away_is_one_line(csv):
     process.wait(timeout=120)
     assert process.returncode == 1
     assert stderr.strip().splitlines() == ["Error: standard output was closed before the output was written"]
+
+
+def test_a_bad_option_is_one_line_on_stderr_from_the_console_script(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "occtool", "simulate", "office", "-o", str(tmp_path / "d/"),
+                             "--features", "1000000000"], capture_output=True, text=True, check=False)
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("Error: Invalid value for '--features'")
+    assert "--help" in result.stderr and not (tmp_path / "d").exists()

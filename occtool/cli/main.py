@@ -178,10 +178,22 @@ def main(argv: list[str] | None = None) -> None:
     if sys.stdout is None:
         sys.stdout = _ClosedStdout()
     try:
-        cli.main(args=argv, prog_name="occtool")
+        code = cli.main(args=argv, prog_name="occtool", standalone_mode=False)
     except Interrupted as exc:
         print(f"Error: interrupted by {signal.Signals(exc.signum).name}", file=sys.stderr)
         sys.exit(128 + exc.signum)
+    except click.UsageError as exc:
+        # One line, as every other error: the usage is one --help away.
+        command = exc.ctx.command_path if exc.ctx is not None else "occtool"
+        print(f"Error: {exc.format_message()} (see '{command} --help')", file=sys.stderr)
+        sys.exit(exc.exit_code)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(exc.exit_code)
+    except click.Abort:
+        print("Error: aborted", file=sys.stderr)
+        sys.exit(1)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 def _detach_stdout() -> None:
