@@ -55,7 +55,7 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
         (f"Hilbert-maps protocol: 10 % of the scans held out in blocks of 40; each held-out return's end point "
          f"occupied, 5 points drawn uniformly along its beam up to 0.1 m before the end free. Fused: the local "
          f"models of the training keyframes (a position is fitted when 5 % of the 0.2 m cells its returns hit "
-         f"are new; laser 0.3 m above the floor, robot 0.5 m tall), combined as named (mean: the default). "
+         f"are new; laser 0.3 m above the floor, robot 0.5 m tall), combined as named (log-odds: the default). "
          f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
          f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
          f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "

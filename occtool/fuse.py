@@ -18,8 +18,11 @@ observed the point:
   probability reported is the pignistic one;
 * ``"mean"``: the plain mean of the speaking models.
 
-Where no model speaks the place is *unknown* (never free). :meth:`FusedMap.rasterise`
-draws the map as a free / occupied / unknown grid over the robot's body band.
+Where no model speaks the place is *unknown* (never free). Each position also keeps its
+nearest returns (its return guard, 720 bytes): :meth:`FusedMap.predict` joins them to the
+models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
+unknown grid over the robot's body band with its walls where the returns fall.
+:func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ NO_OBSTACLE = int(np.iinfo(np.uint16).max)
 FRONT_MARGIN = 0.05
 COMBINATIONS = ("log_odds", "dempster_shafer", "mean")
 #: Measured on Intel (docs/map.md): the combination ``FusedMap`` uses unless told.
-DEFAULT_COMBINATION = "mean"
+DEFAULT_COMBINATION = "log_odds"
 #: OctoMap's clamping of a single observation's probability before it becomes log-odds.
 CLAMP = (0.12, 0.97)
 #: Share of a model's mass committed to occupied/free in the Dempster-Shafer combination.

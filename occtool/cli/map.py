@@ -32,7 +32,7 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 @click.option("--keyframe-share", type=click.FloatRange(min=0.0, max=1.0), default=0.05, show_default=True,
               help="Fit a position of LOG only when this share of the cells its returns hit is new (0: every "
                    "position).")
-@click.option("--combination", type=click.Choice(["log_odds", "dempster_shafer", "mean"]), default="mean",
+@click.option("--combination", type=click.Choice(["log_odds", "dempster_shafer", "mean"]), default="log_odds",
               show_default=True, help="How the positions that observed a place are combined.")
 @click.option("--max-range", type=click.FloatRange(min=0.0, min_open=True), default=1.5, show_default=True,
               help="Radius of each position's navigation polygon, metres.")
