@@ -54,27 +54,31 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
         "",
         (f"Hilbert-maps protocol: 10 % of the scans held out in blocks of 40; each held-out return's end point "
          f"occupied, 5 points drawn uniformly along its beam up to 0.1 m before the end free. Fused: the local "
-         f"models of the training positions (laser 0.3 m above the floor, robot 0.5 m tall), combined as named. "
+         f"models of the training keyframes (a position is fitted when 5 % of the 0.2 m cells its returns hit "
+         f"are new; laser 0.3 m above the floor, robot 0.5 m tall), combined as named (log-odds: the default). "
          f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
-         f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m against its "
-         f"training scans. Published on Intel for orientation: {PUBLISHED_INTEL}."),
+         f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
+         f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "
+         f"Nav2 reads a map, for reference. Published on Intel for orientation: {PUBLISHED_INTEL}."),
         "",
         "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
             n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)
         + " | test points covered | fused map | grid | fit / raster / grid build | returns on occupied "
-          "(+neighbour) | beams clear to 0.1 m | scans with both >= 95 % |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+          "(+neighbour) | beams clear to 0.1 m | scans with both >= 95 % | grid's returns / beams / scans |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         auc = row["auc"]
-        nav2 = row["nav2"]
+        nav2, grid2 = row["nav2"], row["nav2_grid"]
         lines.append(
             f"| {row['log']} | {row['held_out_scans']} of {row['scans']} | "
             f"{auc['fused_log_odds']:.3f} / {auc['fused_dempster_shafer']:.3f} / {auc['fused_mean']:.3f} | "
             + " / ".join(f"{auc[n]:.3f}" for n in grid_names)
-            + f" | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB | {row['grid_bytes'] / 1e6:.2f} MB | "
+            + f" | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
+            f"{row['training_positions']} positions) | {row['grid_bytes'] / 1e6:.2f} MB | "
             f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
-            f"{nav2['returns_on_occupied']:.1%} | {nav2['beams_clear']:.1%} | {nav2['scans_both_95']:.1%} |"
+            f"{nav2['returns_on_occupied']:.1%} | {nav2['beams_clear']:.1%} | {nav2['scans_both_95']:.1%} | "
+            f"{grid2['returns_on_occupied']:.1%} / {grid2['beams_clear']:.1%} / {grid2['scans_both_95']:.1%} |"
         )
     lines += [""] + [f"- {note}" for note in notes]
     return "\n".join(lines) + "\n", {"rows": rows, "notes": notes}

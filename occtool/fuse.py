@@ -18,8 +18,11 @@ observed the point:
   probability reported is the pignistic one;
 * ``"mean"``: the plain mean of the speaking models.
 
-Where no model speaks the place is *unknown* (never free). :meth:`FusedMap.rasterise`
-draws the map as a free / occupied / unknown grid over the robot's body band.
+Where no model speaks the place is *unknown* (never free). Each position also keeps its
+nearest returns (its return guard, 720 bytes): :meth:`FusedMap.predict` joins them to the
+models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
+unknown grid over the robot's body band with its walls where the returns fall.
+:func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, RangeLog
+from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -57,6 +61,14 @@ CLAMP = (0.12, 0.97)
 DS_CONFIDENCE = 0.9
 #: Conflict mass above which positions are said to contradict each other at a point.
 CONFLICT_FLAG = 0.3
+#: A raster cell is occupied where the positions whose returns fall in it make at least this
+#: share of those that returned from it or saw through it (docs/map.md: 0.5 put 96.5 % of
+#: the Intel returns on occupied cells and kept 86.5 % of the beams clear).
+RETURN_SHARE = 0.5
+#: Occupancy a position's return lends a query point at its spot, and the width (metres) of
+#: that kernel, ``amplitude * exp(-(d / width)**2)``, joined to the models' fused occupancy
+#: as a noisy-or (docs/map.md: AUC 0.954 -> 0.982 on Intel's held-out blocks).
+RETURN_KERNEL = (0.8, 0.05)
 #: Nav2 pixel values (trinary mode).
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 
@@ -121,6 +133,22 @@ def reach_from_guard(guard: Any, focus_range: float = math.inf, bins: int = REAC
     return np.vstack([_centimetres(reach), _centimetres(nearest)])
 
 
+def returns_from_guard(guard: Any) -> NDArray[np.uint16]:
+    """A model's nearest returns per pan bin (its return guard: ``guard.bins`` whole
+    millimetres, :data:`NO_OBSTACLE` where none or beyond 65 m); all none without a guard."""
+    from occtool.guard import GUARD_BINS
+
+    if guard is None:
+        return np.full(GUARD_BINS, NO_OBSTACLE, dtype=np.uint16)
+    distance = np.asarray(guard.distance, dtype=np.float64)
+    millimetres = np.where(np.isfinite(distance), np.floor(distance * 1000.0 + 1e-6), NO_OBSTACLE)
+    return np.minimum(millimetres, NO_OBSTACLE).astype(np.uint16)
+
+
+def _nodes(node: Any) -> int:
+    return 1 if isinstance(node, (int, np.integer)) else 1 + sum(_nodes(c) for c in node.children)
+
+
 @dataclass
 class Evidence:
     """The fused evidence at some points (arrays of one value per point).
@@ -157,6 +185,8 @@ class _Sums:
     total: FloatArray = field(init=False)
     log_q_occ: FloatArray = field(init=False)
     log_q_free: FloatArray = field(init=False)
+    #: Per point, the occupancy the nearest return lends it (:data:`RETURN_KERNEL`); None: none.
+    return_kernel: FloatArray | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         self.count = np.zeros(self.n, dtype=np.int32)
@@ -197,6 +227,9 @@ class _Sums:
         else:
             probability = self.total / np.maximum(count, 1)
         probability = np.where(seen, probability, 0.5)
+        if self.return_kernel is not None:
+            # Noisy-or: occupied if the models say so or a return lies there.
+            probability = 1.0 - (1.0 - probability) * (1.0 - self.return_kernel)
         return Evidence(count, probability, belief_occ, belief_free, unknown_mass, conflict)
 
 
@@ -256,11 +289,20 @@ class FusedMap:
     front_margin
         A model is silent where it reads occupied more than this (metres) in front of the
         first obstacle it saw at that pan bin (``inf``: never).
+    returns
+        ``(len(trees), guard bins)`` uint16 millimetres from :func:`returns_from_guard`:
+        each position's nearest return per pan bin (its return guard). With them the
+        raster's occupied cells are where the positions' returns fall (see
+        :meth:`rasterise`); without, where the fused occupancy reaches ``threshold``.
+
+    The trees' coefficients are kept as float32 (half the bytes; an occupancy moves by
+    under 1e-6) and each tree is rebuilt in float64 for a query.
     """
 
     def __init__(self, trees: Sequence[Any], poses: Sequence[Pose], reaches: ArrayLike, robot: Robot, *,
                  combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
-                 stamps: Sequence[float | None] | None = None, front_margin: float = FRONT_MARGIN) -> None:
+                 stamps: Sequence[float | None] | None = None, front_margin: float = FRONT_MARGIN,
+                 returns: ArrayLike | None = None) -> None:
         if combination not in COMBINATIONS:
             raise InputError(f"combination must be one of {', '.join(COMBINATIONS)}, got {combination!r}")
         if not 0.0 < threshold < 1.0:
@@ -273,7 +315,14 @@ class FusedMap:
                              f"and {reaches.shape}")
         if any(p is None for p in poses):
             raise InputError("every position needs a pose to be fused into a world map")
-        self.trees = list(trees)
+        if returns is not None:
+            returns = np.asarray(returns, dtype=np.uint16)
+            if returns.ndim != 2 or returns.shape[0] != len(trees) or returns.shape[1] < 8:
+                raise InputError(f"{len(trees)} models need as many rows of returns per pan bin, got {returns.shape}")
+        self.returns = returns
+        self._basis = [t.basis for t in trees]
+        self._roots = [t.root for t in trees]
+        self._coefficients = [np.asarray(t.coefficients, dtype=np.float32) for t in trees]
         self.poses = list(poses)
         self.reaches = reaches
         self.robot = robot
@@ -281,19 +330,31 @@ class FusedMap:
         self.threshold = float(threshold)
         self.front_margin = float(front_margin)
         self.stamps = list(stamps) if stamps is not None else [None] * len(trees)
+        self._tree_type = type(trees[0])
+        #: A k-d tree over every return in the world, built at the first query that needs it.
+        self._return_index: Any = None
         self._pose_array = np.array([[p.x, p.y, p.z, p.yaw] for p in poses], dtype=np.float64)
         self._radius = reaches[:, 0].max(axis=1).astype(np.float64) * REACH_UNIT
 
     # ------------------------------------------------------------------ size
     @property
     def nbytes(self) -> int:
-        """Memory of the map's numbers: each tree's coefficients and structure, poses, reaches."""
-        from occtool.compare import tree_bytes
+        """Memory of the map's numbers: each tree's float32 coefficients and structure (8 bytes
+        a node, as :func:`occtool.compare.tree_bytes` counts it), poses, reaches, returns."""
+        structure = sum(8 * _nodes(root) for root in self._roots)
+        return int(sum(c.nbytes for c in self._coefficients) + structure + self._pose_array.nbytes
+                   + self.reaches.nbytes + (self.returns.nbytes if self.returns is not None else 0))
 
-        return int(sum(tree_bytes(t) for t in self.trees) + self._pose_array.nbytes + self.reaches.nbytes)
+    def tree(self, k: int) -> Any:
+        """Model ``k``'s min/max tree (float64, from the stored float32 coefficients)."""
+        return self._tree_type(self._basis[k], self._coefficients[k].astype(np.float64), self._roots[k])
+
+    @property
+    def trees(self) -> list[Any]:
+        return [self.tree(k) for k in range(len(self))]
 
     def __len__(self) -> int:
-        return len(self.trees)
+        return len(self._roots)
 
     @property
     def bounds(self) -> tuple[FloatArray, FloatArray]:
@@ -318,7 +379,7 @@ class FusedMap:
         if not speaks.any():
             return speaks, np.empty(0)
         index = np.flatnonzero(speaks)
-        occupancy = self.trees[k].predict(alpha[index], h[index], np.hypot(distance[index], h[index]))
+        occupancy = self.tree(k).predict(alpha[index], h[index], np.hypot(distance[index], h[index]))
         # Occupied well in front of the first obstacle this position saw is the crossing's
         # margin, not something observed: leave that place to the other positions.
         first = self.reaches[k, 1, b[index]].astype(np.float64) * REACH_UNIT
@@ -347,7 +408,7 @@ class FusedMap:
         if points.shape[0]:
             tree = cKDTree(points[:, :2])
             # A loop over models (hundreds), each vectorised over the points it may see.
-            for k in range(len(self.trees)):
+            for k in range(len(self)):
                 if self._radius[k] <= 0:
                     continue
                 near = np.asarray(tree.query_ball_point(self._pose_array[k, :2], self._radius[k]), dtype=np.intp)
@@ -356,23 +417,57 @@ class FusedMap:
                 speaks, occupancy = self._speak(k, points[near])
                 if speaks.any():
                     sums.add(near[speaks], occupancy)
+            if self.returns is not None:
+                sums.return_kernel = self._return_kernel(points)
         return sums
 
+    def _return_kernel(self, points: FloatArray) -> FloatArray:
+        """:data:`RETURN_KERNEL` of each point's horizontal distance to the nearest return of
+        any position; 0 outside the body band (relative to the poses' median height)."""
+        from scipy.spatial import cKDTree
+
+        if self._return_index is None:
+            world = [self.return_points(k) for k in range(len(self))]
+            self._return_index = cKDTree(np.concatenate(world) if world else np.zeros((0, 2)))
+        amplitude, width = RETURN_KERNEL
+        kernel = np.zeros(points.shape[0])
+        if self._return_index.n == 0:
+            return kernel
+        low, high = self.robot.body_band
+        h = points[:, 2] - float(np.median(self._pose_array[:, 2]))
+        band = (h >= low - 1e-9) & (h <= high + 1e-9)
+        distance, _ = self._return_index.query(points[band, :2], distance_upper_bound=5.0 * width)
+        kernel[band] = amplitude * np.exp(-np.square(np.asarray(distance) / width))
+        return kernel
+
     def predict(self, points_world: ArrayLike, *, combination: str | None = None) -> FloatArray:
-        """Fused occupancy probability at world points ``(K, 3)``; 0.5 where no position observed."""
+        """Fused occupancy probability at world points ``(K, 3)``; 0.5 where no position observed.
+
+        With :attr:`returns`, the models' fused occupancy is joined (noisy-or) with the
+        occupancy the positions' nearest returns lend a point near them (:data:`RETURN_KERNEL`)."""
         return self.evidence(points_world, combination=combination).probability
 
     # ------------------------------------------------------------------ raster
     def rasterise(self, resolution: float = 0.05, *, heights: ArrayLike | None = None,
-                  combination: str | None = None, max_cells: int = 50_000_000) -> Raster:
+                  combination: str | None = None, max_cells: int = 50_000_000,
+                  from_returns: bool | None = None) -> Raster:
         """Free / occupied / unknown cells over the body band, in the world frame.
 
         Each cell centre is queried at ``heights`` (sensor-frame, relative to the poses'
         z; default: the sensor's plane if it lies in the body band, else the band's
-        midpoint). A cell is occupied where any height's fused occupancy reaches the
-        threshold, free where some height was observed and none is occupied, unknown where
-        no position observed it.
+        midpoint). Free where some height was observed and the cell is not occupied,
+        unknown where no position observed it. Occupied, ``from_returns`` (the default
+        when the map holds :attr:`returns`): where the positions' nearest returns fall,
+        unless more positions saw through the cell than returned from it
+        (:data:`RETURN_SHARE`): walls where the returns are, not where the models' level
+        crossing sits (in front of them, by design); a cell the models read occupied is
+        free only where some position saw through it, else unknown. Otherwise: occupied
+        where any height's fused occupancy reaches the threshold.
         """
+        if from_returns is None:
+            from_returns = self.returns is not None
+        if from_returns and self.returns is None:
+            raise InputError("this fused map keeps no returns: rasterise it with from_returns=False")
         if not (math.isfinite(resolution) and resolution > 0):
             raise InputError(f"resolution must be a positive number of metres, got {resolution}")
         combination = combination or self.combination
@@ -393,7 +488,7 @@ class FusedMap:
         z0 = float(np.median(self._pose_array[:, 2]))
         for h in heights:
             sums = _Sums(ny * nx)
-            for k in range(len(self.trees)):
+            for k in range(len(self)):
                 r = self._radius[k]
                 if r <= 0:
                     continue
@@ -416,11 +511,65 @@ class FusedMap:
             observed |= ev.observed
             conflict |= ev.contradicted
             best = np.where(ev.observed, np.fmax(best, ev.probability), best)
+        if from_returns:
+            hits, through = self._return_counts(origin, nx, ny, resolution)
+            # Free: observed, and read free by the models or seen through by some position
+            # (the crossing's margin in front of a wall); what the models read occupied and
+            # no position saw through (behind a wall, within the reach's window) stays unknown.
+            observed = (observed & ~occupied) | (through > 0) | (hits > 0)
+            occupied = (hits > 0) & (hits >= RETURN_SHARE * (hits + through))
         cells = np.full(ny * nx, UNKNOWN, dtype=np.uint8)
         cells[observed] = FREE
         cells[occupied] = OCCUPIED
         return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
                       np.nan_to_num(best, nan=0.5).reshape(ny, nx).astype(np.float32), conflict.reshape(ny, nx))
+
+
+    def return_points(self, k: int) -> FloatArray:
+        """World ``(M, 2)`` x, y of position ``k``'s nearest returns (bin centres)."""
+        assert self.returns is not None
+        millimetres = self.returns[k]
+        bins = millimetres.size
+        held = np.flatnonzero(millimetres != NO_OBSTACLE)
+        alpha = -math.pi + (held + 0.5) * (2.0 * math.pi / bins)
+        distance = millimetres[held].astype(np.float64) / 1000.0
+        return self.poses[k].to_world(np.column_stack([distance * np.cos(alpha), distance * np.sin(alpha)]))
+
+    def _return_counts(self, origin: FloatArray, nx: int, ny: int,
+                       resolution: float) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
+        """Per raster cell: positions whose returns fall in it, and positions that saw
+        through it (its centre lies more than a cell in front of their return at that pan bin)."""
+        assert self.returns is not None
+        hits = np.zeros(ny * nx, dtype=np.int32)
+        through = np.zeros(ny * nx, dtype=np.int32)
+        bins = self.returns.shape[1]
+        for k in range(len(self)):  # a loop over positions, each vectorised over its cells
+            millimetres = self.returns[k]
+            held = millimetres != NO_OBSTACLE
+            if not held.any():
+                continue
+            world = self.return_points(k)
+            col = np.floor((world[:, 0] - origin[0]) / resolution).astype(np.int64)
+            row = np.floor((world[:, 1] - origin[1]) / resolution).astype(np.int64)
+            inside = (row >= 0) & (row < ny) & (col >= 0) & (col < nx)
+            hits[np.unique(row[inside] * nx + col[inside])] += 1
+            distance = np.where(held, millimetres.astype(np.float64) / 1000.0, -np.inf)
+            r = float(distance.max())
+            x, y, _, yaw = self._pose_array[k]
+            i0 = max(0, math.floor((x - r - origin[0]) / resolution))
+            i1 = min(nx - 1, math.floor((x + r - origin[0]) / resolution))
+            j0 = max(0, math.floor((y - r - origin[1]) / resolution))
+            j1 = min(ny - 1, math.floor((y + r - origin[1]) / resolution))
+            jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
+            ii, jj = ii.ravel(), jj.ravel()
+            dx = origin[0] + (ii + 0.5) * resolution - x
+            dy = origin[1] + (jj + 0.5) * resolution - y
+            c, s = math.cos(yaw), math.sin(yaw)
+            lx, ly = c * dx + s * dy, -s * dx + c * dy
+            b = np.clip(np.floor((np.arctan2(ly, lx) + math.pi) / (2.0 * math.pi) * bins).astype(np.intp), 0, bins - 1)
+            seen_through = np.hypot(lx, ly) < distance[b] - resolution
+            through[(jj * nx + ii)[seen_through]] += 1
+        return hits, through
 
 
 # ---------------------------------------------------------------------- building
@@ -435,12 +584,18 @@ class FuseReport:
     notes: list[str] = field(default_factory=list)
     #: The position index of each fitted model, in the models' order.
     fitted: list[int] = field(default_factory=list)
+    #: Positions left out before fitting because earlier keyframes covered what they saw.
+    not_keyframes: list[int] = field(default_factory=list)
 
 
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
-             progress: Callable[[int, int], None] | None = None) -> tuple[FusedMap, list[Any], FuseReport]:
-    """Fit every position of ``log`` with a copy of ``template`` (an unfitted
+             progress: Callable[[int, int], None] | None = None,
+             keyframe_share: float = KEYFRAME_NEW_SHARE) -> tuple[FusedMap, list[Any], FuseReport]:
+    """Fit the keyframe positions of ``log`` with copies of ``template`` (an unfitted
     :class:`occtool.fit.OccupancyRegressor`) and fuse them.
+
+    Keyframes (:func:`select_keyframes`): a position is fitted when at least
+    ``keyframe_share`` of the cells its returns fall in are new; 0 fits every position.
 
     Positions without a pose cannot be placed and raise, unless the log is a single
     position without one (its frame becomes the map's, noted in the report); positions
@@ -466,9 +621,12 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         raise InputError(f"{log.source or 'the log'}: position {missing[0]} has no pose; a world map needs poses")
     params = template.get_params()
     robot = params.get("robot") or Robot()
+    keep = select_keyframes(positions, robot, new_share=keyframe_share)
+    not_keyframes = sorted(set(p.index for p in positions) - {positions[k].index for k in keep})
+    positions = [positions[k] for k in keep]
     focus_range = params.get("focus_range", math.inf) if params.get("focus", True) else math.inf
     started = time.perf_counter()
-    models, poses, reaches, stamps, skipped = [], [], [], [], []
+    models, poses, reaches, returns, stamps, skipped = [], [], [], [], [], []
     fitted_positions: list[int] = []
     for done, item in enumerate(positions, start=1):
         try:
@@ -481,14 +639,16 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         poses.append(item.pose)
         stamps.append(item.stamp)
         reaches.append(observed_reach(item.features, robot, focus_range))
+        returns.append(returns_from_guard(getattr(model, "guard_", None)))
         if progress is not None:
             progress(done, len(positions))
     fitted = time.perf_counter()
     if not models:
         raise InputError(f"{log.source or 'the log'}: no position could be fitted ({skipped[0][1]})")
     fused = FusedMap([m.tree_ for m in models], poses, np.stack(reaches), robot, combination=combination,  # type: ignore[arg-type]  # poses checked above
-                     threshold=threshold, stamps=stamps)
-    report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes, fitted_positions)
+                     threshold=threshold, stamps=stamps, returns=np.stack(returns))
+    report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes, fitted_positions,
+                        not_keyframes)
     return fused, models, report
 
 
@@ -507,8 +667,9 @@ def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayL
     if reaches is None:
         reaches = np.stack([reach_from_guard(getattr(m, "guard_", None),
                                               m.focus_range if m.focus else math.inf) for m in models])
+    returns = np.stack([returns_from_guard(getattr(m, "guard_", None)) for m in models])
     return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination, threshold=threshold,
-                    stamps=stamps)
+                    stamps=stamps, returns=returns)
 
 
 __all__ = [
@@ -526,4 +687,6 @@ __all__ = [
     "fuse_models",
     "observed_reach",
     "reach_from_guard",
+    "returns_from_guard",
+    "select_keyframes",
 ]

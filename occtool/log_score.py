@@ -104,6 +104,23 @@ def world_grid(scans: list[Position], resolution: float = 0.05) -> Any:
                          np.array([lower[0], lower[1], 0], dtype=np.int64), params=params)
 
 
+def grid_raster(grid: Any) -> Raster:
+    """A one-layer world grid as Nav2 would load it (trinary: occupied at or above 0.65,
+    free at or below 0.196, unknown between and where no ray passed): the reference for
+    :func:`nav2_agreement`."""
+    from scipy.special import expit
+
+    from occtool.fuse import FREE, UNKNOWN
+
+    log_odds = np.asarray(grid.log_odds, dtype=np.float64)[:, :, 0].T  # rows along y
+    p = expit(log_odds)
+    cells = np.full(p.shape, UNKNOWN, dtype=np.uint8)
+    cells[(log_odds != 0) & (p <= 0.196)] = FREE
+    cells[p >= 0.65] = OCCUPIED
+    origin = (float(grid.lower[0]), float(grid.lower[1]))
+    return Raster(cells, float(grid.resolution), origin, p.astype(np.float32), np.zeros(p.shape, dtype=bool))
+
+
 def holdout_test_points(scans: list[Position], seed: int = 0, per_beam: int = FREE_POINTS_PER_BEAM,
                 margin: float = END_MARGIN) -> tuple[FloatArray, FloatArray]:
     """Occupied (each return's end point) and free (uniform along each return's beam, up to
@@ -180,6 +197,8 @@ class LogScore:
     scans: int
     held_out_scans: int
     training_positions: int
+    #: The keyframes fitted and fused (``training_positions`` less those left out).
+    fused_positions: int
     occupied_points: int
     free_points: int
     auc: dict[str, float]
@@ -190,6 +209,8 @@ class LogScore:
     raster_s: float
     grid_s: float
     nav2: dict[str, float]
+    #: The same agreement for the dense grid of the training scans (read as Nav2 reads a map).
+    nav2_grid: dict[str, float]
 
     def as_dict(self) -> dict[str, Any]:
         from dataclasses import asdict
@@ -199,7 +220,8 @@ class LogScore:
 
 def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: int = BLOCK, seed: int = 0,
                  resolution: float = 0.05, no_return_range: float | None = 5.0, threshold: float = 0.6,
-                 read_options: dict[str, Any] | None = None, grid_resolutions: tuple[float, ...] = ()) -> LogScore:
+                 read_options: dict[str, Any] | None = None, grid_resolutions: tuple[float, ...] = (),
+                 keyframe_share: float | None = None) -> LogScore:
     """Score the fused map of ``path``'s training scans against a dense 2D grid on held-out blocks.
 
     Parameters
@@ -216,6 +238,9 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         Beams without a return become free rays this long (training only; only returns are tested).
     grid_resolutions
         Further grid cell sizes to score (``auc["grid_0.1m"]`` ...); ``auc["grid"]`` is at ``resolution``.
+    keyframe_share
+        :func:`occtool.fuse.fuse_log`'s keyframe selection (``None``: its default; 0: every
+        training position is fitted). The test points and the grid do not depend on it.
     """
     from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
@@ -234,7 +259,10 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     test = [s for s, out in zip(scans, held) if out]
     train_log = build_log([Scan(s.features.points, s.features.evidence, s.pose, s.stamp, s.source) for s in train],
                           source=str(path), tolerance=tolerance)
-    fused, _, report = fuse_log(train_log, template, threshold=threshold)
+    from occtool.keyframes import KEYFRAME_NEW_SHARE
+
+    share = KEYFRAME_NEW_SHARE if keyframe_share is None else keyframe_share
+    fused, _, report = fuse_log(train_log, template, threshold=threshold, keyframe_share=share)
     started = time.perf_counter()
     grid = world_grid(train, resolution)
     grid_s = time.perf_counter() - started
@@ -259,11 +287,13 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     raster = fused.rasterise(resolution)
     raster_s = time.perf_counter() - started
     return LogScore(
-        source=str(path), scans=len(scans), held_out_scans=int(held.sum()), training_positions=len(fused),
+        source=str(path), scans=len(scans), held_out_scans=int(held.sum()),
+        training_positions=len(fused) + len(report.not_keyframes) + len(report.skipped), fused_positions=len(fused),
         occupied_points=len(occupied), free_points=len(free), auc=auc, coverage=float(observed.mean()),
         fused_bytes=fused.nbytes, grid_bytes=int(grid.nbytes), fit_s=report.fit_seconds, raster_s=raster_s,
-        grid_s=grid_s, nav2=nav2_agreement(raster, train),
+        grid_s=grid_s, nav2=nav2_agreement(raster, train), nav2_grid=nav2_agreement(grid_raster(grid), train),
     )
 
 
-__all__ = ["LogScore", "evaluate_log", "holdout_blocks", "holdout_test_points", "nav2_agreement", "world_grid"]
+__all__ = ["LogScore", "evaluate_log", "grid_raster", "holdout_blocks", "holdout_test_points", "nav2_agreement",
+           "world_grid"]

@@ -50,8 +50,12 @@ def test_nav2_map_puts_walls_where_they_are(mapped):
         return loaded.cells[j, i]
 
     _x0, _y0, _x1, y1 = ROOM
-    assert cell(1.0, y1 + 0.02) == CELL_OCCUPIED
+    # The wall's surface: its returns' cell, on one side of y1 or the other.
+    assert CELL_OCCUPIED in (cell(1.0, y1 - 0.02), cell(1.0, y1 + 0.02))
+    assert cell(1.0, y1 - 0.15) == CELL_FREE
     assert cell(1.0, 0.25) == CELL_FREE
+    # Behind the wall: not free.
+    assert cell(1.0, y1 + 0.15) != CELL_FREE
     assert cell(1.0, y1 + 1.5) == CELL_UNKNOWN
 
 
@@ -143,6 +147,18 @@ def test_evaluate_log_prints_the_figures(mapped):
     figures = json.loads(result.output)
     assert set(figures["auc"]) == {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid"}
     assert figures["auc"]["fused_log_odds"] > 0.9
+    assert 0 < figures["fused_positions"] <= figures["training_positions"]
+
+
+def test_keyframe_share_zero_fits_every_position(mapped, tmp_path):
+    log, out = mapped
+    result = run("map", log, "-o", tmp_path / "every", "--keyframe-share", "0", "--no-mcap", *LASER)
+    assert result.exit_code == 0, result.output
+    every = json.loads((tmp_path / "every" / "summary.json").read_text())
+    default = json.loads((out / "summary.json").read_text())
+    assert every["not_keyframes"] == 0
+    assert default["positions"] + default["not_keyframes"] == every["positions"]
+    assert default["positions"] < every["positions"]
 
 
 def test_origin_writes_wgs84_that_round_trips(mapped, tmp_path):

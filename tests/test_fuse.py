@@ -16,6 +16,8 @@ from occtool.fuse import (
     fuse_log,
     fuse_models,
     observed_reach,
+    returns_from_guard,
+    select_keyframes,
 )
 from occtool.io import read_log
 from occtool.log_score import evaluate_log, holdout_blocks
@@ -29,7 +31,8 @@ def room(tmp_path_factory):
     path = tmp_path_factory.mktemp("room") / "room.log"
     write_room_log(path, scans=60)
     log = read_log(path)
-    fused, models, report = fuse_log(log, OccupancyRegressor(robot=LASER_ROBOT))
+    # Every position (no keyframe selection): these tests are about how positions combine.
+    fused, models, report = fuse_log(log, OccupancyRegressor(robot=LASER_ROBOT), keyframe_share=0.0)
     return path, log, fused, models, report
 
 
@@ -60,16 +63,43 @@ def test_dempster_shafer_masses_are_normalised(room):
         assert np.allclose(total[seen], 1.0)
         assert ((ev.conflict >= 0) & (ev.conflict <= 1)).all()
         assert ((ev.probability >= 0) & (ev.probability <= 1)).all()
-        assert np.allclose(ev.probability[~seen], 0.5)
+        # Unobserved: 0.5, or more near a return (the returns' kernel).
+        assert (ev.probability[~seen] >= 0.5).all()
+        bare = FusedMap(fused.trees, fused.poses, fused.reaches, fused.robot, combination=combination)
+        assert np.allclose(bare.evidence(points).probability[~seen], 0.5)
 
 
-def test_memory_is_the_trees_poses_and_reaches(room):
+def test_returns_raise_occupancy_at_walls_only(room):
+    _, _, fused, _, _ = room
+    bare = FusedMap(fused.trees, fused.poses, fused.reaches, fused.robot)
+    _x0, _y0, x1, y1 = ROOM
+    wall = np.array([[1.0, y1, 0.0], [x1, 0.3, 0.0]])
+    inside = np.array([[1.0, 0.25, 0.0], [2.0, 1.0, 0.0]])
+    with_returns, without = fused.predict(np.vstack([wall, inside])), bare.predict(np.vstack([wall, inside]))
+    assert (with_returns[:2] >= 0.8).all() and (with_returns[:2] >= without[:2]).all()
+    assert np.allclose(with_returns[2:], without[2:])
+    # Above the robot's body band a return lends nothing.
+    assert np.allclose(fused.predict([[1.0, y1, 2.0]]), bare.predict([[1.0, y1, 2.0]]))
+
+
+def test_memory_is_the_float32_trees_poses_reaches_and_returns(room):
     from occtool.compare import tree_bytes
 
     _, _log, fused, models, _ = room
-    expected = sum(tree_bytes(m.tree_) for m in models) + 32 * len(models) + fused.reaches.nbytes
-    assert fused.nbytes == expected
+    # float32 coefficients: half of tree_bytes' float64 ones, the same 8 bytes a node.
+    trees = sum(tree_bytes(m.tree_) - m.tree_.coefficients.nbytes // 2 for m in models)
+    assert fused.returns is not None and fused.returns.shape == (len(models), 360)
+    assert fused.nbytes == trees + 32 * len(models) + fused.reaches.nbytes + 720 * len(models)
     assert fused.reaches.shape == (len(models), 2, 120)
+
+
+def test_float32_trees_read_as_the_models_within_1e6(room):
+    _, _log, fused, models, _ = room
+    rng = np.random.default_rng(1)
+    alpha, x = rng.uniform(-np.pi, np.pi, 500), rng.uniform(0.1, 8.0, 500)
+    for k in (0, len(models) // 2, len(models) - 1):
+        exact = models[k].tree_.predict(alpha, np.zeros(500), x)
+        assert np.abs(fused.tree(k).predict(alpha, np.zeros(500), x) - exact).max() < 1e-6
 
 
 def test_raster_rows_grow_with_y_and_walls_are_occupied(room):
@@ -137,3 +167,65 @@ def test_evaluate_log_scores_the_fused_map(room):
     assert score.auc["grid"] > 0.5
     assert 0 < score.coverage <= 1
     assert score.nav2["returns_on_occupied"] > 0.5
+    assert score.fused_positions <= score.training_positions
+
+
+def test_occupied_cells_are_where_the_returns_are(room):
+    _, _, fused, _, _ = room
+    raster = fused.rasterise(0.05)
+    occupied = np.argwhere(raster.cells == OCCUPIED)
+    centres = np.array(raster.origin) + (occupied[:, ::-1] + 0.5) * raster.resolution
+    x0, y0, x1, y1 = ROOM
+    to_wall = np.min(np.abs(np.column_stack([centres[:, 0] - x0, centres[:, 0] - x1,
+                                             centres[:, 1] - y0, centres[:, 1] - y1])), axis=1)
+    # Every occupied cell holds a wall's return (its centre within a cell diagonal of it).
+    assert len(occupied) > 100 and to_wall.max() <= 0.05
+    # The models' own walls (their level crossing) lie in front: thicker.
+    model = fused.rasterise(0.05, from_returns=False)
+    assert (model.cells == OCCUPIED).sum() > len(occupied)
+
+
+def test_raster_from_returns_needs_returns(room):
+    _, _, fused, _, _ = room
+    bare = FusedMap(fused.trees, fused.poses, fused.reaches, fused.robot)
+    assert bare.returns is None
+    assert (bare.rasterise(0.1).cells == OCCUPIED).any()
+    with pytest.raises(InputError, match="no returns"):
+        bare.rasterise(0.1, from_returns=True)
+
+
+def test_returns_are_the_guard_in_whole_millimetres():
+    from occtool.guard import ReturnGuard
+
+    distance = np.full(360, np.inf)
+    distance[[0, 90, 359]] = [1.2345, 0.5, 70.0]
+    returns = returns_from_guard(ReturnGuard(distance, 0.6))
+    assert returns.dtype == np.uint16 and returns.shape == (360,)
+    assert returns[0] == 1234 and returns[90] == 500
+    # None, and beyond what uint16 millimetres hold: no return.
+    assert returns[359] == np.iinfo(np.uint16).max and returns[1] == np.iinfo(np.uint16).max
+    assert (returns_from_guard(None) == np.iinfo(np.uint16).max).all()
+
+
+def test_keyframes_skip_positions_that_see_nothing_new(room):
+    from dataclasses import replace
+
+    _, log, _, _, _ = room
+    positions = list(log.positions)
+    twice = positions[:5] + [replace(p, index=100 + p.index) for p in positions[:5]]
+    kept = select_keyframes(twice, LASER_ROBOT)
+    # The repeats saw exactly what the first five saw.
+    assert kept and all(k < 5 for k in kept) and kept[0] == 0
+    assert select_keyframes(twice, LASER_ROBOT, new_share=0.0) == list(range(10))
+    assert len(select_keyframes(positions, LASER_ROBOT, new_share=1.0)) < len(positions)
+    with pytest.raises(InputError, match="share"):
+        select_keyframes(positions, LASER_ROBOT, new_share=1.5)
+    with pytest.raises(InputError, match="cell"):
+        select_keyframes(positions, LASER_ROBOT, cell=0.0)
+
+
+def test_fuse_log_fits_only_keyframes(room):
+    path, log, every, _, _ = room
+    fused, models, report = fuse_log(log, OccupancyRegressor(robot=LASER_ROBOT), keyframe_share=0.5)
+    assert len(fused) == len(models) == len(report.fitted) < len(every)
+    assert sorted(report.fitted + report.not_keyframes) == [p.index for p in log.positions]

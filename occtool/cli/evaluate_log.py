@@ -17,13 +17,16 @@ from occtool.cli.options import config_option, fit_options, log_options, seed_op
               help="Scans are held out in blocks of this many consecutive scans.")
 @click.option("--resolution", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.05,
               show_default=True, help="Cell size of the grid and of the map's raster, metres.")
+@click.option("--keyframe-share", type=click.FloatRange(min=0.0, max=1.0), default=None,
+              help="Fit a training position only when this share of the cells its returns hit is new "
+                   "(default 0.05; 0 fits every position).")
 @click.option("--json", "as_json", is_flag=True, default=False, help="Print the figures as JSON.")
 @fit_options
 @log_options
 @seed_option
 @config_option
-def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, as_json: bool, seed: int,
-                 **kwargs: Any) -> None:
+def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, keyframe_share: float | None,
+                 as_json: bool, seed: int, **kwargs: Any) -> None:
     """Hold out --holdout of LOG's scans in blocks of --block consecutive scans, fuse the
     local models of the rest and build a dense 2D log-odds grid from the same scans, and
     score both on the held-out beams (end points occupied, points along each beam up to
@@ -39,7 +42,7 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, a
     options["topics"] = list(options.get("topics") or []) or None
     no_return = options.pop("no_return_range", None)
     result = score(log_path, template, holdout=holdout, block=block, seed=seed, resolution=resolution,
-                   no_return_range=no_return, read_options=options).as_dict()
+                   no_return_range=no_return, read_options=options, keyframe_share=keyframe_share).as_dict()
     if as_json:
         click.echo(json.dumps(result, indent=1))
         return
@@ -49,7 +52,8 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, a
                f"{result['free_points']} free test points")
     for name, value in auc.items():
         click.echo(f"  AUC {name:<24} {value:.4f}")
-    click.echo(f"  fused map {result['fused_bytes'] / 1e6:.2f} MB ({result['training_positions']} positions, "
+    click.echo(f"  fused map {result['fused_bytes'] / 1e6:.2f} MB ({result['fused_positions']} keyframes of "
+               f"{result['training_positions']} positions, "
                f"fit {result['fit_s']:.1f} s, raster {result['raster_s']:.1f} s); "
                f"grid {result['grid_bytes'] / 1e6:.2f} MB (built in {result['grid_s']:.1f} s); "
                f"test points the fused map covers: {result['coverage']:.1%}")

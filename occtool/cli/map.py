@@ -29,6 +29,9 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
               show_default=True, help="Cell size of the Nav2 map and the Foxglove grid, metres.")
 @click.option("--threshold", type=float, default=0.6, show_default=True, callback=_occupancy,
               help="Fused occupancy at or above which a cell is occupied, in (0, 1).")
+@click.option("--keyframe-share", type=click.FloatRange(min=0.0, max=1.0), default=0.05, show_default=True,
+              help="Fit a position of LOG only when this share of the cells its returns hit is new (0: every "
+                   "position).")
 @click.option("--combination", type=click.Choice(["log_odds", "dempster_shafer", "mean"]), default="log_odds",
               show_default=True, help="How the positions that observed a place are combined.")
 @click.option("--max-range", type=click.FloatRange(min=0.0, min_open=True), default=1.5, show_default=True,
@@ -47,7 +50,8 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 @seed_option
 @overwrite_option
 @config_option
-def map_command(source: str, output: str, resolution: float, threshold: float, combination: str, max_range: float,
+def map_command(source: str, output: str, resolution: float, threshold: float, keyframe_share: float,
+                combination: str, max_range: float,
                 simplify: float | None, precision: int | None, origin: str | None, mcap: bool, seed: int,
                 overwrite: bool,
                 **kwargs: Any) -> None:
@@ -113,15 +117,18 @@ def map_command(source: str, output: str, resolution: float, threshold: float, c
     else:
         template = fit_from_kwargs(kwargs, seed=seed)
         log = read_log_from_kwargs(source, kwargs)
-        fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold)
+        fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold,
+                                         keyframe_share=keyframe_share)
         for note in report.notes:
             logger.warning("%s: %s", Path(source).name, note)
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
         positions = list(zip(report.fitted, fused.poses, fused.stamps))
-        logger.info("%d positions fitted in %.1f s", report.positions, report.fit_seconds)
+        logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,
+                    report.fit_seconds, len(report.not_keyframes))
         extra = {"source": str(source), "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
-                 "skipped_positions": [index for index, _ in report.skipped]}
+                 "skipped_positions": [index for index, _ in report.skipped],
+                 "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
     run = map_of_run(fused, models, positions, resolution=resolution,
                      navigation={"max_range": max_range, "threshold": threshold})
     written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
