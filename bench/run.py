@@ -553,6 +553,9 @@ def whole_log_targets(log_map: dict[str, Any] | None, fleet: dict[str, Any] | No
         out.append(("Intel held-out blocks: fused AUC >= 0.95 and >= the grid's", f"{fused:.3f} (grid {grid:.3f})",
                     fused >= 0.95 and fused >= grid))
         out.append(("Intel fused model <= 2 MB", f"{intel['fused_bytes'] / 1e6:.2f} MB", intel["fused_bytes"] <= 2e6))
+        seconds = intel["fit_s"] + intel["raster_s"]
+        out.append(("Intel: training positions fitted and fused (fit + raster) <= 60 s, one process",
+                    f"{seconds:.0f} s ({intel['fused_positions']} keyframes fitted)", seconds <= 60))
         both = intel["nav2"]["scans_both_95"]
         out.append(("Nav2 map: >= 95 % of Intel scans with returns on occupied cells and beams clear",
                     f"{both:.1%} of scans", both >= 0.95))
