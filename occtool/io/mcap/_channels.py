@@ -72,15 +72,11 @@ _SCHEMA_KINDS = {
     ("nav_msgs/msg/Odometry", "cdr"): ODOMETRY,
 }
 
-# ROS sensor_msgs/PointField datatypes and foxglove PackedElementField numeric types.
-_ROS_DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
-_FOXGLOVE_TYPES = {1: "u1", 2: "i1", 3: "u2", 4: "i2", 5: "u4", 6: "i4", 7: "f4", 8: "f8"}
-_FOXGLOVE_TYPE_NAMES = {"UINT8": 1, "INT8": 2, "UINT16": 3, "INT16": 4, "UINT32": 5, "INT32": 6, "FLOAT32": 7, "FLOAT64": 8}
-
 
 def channel_kind(schema_name: str, message_encoding: str) -> str | None:
     """What occtool makes of a channel: one of the kinds above, or ``None``."""
     return _SCHEMA_KINDS.get((schema_name, message_encoding.lower()))
+
 
 class _JsonDecoderFactory:
     """Decode ``json`` messages (the core mcap library has no JSON decoder)."""

@@ -31,7 +31,9 @@ DEFAULT_CONSTANT_EVIDENCE = 0.9
 # ROS sensor_msgs/PointField datatypes and foxglove PackedElementField numeric types.
 _ROS_DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 _FOXGLOVE_TYPES = {1: "u1", 2: "i1", 3: "u2", 4: "i2", 5: "u4", 6: "i4", 7: "f4", 8: "f8"}
-_FOXGLOVE_TYPE_NAMES = {"UINT8": 1, "INT8": 2, "UINT16": 3, "INT16": 4, "UINT32": 5, "INT32": 6, "FLOAT32": 7, "FLOAT64": 8}
+_FOXGLOVE_TYPE_NAMES = {
+    "UINT8": 1, "INT8": 2, "UINT16": 3, "INT16": 4, "UINT32": 5, "INT32": 6, "FLOAT32": 7, "FLOAT64": 8,
+}
 
 
 @dataclass
@@ -137,11 +139,15 @@ def _decode_pointcloud2(message: Any, options: _Options, where: str) -> _Decoded
     return _Decoded(points, evidence, _strip_frame(header.frame_id), _stamp_seconds(header.stamp), _IDENTITY, dropped)
 
 
-def _scan_evidence(intensities: Any, count: int, valid: NDArray[np.bool_], options: _Options, where: str) -> NDArray[np.float64]:
+def _scan_evidence(
+    intensities: Any, count: int, valid: NDArray[np.bool_], options: _Options, where: str
+) -> NDArray[np.float64]:
     if options.use_intensities:
         values = np.asarray(intensities if intensities is not None else [], dtype=np.float64)
         if values.size != count:
-            raise InputError(f"{where}: --intensities given but the scan has {values.size} intensities for {count} ranges")
+            raise InputError(
+                f"{where}: --intensities given but the scan has {values.size} intensities for {count} ranges"
+            )
         values = values[valid]
         finite = values[np.isfinite(values)]
         top = float(finite.max()) if finite.size else 0.0
@@ -231,8 +237,8 @@ def _decode_foxglove_pointcloud(message: Any, options: _Options, where: str) -> 
     if "z" not in columns and "x" in columns:
         columns["z"] = np.zeros_like(columns["x"])
     points, evidence, dropped = _cloud_to_arrays(columns, options, where)
-    return _Decoded(points, evidence, _strip_frame(_get(message, "frame_id")), _stamp_seconds(_get(message, "timestamp")),
-                    _foxglove_origin(message), dropped)
+    frame, stamp = _strip_frame(_get(message, "frame_id")), _stamp_seconds(_get(message, "timestamp"))
+    return _Decoded(points, evidence, frame, stamp, _foxglove_origin(message), dropped)
 
 
 def _decode_foxglove_laserscan(message: Any, options: _Options, where: str) -> _Decoded:
@@ -245,11 +251,12 @@ def _decode_foxglove_laserscan(message: Any, options: _Options, where: str) -> _
     # foxglove.LaserScan has no range limits: +inf is the only "no return".
     missing = np.isposinf(ranges)
     intensities = _get(message, "intensities")
-    evidence = _scan_evidence(list(intensities) if intensities is not None else None, ranges.size, valid, options, where)
+    listed = list(intensities) if intensities is not None else None
+    evidence = _scan_evidence(listed, ranges.size, valid, options, where)
     reach = options.no_return_range if options.no_return_range is not None else np.inf
     points, evidence = _scan_points(ranges, angles, valid, missing, reach, evidence, options)
-    return _Decoded(points, evidence, _strip_frame(_get(message, "frame_id")), _stamp_seconds(_get(message, "timestamp")),
-                    _foxglove_origin(message))
+    frame, stamp = _strip_frame(_get(message, "frame_id")), _stamp_seconds(_get(message, "timestamp"))
+    return _Decoded(points, evidence, frame, stamp, _foxglove_origin(message))
 
 
 _DECODERS = {
@@ -260,7 +267,9 @@ _DECODERS = {
 }
 
 
-def _decode_occtool(message: Any, where: str) -> tuple[int, NDArray[np.float64], NDArray[np.float64], Pose | None, float | None]:
+def _decode_occtool(
+    message: Any, where: str
+) -> tuple[int, NDArray[np.float64], NDArray[np.float64], Pose | None, float | None]:
     try:
         version = int(message.get("version", 0))
         if version > OCCTOOL_FORMAT_VERSION:
@@ -276,6 +285,8 @@ def _decode_occtool(message: Any, where: str) -> tuple[int, NDArray[np.float64],
             raise
         raise InputError(f"{where}: malformed occtool features message ({exc!r})") from None
     if points.size != 3 * count or evidence.size != count:
-        raise InputError(f"{where}: message says {count} features but holds {points.size // 3} points and {evidence.size} evidence values")
-    return position, points.reshape(count, 3).astype(np.float64), evidence.astype(np.float64), pose, (None if stamp is None else float(stamp))
+        raise InputError(f"{where}: message says {count} features but holds {points.size // 3} points "
+                         f"and {evidence.size} evidence values")
+    seconds = None if stamp is None else float(stamp)
+    return position, points.reshape(count, 3).astype(np.float64), evidence.astype(np.float64), pose, seconds
 

@@ -30,7 +30,9 @@ def _mcap_errors() -> tuple[type[BaseException], ...]:
 
     from mcap.exceptions import McapError
 
-    errors: list[type[BaseException]] = [McapError, struct.error, EOFError, zlib.error, UnicodeDecodeError, json.JSONDecodeError]
+    errors: list[type[BaseException]] = [
+        McapError, struct.error, EOFError, zlib.error, UnicodeDecodeError, json.JSONDecodeError,
+    ]
     try:
         from google.protobuf.message import DecodeError
 
@@ -97,7 +99,9 @@ class _Reader:
         with open(self.path, "rb") as handle:
             try:
                 for schema, channel, _ in NonSeekingReader(handle, validate_crcs=True).iter_messages():
-                    entry = counts.setdefault(channel.id, [channel.topic, schema.name if schema else "", channel.message_encoding, 0])
+                    entry = counts.setdefault(
+                        channel.id, [channel.topic, schema.name if schema else "", channel.message_encoding, 0]
+                    )
                     entry[3] += 1
             except _mcap_errors() as exc:
                 raise self.corrupt(exc) from None
@@ -167,6 +171,7 @@ def _describe_checksums(reader: _Reader) -> str:
     if missing == len(indexes):
         return f"none: its {len(indexes):,} chunk(s) carry no CRC32, so corrupt data cannot be detected"
     if missing:
-        return f"{len(indexes) - missing:,} of {len(indexes):,} chunks carry a CRC32 (checked on read); {missing:,} do not"
+        return (f"{len(indexes) - missing:,} of {len(indexes):,} chunks carry a CRC32 (checked on read); "
+                f"{missing:,} do not")
     return f"CRC32 on all {len(indexes):,} chunk(s), checked on read"
 

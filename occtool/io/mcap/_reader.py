@@ -28,7 +28,10 @@ from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
 
 def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path: str) -> list[ChannelRow]:
     def listing(items: list[ChannelRow]) -> str:
-        return "; ".join(f"{r.topic} ({r.schema or 'no schema'}, {r.messages if r.messages is not None else '?'} messages)" for r in items)
+        return "; ".join(
+            f"{r.topic} ({r.schema or 'no schema'}, {r.messages if r.messages is not None else '?'} messages)"
+            for r in items
+        )
 
     if topics:
         by_topic = {r.topic: r for r in rows}
@@ -209,7 +212,8 @@ class _Scans:
         if bad.any():
             if not self.options.skip_invalid:
                 i = int(np.argmax(bad))
-                raise InputError(f"{where}: evidence value {float(values[i])!r} is not in [0, 1] (pass --skip-invalid to drop such points)")
+                raise InputError(f"{where}: evidence value {float(values[i])!r} is not in [0, 1] "
+                                 "(pass --skip-invalid to drop such points)")
             self.options.skipped_invalid += int(bad.sum())
             points, values = points[~bad], values[~bad]
         mounting = decoded.origin.then(self._mounting(decoded.frame) or _IDENTITY)

@@ -62,7 +62,8 @@ _IDENTITY = _Rigid(np.eye(3), np.zeros(3))
 
 def _checked_rigid(rotation: Any, translation: Any, what: str) -> _Rigid:
     """The transform of a quaternion and a translation, refusing ones that are no rigid motion."""
-    q = tuple(float(_get(rotation, k, 0.0 if k != "w" else 1.0)) for k in ("x", "y", "z", "w")) if rotation is not None else (0.0, 0.0, 0.0, 1.0)
+    q = (tuple(float(_get(rotation, k, 0.0 if k != "w" else 1.0)) for k in ("x", "y", "z", "w"))
+         if rotation is not None else (0.0, 0.0, 0.0, 1.0))
     t = _vector(translation)
     if not (np.isfinite(q).all() and np.isfinite(t).all()):
         raise InputError(f"{what} is not finite (rotation {q}, translation {tuple(float(v) for v in t)})")
