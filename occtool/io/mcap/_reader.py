@@ -27,6 +27,8 @@ from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
 
 
 def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path: str) -> list[ChannelRow]:
+    """The range channels to read: the ``topics`` asked for, else the log's only range channel."""
+
     def listing(items: list[ChannelRow]) -> str:
         return "; ".join(
             f"{r.topic} ({r.schema or 'no schema'}, {r.messages if r.messages is not None else '?'} messages)"
