@@ -42,7 +42,7 @@ class BagReader:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = str(path)
 
-    def __enter__(self) -> BagReader:  # noqa: PYI034 - as io.mcap._Reader
+    def __enter__(self) -> BagReader:  # noqa: PYI034 - as io.mcap._file._Reader
         try:
             from rosbags.highlevel import AnyReader
             from rosbags.typesys import Stores, get_typestore
