@@ -1,0 +1,85 @@
+"""One world-frame occupancy map from the local models of a whole log.
+
+occtool fits one small model per robot position, in that position's sensor-centred
+frame. A local model only *speaks* where its position observed: at pan angles its rays
+covered, in front of the first obstacle at that angle (plus the obstacle's own depth
+window; a function increasing in range says nothing true behind it) and no farther than
+its rays reached or the fit's focus range. :func:`observed_reach` records that, per pan
+bin, as a few hundred bytes next to the model.
+
+:class:`FusedMap` is the list of local trees, their poses and reaches (nothing else: no
+grid), and answers occupancy queries at world points by combining every position that
+observed the point:
+
+* ``"log_odds"``: the models' occupancies, clamped as OctoMap clamps, added as log-odds;
+* ``"dempster_shafer"``: each model gives masses ``occupied = c F``, ``free = c (1 - F)``,
+  ``unknown = 1 - c``; Dempster's conjunctive rule combines them (as products of
+  commonalities), the conflict mass flags positions that contradict each other, and the
+  probability reported is the pignistic one;
+* ``"mean"``: the plain mean of the speaking models.
+
+Where no model speaks the place is *unknown* (never free). Each position also keeps its
+nearest returns (its return guard, 720 bytes): :meth:`FusedMap.predict` joins them to the
+models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
+unknown grid over the robot's body band with its walls where the returns fall.
+:func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
+
+The parts, one concept a module (private; everything public is imported from here):
+
+============  =========================================================================
+``_reach``    what a position observed: reach and first obstacle per pan bin, returns
+``_combine``  the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
+``_map``      :class:`FusedMap`: storage, where each model speaks, queries, rasterising
+``_raster``   :class:`Raster` and the Nav2 pixel values
+``_build``    :func:`fuse_log`, :func:`fuse_models` and :class:`FuseReport`
+============  =========================================================================
+"""
+
+from occtool.fuse._build import FuseReport, fuse_log, fuse_models
+from occtool.fuse._combine import (
+    CLAMP,
+    COMBINATIONS,
+    CONFLICT_FLAG,
+    DEFAULT_COMBINATION,
+    DS_CONFIDENCE,
+    RETURN_KERNEL,
+    Evidence,
+)
+from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
+from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.fuse._reach import (
+    NO_OBSTACLE,
+    REACH_BINS,
+    REACH_UNIT,
+    observed_reach,
+    reach_from_guard,
+    returns_from_guard,
+)
+from occtool.keyframes import select_keyframes
+
+__all__ = [
+    "CLAMP",
+    "COMBINATIONS",
+    "CONFLICT_FLAG",
+    "DEFAULT_COMBINATION",
+    "DS_CONFIDENCE",
+    "FREE",
+    "FRONT_MARGIN",
+    "NO_OBSTACLE",
+    "OCCUPIED",
+    "REACH_BINS",
+    "REACH_UNIT",
+    "RETURN_KERNEL",
+    "RETURN_SHARE",
+    "UNKNOWN",
+    "Evidence",
+    "FuseReport",
+    "FusedMap",
+    "Raster",
+    "fuse_log",
+    "fuse_models",
+    "observed_reach",
+    "reach_from_guard",
+    "returns_from_guard",
+    "select_keyframes",
+]

@@ -1,0 +1,119 @@
+"""Building a fused map: fitting a log's keyframe positions, or placing fitted models."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from occtool.errors import InputError
+from occtool.features import Pose, RangeLog
+from occtool.fuse._combine import DEFAULT_COMBINATION
+from occtool.fuse._map import FusedMap
+from occtool.fuse._reach import observed_reach, reach_from_guard, returns_from_guard
+from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
+from occtool.robot import Robot
+
+
+@dataclass
+class FuseReport:
+    """What building a fused map took."""
+
+    positions: int
+    skipped: list[tuple[int, str]]
+    fit_seconds: float
+    fuse_seconds: float
+    notes: list[str] = field(default_factory=list)
+    #: The position index of each fitted model, in the models' order.
+    fitted: list[int] = field(default_factory=list)
+    #: Positions left out before fitting because earlier keyframes covered what they saw.
+    not_keyframes: list[int] = field(default_factory=list)
+
+
+def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
+             progress: Callable[[int, int], None] | None = None,
+             keyframe_share: float = KEYFRAME_NEW_SHARE) -> tuple[FusedMap, list[Any], FuseReport]:
+    """Fit the keyframe positions of ``log`` with copies of ``template`` (an unfitted
+    :class:`occtool.fit.OccupancyRegressor`) and fuse them.
+
+    Keyframes (:func:`select_keyframes`): a position is fitted when at least
+    ``keyframe_share`` of the cells its returns fall in are new; 0 fits every position.
+
+    Positions without a pose cannot be placed and raise, unless the log is a single
+    position without one (its frame becomes the map's, noted in the report); positions
+    whose fit fails for their data (no usable features) are skipped and reported.
+
+    Returns
+    -------
+    fused, models, report
+        The :class:`FusedMap`, the fitted regressors (for their navigation maps) and a
+        :class:`FuseReport`.
+    """
+    from occtool.errors import OcctoolError
+    from occtool.fit import OccupancyRegressor
+
+    notes = []
+    positions = list(log.positions)
+    missing = [p.index for p in positions if p.pose is None]
+    if missing and len(positions) == 1:
+        # One position and no pose (a log without any): its own frame is the map.
+        positions = [replace(positions[0], pose=Pose())]
+        notes.append("the log has no poses: its single position is the map frame's origin")
+    elif missing:
+        raise InputError(f"{log.source or 'the log'}: position {missing[0]} has no pose; a world map needs poses")
+    params = template.get_params()
+    robot = params.get("robot") or Robot()
+    keep = select_keyframes(positions, robot, new_share=keyframe_share)
+    not_keyframes = sorted(set(p.index for p in positions) - {positions[k].index for k in keep})
+    positions = [positions[k] for k in keep]
+    focus_range = params.get("focus_range", math.inf) if params.get("focus", True) else math.inf
+    started = time.perf_counter()
+    models, poses, reaches, returns, stamps, skipped = [], [], [], [], [], []
+    fitted_positions: list[int] = []
+    for done, item in enumerate(positions, start=1):
+        try:
+            model = OccupancyRegressor(**params).fit(item.features)
+        except OcctoolError as exc:
+            skipped.append((item.index, str(exc)))
+            continue
+        fitted_positions.append(item.index)
+        models.append(model)
+        poses.append(item.pose)
+        stamps.append(item.stamp)
+        reaches.append(observed_reach(item.features, robot, focus_range))
+        returns.append(returns_from_guard(getattr(model, "guard_", None)))
+        if progress is not None:
+            progress(done, len(positions))
+    fitted = time.perf_counter()
+    if not models:
+        raise InputError(f"{log.source or 'the log'}: no position could be fitted ({skipped[0][1]})")
+    fused = FusedMap([m.tree_ for m in models], poses, np.stack(reaches), robot, combination=combination,  # type: ignore[arg-type]  # poses checked above
+                     threshold=threshold, stamps=stamps, returns=np.stack(returns))
+    report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes, fitted_positions,
+                        not_keyframes)
+    return fused, models, report
+
+
+def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayLike | None = None,
+                combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
+                stamps: Sequence[float | None] | None = None) -> FusedMap:
+    """Fuse fitted regressors (e.g. a model set read back) placed at ``poses``.
+
+    Without ``reaches`` each model's reach comes from its return guard
+    (:func:`reach_from_guard`): a model file does not keep its features, so directions
+    where it saw no return stay unknown.
+    """
+    if not models:
+        raise InputError("a fused map needs at least one local model")
+    robot = models[0].robot_
+    if reaches is None:
+        reaches = np.stack([reach_from_guard(getattr(m, "guard_", None),
+                                              m.focus_range if m.focus else math.inf) for m in models])
+    returns = np.stack([returns_from_guard(getattr(m, "guard_", None)) for m in models])
+    return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination, threshold=threshold,
+                    stamps=stamps, returns=returns)

@@ -1,0 +1,44 @@
+"""The fused map drawn as a free / occupied / unknown grid (Nav2's trinary pixel values)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: Nav2 pixel values (trinary mode).
+FREE, OCCUPIED, UNKNOWN = 254, 0, 205
+
+
+@dataclass
+class Raster:
+    """A free / occupied / unknown grid in the world (map) frame.
+
+    ``cells`` is ``(ny, nx)`` uint8 with :data:`FREE`, :data:`OCCUPIED`, :data:`UNKNOWN`,
+    row 0 at ``origin[1]`` (the bottom: y grows with the row); cell ``(j, i)`` spans
+    ``origin + (i, j) * resolution`` to one resolution more. ``conflict`` marks cells where
+    positions contradicted each other; ``probability`` is the fused occupancy (0.5 unknown).
+    """
+
+    cells: NDArray[np.uint8]
+    resolution: float
+    origin: tuple[float, float]
+    probability: NDArray[np.float32]
+    conflict: NDArray[np.bool_]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.cells.shape[0]), int(self.cells.shape[1]))
+
+    def cell_of(self, xy: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+        """Row, column and inside-flag of world ``(K, 2)`` points."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        col = np.floor((xy[:, 0] - self.origin[0]) / self.resolution).astype(np.intp)
+        row = np.floor((xy[:, 1] - self.origin[1]) / self.resolution).astype(np.intp)
+        inside = (row >= 0) & (row < self.shape[0]) & (col >= 0) & (col < self.shape[1])
+        return np.clip(row, 0, self.shape[0] - 1), np.clip(col, 0, self.shape[1] - 1), inside
+
+    def counts(self) -> dict[str, int]:
+        return {"free": int((self.cells == FREE).sum()), "occupied": int((self.cells == OCCUPIED).sum()),
+                "unknown": int((self.cells == UNKNOWN).sum()), "conflict": int(self.conflict.sum())}

@@ -1,0 +1,98 @@
+"""What one position observed: its reach and first obstacle per pan bin, its nearest returns.
+
+A local model only speaks where its position observed; these few hundred bytes, kept next
+to the model, say where that is (:class:`occtool.fuse.FusedMap` reads them).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.features import Features
+from occtool.robot import Robot
+
+FloatArray = NDArray[np.float64]
+
+#: Pan-angle bins of a model's reach (the fit's own first-obstacle bins, 3 degrees).
+REACH_BINS = 120
+#: Reaches are kept in whole centimetres (uint16: up to 655 m).
+REACH_UNIT = 0.01
+#: A bin's first-obstacle value where it saw none.
+NO_OBSTACLE = int(np.iinfo(np.uint16).max)
+
+
+def observed_reach(features: Features, robot: Robot, focus_range: float = math.inf,
+                   bins: int = REACH_BINS, window: tuple[float, float] | None = None) -> NDArray[np.uint16]:
+    """Per pan bin, how far a position observed, and its first obstacle.
+
+    Returns ``(2, bins)`` uint16 centimetres: row 0 the reach, row 1 the first obstacle
+    (:data:`NO_OBSTACLE` where none). The reach is
+
+    the least of: the first obstacle's distance widened by its cluster window (the fit's
+    :func:`occtool.fit.first_obstacle_distance`, as
+    :func:`occtool.compare.in_front_of_first_obstacle` scores it), the farthest feature in
+    the body band at that angle (a free ray reaches its end), and ``focus_range``. 0 where
+    the position saw nothing.
+    """
+    from occtool.fit import (
+        FOCUS_WINDOW,
+        FOCUS_WINDOW_ABS,
+        adaptive_support,
+        angle_bins,
+        first_obstacle_distance,
+    )
+
+    low, high = robot.body_band
+    x, y, z = features.points.T
+    band = (z >= low) & (z <= high)
+    alpha = np.arctan2(y[band], x[band])
+    distance = np.hypot(x[band], y[band])
+    seen = np.zeros(bins)
+    np.maximum.at(seen, angle_bins(alpha, bins), distance)
+    hits = features.evidence[band] > 0
+    limit = np.full(bins, np.inf)
+    first = np.full(bins, np.inf)
+    if hits.any():
+        support, _ = adaptive_support(len(features))
+        first = first_obstacle_distance(np.repeat(alpha[hits], 2), np.repeat(distance[hits], 2), bins, support)
+        relative, absolute = window if window is not None else (FOCUS_WINDOW, FOCUS_WINDOW_ABS)
+        limit = first * (1.0 + relative) + absolute
+    reach = np.minimum(np.minimum(seen, limit), focus_range)
+    return np.vstack([_centimetres(reach), _centimetres(first)])
+
+
+def _centimetres(distance: FloatArray) -> NDArray[np.uint16]:
+    return np.round(np.minimum(distance / REACH_UNIT, NO_OBSTACLE)).astype(np.uint16)
+
+
+def reach_from_guard(guard: Any, focus_range: float = math.inf, bins: int = REACH_BINS) -> NDArray[np.uint16]:
+    """A model file's reach when its features are gone: the return guard's nearest return
+    per bin (widened by the cluster window); 0 (unobserved) where the guard holds none."""
+    from occtool.fit import FOCUS_WINDOW, FOCUS_WINDOW_ABS
+
+    if guard is None:
+        return np.vstack([np.zeros(bins, dtype=np.uint16), np.full(bins, NO_OBSTACLE, dtype=np.uint16)])
+    per = guard.bins // bins if guard.bins % bins == 0 else None
+    if per is None:
+        raise InputError(f"a guard of {guard.bins} bins does not split into {bins} reach bins")
+    nearest = guard.distance.reshape(bins, per).min(axis=1)
+    reach = np.where(np.isfinite(nearest), nearest * (1.0 + FOCUS_WINDOW) + FOCUS_WINDOW_ABS, 0.0)
+    reach = np.minimum(reach, focus_range)
+    return np.vstack([_centimetres(reach), _centimetres(nearest)])
+
+
+def returns_from_guard(guard: Any) -> NDArray[np.uint16]:
+    """A model's nearest returns per pan bin (its return guard: ``guard.bins`` whole
+    millimetres, :data:`NO_OBSTACLE` where none or beyond 65 m); all none without a guard."""
+    from occtool.guard import GUARD_BINS
+
+    if guard is None:
+        return np.full(GUARD_BINS, NO_OBSTACLE, dtype=np.uint16)
+    distance = np.asarray(guard.distance, dtype=np.float64)
+    millimetres = np.where(np.isfinite(distance), np.floor(distance * 1000.0 + 1e-6), NO_OBSTACLE)
+    return np.minimum(millimetres, NO_OBSTACLE).astype(np.uint16)
