@@ -113,7 +113,7 @@ def design_matrix(basis: str, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> F
 
 
 #: Points evaluated at once: a (pieces x points) block of a few megabytes.
-EVALUATION_CHUNK = 1 << 13
+EVALUATION_CHUNK = 1 << 12
 
 
 def _evaluate(node: Node, values: FloatArray) -> FloatArray:
