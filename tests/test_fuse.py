@@ -229,3 +229,19 @@ def test_fuse_log_fits_only_keyframes(room):
     fused, models, report = fuse_log(log, OccupancyRegressor(robot=LASER_ROBOT), keyframe_share=0.5)
     assert len(fused) == len(models) == len(report.fitted) < len(every)
     assert sorted(report.fitted + report.not_keyframes) == [p.index for p in log.positions]
+
+
+def test_a_model_set_fuses_from_its_folder_as_from_its_models(room, tmp_path):
+    from occtool.fuse import fuse_model_set
+    from occtool.io.model import load_model, read_model_set
+    from occtool.modelset import fit_model_set
+
+    path, *_ = room
+    summary = fit_model_set(path, tmp_path / "models", estimator=OccupancyRegressor(robot=LASER_ROBOT), jobs=1)
+    assert not summary.failures
+    fused, models, positions = fuse_model_set(tmp_path / "models")
+    folder, entries = read_model_set(tmp_path / "models")
+    assert [p[0] for p in positions] == [e["position"] for e in entries] and len(models) == len(entries)
+    again = fuse_models([load_model(folder / e["file"]) for e in entries], [p[1] for p in positions])
+    points = np.array([[1.0, 0.25, 0.0], [ROOM[2] + 0.02, 0.3, 0.0], [2.0, 1.0, 0.0]])
+    assert np.array_equal(fused.predict(points), again.predict(points))

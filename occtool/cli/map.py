@@ -72,9 +72,7 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
 
     from occtool.cli.options import fit_from_kwargs, read_log_from_kwargs
     from occtool.errors import InputError
-    from occtool.features import Pose
-    from occtool.fuse import fuse_log, fuse_models
-    from occtool.io.model import load_model, read_model_set
+    from occtool.fuse import fuse_log, fuse_model_set
     from occtool.mapping import map_of_run, output_paths, write_run_map
 
     logger = logging.getLogger("occtool.map")
@@ -95,24 +93,8 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
         raise click.ClickException(f"{output} exists and is not a folder")
     is_models = Path(source).is_dir() or Path(source).name == "index.json"
     if is_models:
-        folder, entries = read_model_set(source)
-        models, poses, stamps, positions = [], [], [], []
-        for entry in entries:
-            if entry.get("pose") is None:
-                raise InputError(f"{folder / 'index.json'}: position {entry['position']} has no pose for a world map")
-            try:
-                pose = Pose.from_dict(entry["pose"])
-            except (TypeError, ValueError):
-                raise InputError(
-                    f"{folder / 'index.json'}: position {entry['position']}'s pose is not numbers") from None
-            model = load_model(folder / entry["file"])
-            stamp = entry.get("stamp") if isinstance(entry.get("stamp"), (int, float)) else None
-            models.append(model)
-            poses.append(pose)
-            stamps.append(stamp)
-            positions.append((entry["position"], pose, stamp))
-        fused = fuse_models(models, poses, combination=combination, threshold=threshold, stamps=stamps)
-        logger.info("%d models read from %s", len(models), folder)
+        fused, models, positions = fuse_model_set(source, combination=combination, threshold=threshold)
+        logger.info("%d models read from %s", len(models), source)
         extra = {"source": str(source), "fitted_here": False}
     else:
         template = fit_from_kwargs(kwargs, seed=seed)

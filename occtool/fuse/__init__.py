@@ -31,11 +31,11 @@ The parts, one concept a module (private; everything public is imported from her
 ``_combine``  the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
 ``_map``      :class:`FusedMap`: storage, where each model speaks, queries, rasterising
 ``_raster``   :class:`Raster` and the Nav2 pixel values
-``_build``    :func:`fuse_log`, :func:`fuse_models` and :class:`FuseReport`
+``_build``    :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
 ============  =========================================================================
 """
 
-from occtool.fuse._build import FuseReport, fuse_log, fuse_models
+from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set, fuse_models
 from occtool.fuse._combine import (
     CLAMP,
     COMBINATIONS,
@@ -77,6 +77,7 @@ __all__ = [
     "FusedMap",
     "Raster",
     "fuse_log",
+    "fuse_model_set",
     "fuse_models",
     "observed_reach",
     "reach_from_guard",

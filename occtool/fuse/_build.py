@@ -117,3 +117,34 @@ def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayL
     returns = np.stack([returns_from_guard(getattr(m, "guard_", None)) for m in models])
     return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination, threshold=threshold,
                     stamps=stamps, returns=returns)
+
+
+def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,
+                   threshold: float = 0.6) -> tuple[FusedMap, list[Any], list[tuple[int, Pose, float | None]]]:
+    """Fuse a model set written by ``occtool fit LOG -o DIR/`` (``DIR`` or ``DIR/index.json``).
+
+    Returns the fused map, the models and, for each, its position index, pose and stamp.
+
+    Raises
+    ------
+    InputError
+        If the set is malformed (:func:`occtool.io.model.read_model_set`) or a position has
+        no pose: a world map needs every model placed.
+    """
+    from occtool.io.model import load_model, read_model_set
+
+    folder, entries = read_model_set(path)
+    models, poses, stamps, positions = [], [], [], []
+    for entry in entries:
+        if entry.get("pose") is None:
+            raise InputError(f"{folder / 'index.json'}: position {entry['position']} has no pose for a world map")
+        try:
+            pose = Pose.from_dict(entry["pose"])
+        except (TypeError, ValueError):
+            raise InputError(f"{folder / 'index.json'}: position {entry['position']}'s pose is not numbers") from None
+        stamp = entry.get("stamp") if isinstance(entry.get("stamp"), (int, float)) else None
+        models.append(load_model(folder / entry["file"]))
+        poses.append(pose)
+        stamps.append(stamp)
+        positions.append((entry["position"], pose, stamp))
+    return fuse_models(models, poses, combination=combination, threshold=threshold, stamps=stamps), models, positions
