@@ -158,7 +158,8 @@ def test_a_reader_that_goes_away_is_one_line(csv):
     process = subprocess.Popen([sys.executable, "-m", "occtool", "convert", str(csv), "-o", "-"], env=ENV,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     process.stdout.close()  # gone before the first write (like `| head -0`)
-    stderr = process.stderr.read()
+    with process.stderr:
+        stderr = process.stderr.read()
     process.wait(timeout=120)
     assert process.returncode == 1
     assert stderr.strip().splitlines() == ["Error: standard output was closed before the output was written"]
