@@ -146,7 +146,7 @@ def _scan_evidence(
         values = np.asarray(intensities if intensities is not None else [], dtype=np.float64)
         if values.size != count:
             raise InputError(
-                f"{where}: --intensities given but the scan has {values.size} intensities for {count} ranges"
+                f"{where}: use_intensities=True given but the scan has {values.size} intensities for {count} ranges"
             )
         values = values[valid]
         finite = values[np.isfinite(values)]
@@ -155,7 +155,7 @@ def _scan_evidence(
         if top > 1.0:
             values = values / top
         return values
-    options.constant_for.add("laser scans (no --intensities)")
+    options.constant_for.add("laser scans (no use_intensities=True)")
     return np.full(int(valid.sum()), DEFAULT_CONSTANT_EVIDENCE if options.evidence is None else options.evidence)
 
 

@@ -54,7 +54,7 @@ def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path:
     if not candidates:
         raise InputError(f"{path} holds no range data occtool can read; its channels: {listing(rows) or 'none'}")
     if len(candidates) > 1:
-        raise InputError(f"{path} has several range channels, pick one or more with --topic: {listing(candidates)}")
+        raise InputError(f"{path} has several range channels, pick one or more (topics=): {listing(candidates)}")
     return candidates
 
 
@@ -215,7 +215,7 @@ class _Scans:
             if not self.options.skip_invalid:
                 i = int(np.argmax(bad))
                 raise InputError(f"{where}: evidence value {float(values[i])!r} is not in [0, 1] "
-                                 "(pass --skip-invalid to drop such points)")
+                                 "(pass skip_invalid=True to drop such points)")
             self.options.skipped_invalid += int(bad.sum())
             points, values = points[~bad], values[~bad]
         mounting = decoded.origin.then(self._mounting(decoded.frame) or _IDENTITY)
@@ -269,7 +269,7 @@ def _reading_notes(scans: _Scans, evidence: float | None, no_return_range: float
         )
     if options.constant_for:
         value = DEFAULT_CONSTANT_EVIDENCE if evidence is None else evidence
-        notes.append(f"constant evidence {value} (--evidence) for {' and '.join(sorted(options.constant_for))}")
+        notes.append(f"constant evidence {value} (evidence=) for {' and '.join(sorted(options.constant_for))}")
     if options.no_return:
         if no_return_range is None:
             notes.append(f"dropped {options.no_return} of {options.beams} laser beam(s) with no return "
@@ -279,7 +279,7 @@ def _reading_notes(scans: _Scans, evidence: float | None, no_return_range: float
             at = f"{reach[0]:g} m" if len(reach) == 1 else f"{reach[0]:g} to {reach[-1]:g} m"
             notes.append(f"kept {options.no_return} of {options.beams} laser beam(s) with no return "
                          f"(+inf or above range_max) as free rays at {at} with evidence 0 "
-                         f"(--no-return-range {no_return_range:g})")
+                         f"(no_return_range={no_return_range:g})")
     if options.invalid_beams:
         notes.append(f"dropped {options.invalid_beams} of {options.beams} invalid laser beam(s) "
                      "(NaN, -inf, <= 0 or below range_min)")
