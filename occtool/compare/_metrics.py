@@ -93,23 +93,10 @@ def in_front_of_first_obstacle(points: FloatArray, features: Features, robot: Ro
     :func:`occtool.fit.first_obstacle_distance`); free points count when nearer than it,
     ``occupied`` points (returns) when no farther than it plus its cluster window.
     """
-    from occtool.fit import (
-        FOCUS_ANGLE_BINS,
-        FOCUS_WINDOW,
-        FOCUS_WINDOW_ABS,
-        adaptive_support,
-        angle_bins,
-        first_obstacle_distance,
-    )
+    from occtool.fit import FOCUS_ANGLE_BINS, FOCUS_WINDOW, FOCUS_WINDOW_ABS, angle_bins, first_obstacles_in_band
 
     low, high = robot.body_band
-    x, y, z = features.points.T
-    band = (z >= low) & (z <= high) & (features.evidence > 0)
-    distance = np.hypot(x[band], y[band])
-    support, _ = adaptive_support(len(features))
-    # Each feature counts twice, as the fit's two hit samples do.
-    first = first_obstacle_distance(np.repeat(np.arctan2(y[band], x[band]), 2), np.repeat(distance, 2),
-                                     FOCUS_ANGLE_BINS, support)
+    first = first_obstacles_in_band(features, robot, FOCUS_ANGLE_BINS)
     px, py, pz = np.asarray(points, dtype=np.float64).reshape(-1, 3).T
     limit = first[angle_bins(np.arctan2(py, px), FOCUS_ANGLE_BINS)]
     if occupied:

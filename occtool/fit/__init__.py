@@ -49,6 +49,7 @@ from occtool.fit._profile import (
     adaptive_support,
     angle_bins,
     first_obstacle_distance,
+    first_obstacles_in_band,
     segment_near_runs,
     sorted_within_bins,
 )
@@ -79,6 +80,7 @@ __all__ = [
     "contradicted_features",
     "features_digest",
     "first_obstacle_distance",
+    "first_obstacles_in_band",
     "focus_samples",
     "frontier_samples",
     "huber_loss",

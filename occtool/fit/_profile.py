@@ -10,6 +10,7 @@ of pieces per segment.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -93,6 +94,20 @@ def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int
     np.minimum.at(first, bins[index], np.minimum(distance[ahead], cap * distance[anchor]))
     return first
 
+
+
+def first_obstacles_in_band(features: Any, robot: Any, n_bins: int) -> FloatArray:
+    """Per pan-angle bin, the horizontal distance of the first obstacle among ``features``'
+    returns (evidence > 0) inside ``robot``'s body band: :func:`first_obstacle_distance` with
+    the support of :func:`adaptive_support`, each return counted twice as the fit's two hit
+    samples are. ``inf`` where there is none. The scoring of held-out points and a fused
+    map's reach both read a position's first obstacles this way."""
+    low, high = robot.body_band
+    x, y, z = features.points.T
+    band = (z >= low) & (z <= high) & (features.evidence > 0)
+    support, _ = adaptive_support(len(features))
+    alpha, distance = np.arctan2(y[band], x[band]), np.hypot(x[band], y[band])
+    return first_obstacle_distance(np.repeat(alpha, 2), np.repeat(distance, 2), n_bins, support)
 
 def group_by_bin(bins: NDArray[np.intp], n_bins: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """The order that groups ``bins`` by bin (stable: ascending index within a bin) and the

@@ -39,13 +39,7 @@ def observed_reach(features: Features, robot: Robot, focus_range: float = math.i
     the body band at that angle (a free ray reaches its end), and ``focus_range``. 0 where
     the position saw nothing.
     """
-    from occtool.fit import (
-        FOCUS_WINDOW,
-        FOCUS_WINDOW_ABS,
-        adaptive_support,
-        angle_bins,
-        first_obstacle_distance,
-    )
+    from occtool.fit import FOCUS_WINDOW, FOCUS_WINDOW_ABS, angle_bins, first_obstacles_in_band
 
     low, high = robot.body_band
     x, y, z = features.points.T
@@ -54,14 +48,9 @@ def observed_reach(features: Features, robot: Robot, focus_range: float = math.i
     distance = np.hypot(x[band], y[band])
     seen = np.zeros(bins)
     np.maximum.at(seen, angle_bins(alpha, bins), distance)
-    hits = features.evidence[band] > 0
-    limit = np.full(bins, np.inf)
-    first = np.full(bins, np.inf)
-    if hits.any():
-        support, _ = adaptive_support(len(features))
-        first = first_obstacle_distance(np.repeat(alpha[hits], 2), np.repeat(distance[hits], 2), bins, support)
-        relative, absolute = window if window is not None else (FOCUS_WINDOW, FOCUS_WINDOW_ABS)
-        limit = first * (1.0 + relative) + absolute
+    first = first_obstacles_in_band(features, robot, bins)
+    relative, absolute = window if window is not None else (FOCUS_WINDOW, FOCUS_WINDOW_ABS)
+    limit = first * (1.0 + relative) + absolute  # inf where no obstacle
     reach = np.minimum(np.minimum(seen, limit), focus_range)
     return np.vstack([_centimetres(reach), _centimetres(first)])
 
