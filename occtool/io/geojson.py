@@ -31,6 +31,7 @@ from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.io import json as safe_json
 from occtool.io._atomic import atomic_write
+from occtool.io.json import read_text
 from occtool.navigation import NavigationMap, Slice
 
 CRS_NOTE = (
@@ -413,11 +414,7 @@ def read_navigation(path: str | os.PathLike[str], position: int | None = None) -
         message names the file and what is wrong.
     """
     source = os.fspath(path)
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except UnicodeDecodeError:
-        raise InputError(f"{source}: not a text (UTF-8) file") from None
+    text = read_text(path, error=InputError)
     features, properties = _parse(text, source)
     if position is not None:
         features = [
@@ -507,11 +504,7 @@ def read_navigation_maps(path: str | os.PathLike[str]) -> list[tuple[int | None,
         If the file is not a navigation map (the message names the file).
     """
     source = os.fspath(path)
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except UnicodeDecodeError:
-        raise InputError(f"{source}: not a text (UTF-8) file") from None
+    text = read_text(path, error=InputError)
     features, _ = _parse(text, source)
     tags = {feature["properties"].get("position") for feature in features
             if isinstance(feature, Mapping) and isinstance(feature.get("properties"), Mapping)}

@@ -17,6 +17,15 @@ from typing import Any
 from occtool.errors import ModelFormatError, OcctoolError
 
 
+def read_text(path: str | os.PathLike[str], *, error: type[OcctoolError] = ModelFormatError) -> str:
+    """A user's text file, whole: ``error`` (one line naming the file) when it is not UTF-8."""
+    try:
+        with open(path, encoding="utf-8") as handle:
+            return handle.read()
+    except UnicodeDecodeError:
+        raise error(f"{os.fspath(path)}: not a text (UTF-8) file") from None
+
+
 def read_json(path: str | os.PathLike[str], *, error: type[OcctoolError] = ModelFormatError) -> Any:
     """The JSON document in a file.
 
@@ -43,11 +52,7 @@ def read_json(path: str | os.PathLike[str], *, error: type[OcctoolError] = Model
     ...
     occtool.errors.ModelFormatError: .../report.json: not valid JSON (line 1: Expecting value)
     """
-    try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except UnicodeDecodeError:
-        raise error(f"{os.fspath(path)}: not a text (UTF-8) file") from None
+    text = read_text(path, error=error)
     try:
         return loads(text)
     except json.JSONDecodeError as exc:

@@ -25,7 +25,7 @@ import numpy as np
 
 from occtool.errors import InputError, ModelFormatError
 from occtool.io._atomic import atomic_write
-from occtool.io.json import read_json
+from occtool.io.json import loads, read_json
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 from occtool.tree import InverseTree, MinMaxTree
@@ -508,8 +508,8 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
     if os.stat(index).st_size > MAX_INDEX_BYTES:
         raise InputError(f"{index}: larger than {MAX_INDEX_BYTES >> 20} MB, not a model-set index")
     try:
-        data = json.loads(index.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        data = loads(index.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{index}: not valid JSON ({exc})") from None
     is_index = isinstance(data, dict) and data.get("format") == MODEL_SET_FORMAT
     if not (is_index and isinstance(data.get("models"), list)):
