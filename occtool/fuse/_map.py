@@ -258,12 +258,7 @@ class FusedMap:
                 if r <= 0:
                     continue
                 x, y = self._pose_array[k, :2]
-                i0 = max(0, math.floor((x - r - origin[0]) / resolution))
-                i1 = min(nx - 1, math.floor((x + r - origin[0]) / resolution))
-                j0 = max(0, math.floor((y - r - origin[1]) / resolution))
-                j1 = min(ny - 1, math.floor((y + r - origin[1]) / resolution))
-                jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
-                ii, jj = ii.ravel(), jj.ravel()
+                ii, jj = _cells_around(x, y, r, origin, resolution, nx, ny)
                 pts = np.column_stack([origin[0] + (ii + 0.5) * resolution, origin[1] + (jj + 0.5) * resolution,
                                        np.full(ii.size, z0 + h)])
                 # Heights are relative to each pose: a robot whose z varies keeps its band.
@@ -321,12 +316,7 @@ class FusedMap:
             distance = np.where(held, millimetres.astype(np.float64) / 1000.0, -np.inf)
             r = float(distance.max())
             x, y, _, yaw = self._pose_array[k]
-            i0 = max(0, math.floor((x - r - origin[0]) / resolution))
-            i1 = min(nx - 1, math.floor((x + r - origin[0]) / resolution))
-            j0 = max(0, math.floor((y - r - origin[1]) / resolution))
-            j1 = min(ny - 1, math.floor((y + r - origin[1]) / resolution))
-            jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
-            ii, jj = ii.ravel(), jj.ravel()
+            ii, jj = _cells_around(x, y, r, origin, resolution, nx, ny)
             dx = origin[0] + (ii + 0.5) * resolution - x
             dy = origin[1] + (jj + 0.5) * resolution - y
             c, s = math.cos(yaw), math.sin(yaw)
@@ -335,3 +325,15 @@ class FusedMap:
             seen_through = np.hypot(lx, ly) < distance[b] - resolution
             through[(jj * nx + ii)[seen_through]] += 1
         return hits, through
+
+
+def _cells_around(x: float, y: float, r: float, origin: Any, resolution: float, nx: int,
+                  ny: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Column and row indices of the raster cells (``nx`` x ``ny`` from ``origin``) of the
+    square of half-side ``r`` around ``(x, y)``, clipped to the raster."""
+    i0 = max(0, math.floor((x - r - origin[0]) / resolution))
+    i1 = min(nx - 1, math.floor((x + r - origin[0]) / resolution))
+    j0 = max(0, math.floor((y - r - origin[1]) / resolution))
+    j1 = min(ny - 1, math.floor((y + r - origin[1]) / resolution))
+    jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
+    return ii.ravel(), jj.ravel()
