@@ -107,6 +107,17 @@ def test_a_fitted_model_brings_its_slope_bounds_and_robot(fitted_model, tmp_path
     properties = json.loads(out.read_text())["properties"]
     assert properties["robot_radius"] == 0.3 and properties["sensor_height"] == 0.8
     assert properties["threshold"] == 0.7
+    # The model's guard carries rays on to its returns by the library's default, or as told.
+    from occtool.navigation import RETURN_SNAP
+
+    assert properties["return_snap"] == RETURN_SNAP
+    snapped = shapely.geometry.shape(json.loads(out.read_text())["features"][0]["geometry"])
+    result = run("extract", fitted_model, "-o", out, "--robot-radius", "0.3", "--threshold", "0.7",
+                 "--return-snap", "0")
+    assert result.exit_code == 0, result.output
+    collection = json.loads(out.read_text())
+    assert collection["properties"]["return_snap"] == 0
+    assert shapely.geometry.shape(collection["features"][0]["geometry"]).area <= snapped.area + 1e-9
 
 
 def test_config_file_gives_defaults(sphere_inverse, tmp_path):

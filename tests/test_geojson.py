@@ -70,6 +70,9 @@ def test_slices_are_included_on_request(nav):
 
 @pytest.mark.parametrize("sequence", [False, True])
 def test_write_then_read_gives_the_same_map(nav, tmp_path, sequence):
+    from dataclasses import replace
+
+    nav = replace(nav, return_snap=0.3)
     path = tmp_path / "nav.geojson"
     write_navigation(nav, path, sequence=sequence, include_slices=True)
     back = read_navigation(path)
@@ -79,7 +82,7 @@ def test_write_then_read_gives_the_same_map(nav, tmp_path, sequence):
     assert [s.height for s in back.slices] == [s.height for s in nav.slices]
     assert all(a.polygon.equals_exact(b.polygon, 1e-12) for a, b in zip(back.slices, nav.slices))
     for name in ("threshold", "effective_threshold", "heights", "robot_radius", "max_range", "n_angles",
-                 "point_spacing", "sensor_height", "body_height", "frame_id", "straight_line"):
+                 "point_spacing", "sensor_height", "body_height", "frame_id", "straight_line", "return_snap"):
         assert getattr(back, name) == getattr(nav, name), name
 
 

@@ -690,3 +690,60 @@ def test_a_doorway_keeps_its_exploration_points_under_the_guarantee():
     assert len(explore) >= 2
     assert np.abs(explore).max() < 0.4 - math.asin(0.25 / 1.5)
     assert nav.polygon.contains(Point(1.45, 0.0)) and not nav.polygon.contains(Point(0.0, 1.49))
+
+
+# --- carrying a ray on to the guarded returns it stops just short of ----------------------
+
+
+def _guard_ring(distance: float, alpha_low: float = -math.pi, alpha_high: float = math.pi):
+    """A guard with returns every 0.1 degree at ``distance`` over ``[alpha_low, alpha_high)``."""
+    from occtool.guard import build_guard
+
+    alpha = np.arange(alpha_low, alpha_high, math.radians(0.1))
+    return build_guard(alpha, np.full(alpha.size, distance), 0.6)
+
+
+@pytest.mark.parametrize("returns_at, snap, expected_reach", [
+    (3.2, 0.3, 3.2 - 0.001),   # crossing 0.2 m short: carried on to the returns (mm-rounded down)
+    (3.2, 0.1, 3.0),           # 0.2 m is farther than the snap: the model's crossing stays
+    (3.5, 0.3, 3.0),           # returns 0.5 m beyond the crossing: not this surface, the crossing stays
+    (2.8, 0.3, 2.8 - 0.001),   # returns nearer than the crossing: the guard caps, as before
+    (3.2, 0.0, 3.0),           # snap 0: the model's crossing
+])
+def test_a_ray_stopping_just_short_of_its_returns_is_carried_on_to_them(returns_at, snap, expected_reach):
+    guard = _guard_ring(returns_at)
+    nav = navigation_map(round_room(3.0), robot=ROBOT, max_range=5.0, guard=guard, return_snap=snap)
+    inner = expected_reach - ROBOT.radius
+    # The shrunk disc: area of a circle of the inner radius (360 chords, GEOS arcs: within 1 %).
+    assert nav.polygon.area == pytest.approx(math.pi * inner**2, rel=0.01)
+    assert nav.return_snap == snap
+
+
+def test_only_the_rays_near_returns_are_carried_on_and_none_comes_within_the_radius():
+    # Returns 0.2 m behind the model's wall over one quarter of the pan angle only.
+    guard = _guard_ring(3.2, 0.0, math.pi / 2)
+    nav = navigation_map(round_room(3.0), robot=ROBOT, max_range=5.0, guard=guard, return_snap=0.3)
+    assert nav.polygon.contains(Point(0.0, 0.0).buffer(2.75 - 0.03))
+    assert nav.polygon.contains(Point(2.9 * math.cos(math.pi / 4), 2.9 * math.sin(math.pi / 4)))
+    assert not nav.polygon.contains(Point(-2.9 * math.cos(math.pi / 4), -2.9 * math.sin(math.pi / 4)))
+    alpha = np.arange(0.0, math.pi / 2, math.radians(0.1))
+    returns = shapely.points(np.column_stack([3.2 * np.cos(alpha), 3.2 * np.sin(alpha)]))
+    assert shapely.distance(nav.polygon, returns).min() >= ROBOT.radius * (1 - 1e-3)
+
+
+def test_a_robot_in_collision_stays_in_collision_whatever_the_snap():
+    guard = _guard_ring(0.28)
+
+    def touching(alpha, h, level):
+        return np.zeros(np.broadcast(alpha, h).shape)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = navigation_map(touching, robot=ROBOT, guard=guard, return_snap=0.3)
+    assert nav.polygon.is_empty
+
+
+@pytest.mark.parametrize("snap", [-0.1, math.nan, math.inf])
+def test_a_snap_out_of_range_is_refused(snap):
+    with pytest.raises(InputError, match="return_snap"):
+        navigation_map(round_room(3.0), robot=ROBOT, return_snap=snap)

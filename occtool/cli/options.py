@@ -343,7 +343,10 @@ def fit_from_kwargs(kwargs: dict[str, Any], *, seed: int = 0) -> Any:
 # --- navigation extraction (owner: navigation) ----------------------------------------
 
 ROBOT_OPTION_NAMES = ("robot_radius", "sensor_height", "body_height", "ground_clearance")
-EXTRACT_OPTION_NAMES = ("threshold", "heights", "slice_spacing", "max_range", "n_angles", "point_spacing")
+EXTRACT_OPTION_NAMES = ("threshold", "heights", "slice_spacing", "max_range", "n_angles", "point_spacing",
+                        "return_snap")
+#: The library's :data:`occtool.navigation.RETURN_SNAP` (not imported: the CLI starts without numpy).
+RETURN_SNAP = 0.3
 
 
 def _positive(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
@@ -387,6 +390,11 @@ extract_options = _compose(
     click.option("--point-spacing", type=float, default=None, callback=_positive,
                  help="Arc length between obstacle/exploration points on the max-range circle, metres "
                       "(default: the robot radius, at least a tenth of the max range)."),
+    click.option("--return-snap", type=click.FloatRange(min=0, max=MAX_DISTANCE), default=RETURN_SNAP,
+                 show_default=True,
+                 help="A ray whose model crossing stops at most this far (metres) in front of the model's "
+                      "guarded returns is carried on to them, where the surface was measured; 0: the "
+                      "model's crossing."),
 )
 
 geojson_options = _compose(

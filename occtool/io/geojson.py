@@ -41,7 +41,7 @@ CRS_NOTE = (
 # Properties written for every map; read back into the NavigationMap fields of the same name.
 _NUMBER_FIELDS = (
     "threshold", "effective_threshold", "robot_radius", "max_range", "point_spacing",
-    "sensor_height", "body_height", "ground_clearance", "margin",
+    "sensor_height", "body_height", "ground_clearance", "margin", "return_snap",
 )
 _RECORD_SEPARATOR = "\x1e"
 
@@ -471,7 +471,8 @@ def read_navigation(path: str | os.PathLike[str], position: int | None = None) -
     if not isinstance(straight_line, bool):
         raise InputError(f"{source}: property 'straight_line' must be true or false, got {straight_line!r}")
     numbers = {name: _number(properties, name, source) for name in _NUMBER_FIELDS}
-    numbers["margin"] = 0.0 if math.isnan(numbers["margin"]) else numbers["margin"]
+    for name in ("margin", "return_snap"):  # absent from older files: neither was applied
+        numbers[name] = 0.0 if math.isnan(numbers[name]) else numbers[name]
     for name, default in (("sensor_height", 1.0), ("body_height", 1.0), ("ground_clearance", 0.05)):
         numbers[name] = default if math.isnan(numbers[name]) else numbers[name]
     n_angles = _number(properties, "n_angles", source, default=0.0)

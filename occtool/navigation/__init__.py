@@ -33,6 +33,7 @@ The parts, one concept a module (private; everything public is imported from her
 
 from occtool.navigation._extract import (
     MAX_POINTS,
+    RETURN_SNAP,
     SHRINK_QUAD_SEGMENTS,
     FreeBounds,
     InverseRange,

@@ -2,8 +2,8 @@
 
 :func:`navigation_map` reads as the method, one step a function: check the parameters,
 choose the cut heights and the margin (:mod:`occtool.navigation._heights`), sweep the pan
-angle at each height, bound each ray by its neighbours and cap it by the return guard,
-shrink the free area by the robot's radius, keep what the robot sees in a straight line,
+angle at each height, bound each ray by its neighbours and cap it by the return guard (or
+carry it on to the guarded returns it stops just short of), shrink the free area by the robot's radius, keep what the robot sees in a straight line,
 clip to the max-range circle, then place the obstacle and exploration points.
 """
 
@@ -49,6 +49,14 @@ FreeBounds = Callable[[FloatArray, FloatArray, FloatArray, float], FloatArray]
 SHRINK_QUAD_SEGMENTS = 16
 #: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).
 MAX_POINTS = 20_000
+#: A ray whose model crossing stops at most this far (m) in front of the guarded returns
+#: around it is carried on to them (``return_snap``). The fitted pieces cross the threshold
+#: in front of a surface (a smooth summary of a sharp step, with bounded slopes): the
+#: polygon stopped 0.1-0.3 m short of walls, which closed a 1 m aisle to 0.6 of its area.
+#: Measured over 7 scenes x 3 seeds at 1k-10k features: IoU against the truth +0.02 to
+#: +0.15 (aisle 10k: 0.61 -> 0.78), no collision added beyond 0.1 % of a polygon; 0.15 m
+#: gave most of it, 0.3 m a little more.
+RETURN_SNAP = 0.3
 
 
 def navigation_map(
@@ -65,6 +73,7 @@ def navigation_map(
     straight_line: bool = True,
     guard: ReturnGuard | None = None,
     free_bounds: FreeBounds | None = None,
+    return_snap: float = RETURN_SNAP,
 ) -> NavigationMap:
     """Extract the navigation polygon, obstacle and exploration points from a model.
 
@@ -120,6 +129,12 @@ def navigation_map(
         :class:`~occtool.guard.ReturnGuard`): each ray's free distance is capped by the
         guarded returns around it before the shrink, so the polygon keeps every one at
         least the robot's radius away, whatever the model's pieces say.
+    return_snap
+        With ``guard``: a ray whose free distance stops at most this far (metres) in
+        front of the guarded returns around it is carried on to them, where the surface
+        was measured (the model's crossing lies in front of it by design); the cap above
+        still holds. The space between was seen through: by the return's own ray, and
+        for a planar scan by the beams beside it. 0 keeps the model's crossing.
 
     Returns
     -------
@@ -148,6 +163,9 @@ def navigation_map(
     """
     threshold, max_range, n_angles, point_spacing = _checked_parameters(
         threshold, max_range, n_angles, point_spacing, slice_spacing, robot)
+    return_snap = float(return_snap)
+    if not (math.isfinite(return_snap) and 0.0 <= return_snap <= MAX_DISTANCE):
+        raise InputError(f"return_snap must be a number of metres from 0 to {MAX_DISTANCE:g}, got {return_snap}")
     radius = float(robot.radius)
     requested = requested_heights(heights, robot)
     cuts = cut_heights(requested, robot, n_angles, slope_bounds=slope_bounds, slice_spacing=slice_spacing,
@@ -175,7 +193,7 @@ def navigation_map(
     )
     slices = [Slice(float(height), polygon) for height, polygon in zip(requested, slice_polygons)]
 
-    nearest = _nearest_per_ray(distances, alpha, between_rays=cuts.between_rays, guard=guard)
+    nearest = _nearest_per_ray(distances, alpha, between_rays=cuts.between_rays, guard=guard, snap=return_snap)
     circle_vertices = max(CIRCLE_OVERSAMPLING * n_angles, MIN_CIRCLE_VERTICES)
     polygon = _free_polygon(nearest, alpha, radius=radius, shrink=shrink, max_range=max_range,
                             straight_line=straight_line, circle_vertices=circle_vertices)
@@ -207,6 +225,7 @@ def navigation_map(
         slice_heights=tuple(float(h) for h in cuts.heights),
         margin=float(cuts.margin),
         straight_line=bool(straight_line),
+        return_snap=return_snap if guard is not None else 0.0,
     )
 
 
@@ -253,9 +272,10 @@ def _sweep(inverse_range: InverseRange, free_bounds: FreeBounds | None, alpha: F
 
 
 def _nearest_per_ray(distances: FloatArray, alpha: FloatArray, *, between_rays: bool,
-                     guard: ReturnGuard | None) -> FloatArray:
+                     guard: ReturnGuard | None, snap: float = 0.0) -> FloatArray:
     """Each ray's free distance over every cut, bounded by its neighbours' when the margin
-    covers the model between rays, and capped by the guarded returns around it."""
+    covers the model between rays, and capped by the guarded returns around it; carried
+    on to those returns when it stops at most ``snap`` in front of them."""
     # Star polygons on common rays: the one through the per-ray least distance lies
     # inside their intersection (each triangle between two rays lies inside every
     # slice's) and touches it at every ray, and shrinking commutes with intersecting, so
@@ -267,7 +287,13 @@ def _nearest_per_ray(distances: FloatArray, alpha: FloatArray, *, between_rays: 
         # takes the least of its own and its neighbours' distances.
         nearest = np.minimum(nearest, np.minimum(cyclic_previous(nearest), cyclic_next(nearest)))
     if guard is not None:
-        nearest = np.minimum(nearest, guard.ray_bounds(alpha))
+        bound = guard.ray_bounds(alpha)
+        nearest = np.minimum(nearest, bound)
+        # ``bound`` is the least guarded return over the ray's window (its neighbours'
+        # rays included), so the carried-on star polygon still holds none strictly inside.
+        # A ray the model closes at the sensor stays closed: the robot is in collision.
+        near = np.isfinite(bound) & (nearest > 0) & (bound - nearest <= snap)
+        nearest = np.where(near, bound, nearest)
     return nearest
 
 

@@ -79,6 +79,9 @@ class NavigationMap:
         ``threshold - effective_threshold``.
     straight_line
         Whether the polygon was cut to what the robot reaches in a straight line.
+    return_snap
+        How far (m) in front of the guarded returns a ray's crossing was carried on to
+        them (0: not; :func:`~occtool.navigation.navigation_map`'s ``return_snap``).
     frame_id
         ``"base_link"`` for the robot frame, else the world frame the map was moved to.
     pose
@@ -104,6 +107,7 @@ class NavigationMap:
     slice_heights: tuple[float, ...] = ()
     margin: float = 0.0
     straight_line: bool = True
+    return_snap: float = 0.0
     frame_id: str = "base_link"
     pose: Pose | None = None
     extra: Mapping[str, object] = field(default_factory=dict)
