@@ -29,7 +29,7 @@ import numpy as np
 from occtool.compare import compare_grid
 from occtool.errors import OcctoolError
 from occtool.evaluate import returns_within_body
-from occtool.fit import OccupancyRegressor
+from occtool.fit import PLANAR_FOCUS_RANGE, OccupancyRegressor
 from occtool.navigation import NavigationWarning
 from occtool.robot import Robot
 from occtool.simulate import SCENES, simulate_scene
@@ -129,17 +129,20 @@ def summarise_scenes(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def log_quality(path: str, every: int = AUC_EVERY) -> dict[str, Any]:
     """One CARMEN log, every position: same-scan safety, area, obstacle points; AUC every ``every``-th."""
     from occtool.io import read_log
+    from occtool.modelset import estimator_for_log
 
-    robot = LASER_ROBOT
     started = time.perf_counter()
     log = read_log(path, no_return_range=LASER_NO_RETURN_RANGE)
+    # What `occtool fit LOG` fits with: a planar laser's robot (LASER_ROBOT) and focus range.
+    template = estimator_for_log(OccupancyRegressor(robot=LASER_ROBOT), log.positions, planar_defaults=True)
+    robot = template.robot
     unsafe_positions = unsafe_returns = disc_points = all_points = empty = 0
     areas, aucs = [], []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NavigationWarning)
         for index, item in enumerate(log.positions):
             features = item.features
-            nav = OccupancyRegressor(robot=robot).fit(features).navigation_map()
+            nav = OccupancyRegressor(**template.get_params()).fit(features).navigation_map()
             areas.append(nav.polygon.area)
             empty += nav.polygon.is_empty
             touched = returns_within_body(features, nav.polygon, robot, nav.threshold)
@@ -149,11 +152,12 @@ def log_quality(path: str, every: int = AUC_EVERY) -> dict[str, Any]:
                 disc_points += int((np.hypot(*nav.obstacle_points.T) < robot.radius).sum())
                 all_points += len(nav.obstacle_points)
             if index % every == 0 and len(features) >= 20:
-                report = compare_grid(features, regressor=OccupancyRegressor(robot=robot), navigation={"robot": robot},
+                report = compare_grid(features, regressor=template, navigation={"robot": robot},
                                       resolution=RESOLUTION, unknown="occupied", file_sizes=False, seed=0)
                 aucs.append((report["auc"]["parametric"], report["auc"]["grid"],
-                             report["auc_front"]["parametric"], report["auc_front"]["grid"]))
-    auc = np.array(aucs, dtype=np.float64).reshape(-1, 4)
+                             report["auc_front"]["parametric"], report["auc_front"]["grid"],
+                             report["models"]["parametric"]["polygon_area"], report["models"]["grid"]["polygon_area"]))
+    auc = np.array(aucs, dtype=np.float64).reshape(-1, 6)
     return {
         "log": str(Path(path).parent.name),
         "positions": len(log.positions),
@@ -168,6 +172,9 @@ def log_quality(path: str, every: int = AUC_EVERY) -> dict[str, Any]:
         "grid_auc_mean": float(np.nanmean(auc[:, 1])) if len(auc) else float("nan"),
         "parametric_auc_front_mean": float(np.nanmean(auc[:, 2])) if len(auc) else float("nan"),
         "grid_auc_front_mean": float(np.nanmean(auc[:, 3])) if len(auc) else float("nan"),
+        # Both from the same 90 % of the features, the grid careful (unseen space occupied).
+        "compared_area_parametric_mean": float(np.nanmean(auc[:, 4])) if len(auc) else float("nan"),
+        "compared_area_grid_mean": float(np.nanmean(auc[:, 5])) if len(auc) else float("nan"),
         "seconds": time.perf_counter() - started,
     }
 
@@ -281,19 +288,24 @@ def render_quality(summary: list[dict[str, Any]], rows: list[dict[str, Any]], lo
     if logs:
         lines += ["", "## Map quality: the six CARMEN logs, every position", "",
                   f"A robot carrying its laser {LASER_ROBOT.sensor_height} m above the floor, "
-                  f"{LASER_ROBOT.body_height} m tall, radius {LASER_ROBOT.radius} m; beams without return are free "
+                  f"{LASER_ROBOT.body_height} m tall, radius {LASER_ROBOT.radius} m, fitted as `occtool fit LOG` does "
+                  f"(a laser's focus range, {PLANAR_FOCUS_RANGE:g} m); beams without return are free "
                   f"rays to {LASER_NO_RETURN_RANGE:g} m. Same-scan returns: returns of the position's own scan "
                   "(evidence >= the threshold, in the body band, beyond the robot's footprint) closer than the radius "
-                  f"to its navigation polygon. AUC: every {AUC_EVERY}th position against the careful grid.",
+                  f"to its navigation polygon. AUC and compared area: every {AUC_EVERY}th position against the "
+                  "careful grid, both built from the same 90 % of the scan.",
                   "",
                   "| log | positions | positions / returns within the body | empty maps | polygon area mean "
-                  "| obstacle points inside the disc | AUC parametric (front) | AUC grid (front) | time |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "| obstacle points inside the disc | compared area parametric / grid | AUC parametric (front) "
+                  "| AUC grid (front) | time |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for row in logs:
             lines.append(
                 f"| {row['log']} | {row['positions']:,} | {row['positions_with_returns_within_the_body']} / "
                 f"{row['returns_within_the_body']} | {row['empty_maps']} | {row['polygon_area_mean']:.2f} m² "
                 f"| {row['obstacle_points_inside_the_disc']} of {row['obstacle_points']:,} "
+                f"| {row.get('compared_area_parametric_mean', float('nan')):.2f} / "
+                f"{row.get('compared_area_grid_mean', float('nan')):.2f} m² "
                 f"| {row['parametric_auc_mean']:.3f} ({row['parametric_auc_front_mean']:.3f}) "
                 f"| {row['grid_auc_mean']:.3f} ({row['grid_auc_front_mean']:.3f}) | {row['seconds']:.0f} s |")
     return lines

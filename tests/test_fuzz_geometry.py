@@ -101,6 +101,12 @@ def test_a_planar_laser_log_gets_planar_scanner_defaults(carmen_log, tmp_path, c
     robot = json.loads(out.read_text())["robot"]
     assert (robot["sensor_height"], robot["body_height"]) == (PLANAR_LASER_SENSOR_HEIGHT, PLANAR_LASER_BODY_HEIGHT)
     assert "at the edge" not in result.output
+    # A laser's focus range, unless another is given.
+    from occtool.fit import PLANAR_FOCUS_RANGE
+
+    assert json.loads(out.read_text())["fit"]["focus_range"] == PLANAR_FOCUS_RANGE
+    assert run("fit", carmen_log, "-o", out, "--pieces", "8", "--focus-range", "3").exit_code == 0
+    assert json.loads(out.read_text())["fit"]["focus_range"] == 3.0
 
 
 def test_given_heights_win_and_a_plane_at_the_edge_is_warned(carmen_log, tmp_path):

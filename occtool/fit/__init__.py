@@ -57,6 +57,7 @@ from occtool.fit._regressor import (
     DEFAULT_BASIS,
     DEFAULT_FOCUS_RANGE,
     DEFAULT_PIECES,
+    PLANAR_FOCUS_RANGE,
     OccupancyRegressor,
     features_digest,
     slope_bounds,
@@ -66,6 +67,7 @@ from occtool.fit._sight import contradicted_features
 __all__ = [
     "DEFAULT_BASIS",
     "DEFAULT_FOCUS_RANGE",
+    "PLANAR_FOCUS_RANGE",
     "DEFAULT_PIECES",
     "FOCUS_ANGLE_BINS",
     "FOCUS_SUPPORT",

@@ -121,22 +121,27 @@ def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaul
 
     With ``planar_defaults``, a log whose returns all lie in one plane (a 2D laser, as
     CARMEN logs) gets a planar scanner's robot (:data:`occtool.robot.PLANAR_LASER_SENSOR_HEIGHT`,
-    ``..._BODY_HEIGHT``) instead of the estimator's: the command line does so unless the
-    user gave a sensor or body height. Each finding of
+    ``..._BODY_HEIGHT``) instead of the estimator's, and, unless the estimator's focus range
+    is other than the default, a laser's (:data:`occtool.fit.PLANAR_FOCUS_RANGE`): the
+    command line does so unless the user gave a sensor or body height. Each finding of
     :func:`occtool.sensor.geometry_findings` is logged as one warning (the first position's,
     with a count of the others that have findings too).
     """
     from dataclasses import replace
 
+    from occtool.fit import DEFAULT_FOCUS_RANGE, PLANAR_FOCUS_RANGE
     from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
     from occtool.sensor import geometry_findings, is_planar
 
     robot = estimator.robot if estimator.robot is not None else Robot()
     if planar_defaults and positions and all(is_planar(p.features) for p in positions):
         robot = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT, body_height=PLANAR_LASER_BODY_HEIGHT)
-        estimator = type(estimator)(**{**estimator.get_params(deep=False), "robot": robot})
-        log.info("a planar laser log: sensor height %g m, body height %g m", robot.sensor_height,
-                 robot.body_height)
+        params = {**estimator.get_params(deep=False), "robot": robot}
+        if params.get("focus_range") == DEFAULT_FOCUS_RANGE:
+            params["focus_range"] = PLANAR_FOCUS_RANGE
+        estimator = type(estimator)(**params)
+        log.info("a planar laser log: sensor height %g m, body height %g m, focus range %g m", robot.sensor_height,
+                 robot.body_height, estimator.focus_range)
     flagged = [(p, findings) for p in positions if (findings := geometry_findings(p.features, robot))]
     if flagged:
         position, findings = flagged[0]

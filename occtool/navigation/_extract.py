@@ -3,8 +3,9 @@
 :func:`navigation_map` reads as the method, one step a function: check the parameters,
 choose the cut heights and the margin (:mod:`occtool.navigation._heights`), sweep the pan
 angle at each height, bound each ray by its neighbours and cap it by the return guard (or
-carry it on to the guarded returns it stops just short of), shrink the free area by the robot's radius, keep what the robot sees in a straight line,
-clip to the max-range circle, then place the obstacle and exploration points.
+carry it on to the guarded returns it stops just short of), shrink the free area by the
+robot's radius, keep what the robot sees in a straight line, clip to the max-range circle,
+then place the obstacle and exploration points.
 """
 
 from __future__ import annotations
