@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
 
 settings.register_profile(
-    "occtool", deadline=None, max_examples=60, suppress_health_check=[HealthCheck.too_slow]
+    "occtool", deadline=None, max_examples=60, suppress_health_check=[HealthCheck.too_slow], print_blob=True
 )
-settings.load_profile("occtool")
+# CI (.ci/run sets HYPOTHESIS_PROFILE=ci) draws the same examples on every run, so a landing
+# never hangs on a new random draw; local runs keep exploring, and a failure they find
+# becomes an @example.
+settings.register_profile("ci", parent=settings.get_profile("occtool"), derandomize=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "occtool"))
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURES = ROOT / "fixtures"
