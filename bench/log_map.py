@@ -31,6 +31,15 @@ GRID_RESOLUTIONS = (0.1, 0.2)
 PUBLISHED_INTEL = "occupancy grid 0.93, Fast-BHM 0.95, BHM 0.96, I-GPOM2 0.97 (BHM model 0.04 MB)"
 
 
+def _per_beam(nav2: dict[str, float]) -> str:
+    return f"{nav2['returns_on_occupied']:.1%} / {nav2['beams_clear']:.1%} / {nav2['scans_both_95']:.1%}"
+
+
+def _per_cell(nav2: dict[str, float]) -> str:
+    return (f"{nav2['endpoint_cells_on_occupied']:.1%} / {nav2['traversed_cells_clear']:.1%} / "
+            f"{nav2['scans_cells_both_95']:.1%}")
+
+
 def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LOGS, *, seed: int = 0,
                     resolution: float = 0.05) -> tuple[str, dict[str, Any]]:
     """Score the fused map of each log present under ``data_dir``; returns ``(markdown, json)``."""
@@ -59,12 +68,16 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
          f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
          f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
          f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "
-         f"Nav2 reads a map, for reference. Published on Intel for orientation: {PUBLISHED_INTEL}."),
+         f"Nav2 reads a map, for reference. Per beam: a return agrees on an occupied cell or a neighbour, a beam "
+         f"when no cell it crosses up to 0.1 m before its end is occupied (one cell fails the whole beam). Per "
+         f"cell (OctoMap's map accuracy): each scan's distinct end-point cells and traversed cells (less its own "
+         f"end-point cells) counted once. Published on Intel for orientation: {PUBLISHED_INTEL}."),
         "",
         "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
             n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)
-        + " | test points covered | fused map | grid | fit / raster / grid build | returns on occupied "
-          "(+neighbour) | beams clear to 0.1 m | scans with both >= 95 % | grid's returns / beams / scans |",
+        + " | test points covered | fused map | grid | fit / raster / grid build | per beam: returns on occupied "
+          "(+neighbour) / beams clear to 0.1 m / scans with both >= 95 % | per cell: end-point cells on occupied / "
+          "traversed cells clear / scans with both >= 95 % | grid's per beam | grid's per cell |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
@@ -77,8 +90,7 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
             + f" | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
             f"{row['training_positions']} positions) | {row['grid_bytes'] / 1e6:.2f} MB | "
             f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
-            f"{nav2['returns_on_occupied']:.1%} | {nav2['beams_clear']:.1%} | {nav2['scans_both_95']:.1%} | "
-            f"{grid2['returns_on_occupied']:.1%} / {grid2['beams_clear']:.1%} / {grid2['scans_both_95']:.1%} |"
+            f"{_per_beam(nav2)} | {_per_cell(nav2)} | {_per_beam(grid2)} | {_per_cell(grid2)} |"
         )
     lines += [""] + [f"- {note}" for note in notes]
     return "\n".join(lines) + "\n", {"rows": rows, "notes": notes}

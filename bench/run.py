@@ -557,8 +557,12 @@ def whole_log_targets(log_map: dict[str, Any] | None, fleet: dict[str, Any] | No
         out.append(("Intel: training positions fitted and fused (fit + raster) <= 60 s, one process",
                     f"{seconds:.0f} s ({intel['fused_positions']} keyframes fitted)", seconds <= 60))
         both = intel["nav2"]["scans_both_95"]
-        out.append(("Nav2 map: >= 95 % of Intel scans with returns on occupied cells and beams clear",
+        out.append(("Nav2 map: >= 95 % of Intel scans with returns on occupied cells and beams clear (per beam)",
                     f"{both:.1%} of scans", both >= 0.95))
+        if "scans_cells_both_95" in intel["nav2"]:
+            cells = intel["nav2"]["scans_cells_both_95"]
+            out.append(("Nav2 map: >= 95 % of Intel scans with end-point cells occupied and traversed cells not "
+                        "(per cell, OctoMap's map accuracy)", f"{cells:.1%} of scans", cells >= 0.95))
     runs = (fleet or {}).get("runs", {})
     parallel = [(name, figures) for name, figures in runs.items() if name != "-j 1" and "speedup" in figures]
     for name, figures in parallel:
