@@ -31,6 +31,12 @@ GRID_RESOLUTIONS = (0.1, 0.2)
 PUBLISHED_INTEL = "occupancy grid 0.93, Fast-BHM 0.95, BHM 0.96, I-GPOM2 0.97 (BHM model 0.04 MB)"
 
 
+def _octomap(row: dict[str, Any]) -> str:
+    if row.get("octomap_bytes") is None:
+        return f"not scored ({row.get('octomap_note', '')})"
+    return f"{row['auc']['octomap']:.3f} / {row['octomap_bytes'] / 1e6:.2f} MB / {row['octomap_s']:.0f} s"
+
+
 def _per_beam(nav2: dict[str, float]) -> str:
     return f"{nav2['returns_on_occupied']:.1%} / {nav2['beams_clear']:.1%} / {nav2['scans_both_95']:.1%}"
 
@@ -66,7 +72,8 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
          f"models of the training keyframes (a position is fitted when 5 % of the 0.2 m cells its returns hit "
          f"are new; laser 0.3 m above the floor, robot 0.5 m tall), combined as named (log-odds: the default). "
          f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
-         f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
+         f"{resolution:g} m and coarser. OctoMap: the same training scans inserted from each scan's pose "
+         f"(pyoctomap, {resolution:g} m, OctoMap's defaults; memory as its memoryUsage()). Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
          f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "
          f"Nav2 reads a map, for reference. Per beam: a return agrees on an occupied cell or a neighbour, a beam "
          f"when no cell it crosses up to 0.1 m before its end is occupied (one cell fails the whole beam). Per "
@@ -75,10 +82,10 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
         "",
         "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
             n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)
-        + " | test points covered | fused map | grid | fit / raster / grid build | per beam: returns on occupied "
+        + f" | OctoMap AUC / memory / build ({resolution:g} m) | test points covered | fused map | grid | fit / raster / grid build | per beam: returns on occupied "
           "(+neighbour) / beams clear to 0.1 m / scans with both >= 95 % | per cell: end-point cells on occupied / "
           "traversed cells clear / scans with both >= 95 % | grid's per beam | grid's per cell |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         auc = row["auc"]
@@ -87,7 +94,7 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
             f"| {row['log']} | {row['held_out_scans']} of {row['scans']} | "
             f"{auc['fused_log_odds']:.3f} / {auc['fused_dempster_shafer']:.3f} / {auc['fused_mean']:.3f} | "
             + " / ".join(f"{auc[n]:.3f}" for n in grid_names)
-            + f" | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
+            + f" | {_octomap(row)} | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
             f"{row['training_positions']} positions) | {row['grid_bytes'] / 1e6:.2f} MB | "
             f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
             f"{_per_beam(nav2)} | {_per_cell(nav2)} | {_per_beam(grid2)} | {_per_cell(grid2)} |"

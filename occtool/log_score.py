@@ -269,6 +269,12 @@ class LogScore:
     nav2: dict[str, float]
     #: The same agreement for the dense grid of the training scans (read as Nav2 reads a map).
     nav2_grid: dict[str, float]
+    #: OctoMap of the same training scans at ``resolution`` (``auc["octomap"]``): its
+    #: ``memoryUsage()`` and build time, or ``None`` with the reason in ``octomap_note``
+    #: (``pyoctomap`` not installed, or not asked for).
+    octomap_bytes: int | None = None
+    octomap_s: float | None = None
+    octomap_note: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         from dataclasses import asdict
@@ -279,7 +285,7 @@ class LogScore:
 def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: int = BLOCK, seed: int = 0,
                  resolution: float = 0.05, no_return_range: float | None = 5.0, threshold: float = 0.6,
                  read_options: dict[str, Any] | None = None, grid_resolutions: tuple[float, ...] = (),
-                 keyframe_share: float | None = None) -> LogScore:
+                 keyframe_share: float | None = None, octomap: bool = True) -> LogScore:
     """Score the fused map of ``path``'s training scans against a dense 2D grid on held-out blocks.
 
     Parameters
@@ -299,6 +305,11 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     keyframe_share
         :func:`occtool.fuse.fuse_log`'s keyframe selection (``None``: its default; 0: every
         training position is fitted). The test points and the grid do not depend on it.
+    octomap
+        Also build an OctoMap of the training scans at ``resolution``
+        (:func:`occtool.octomap.build_world_octomap`) and score it as ``auc["octomap"]``.
+        Without ``pyoctomap`` (the ``octomap`` extra) the score says so in
+        :attr:`LogScore.octomap_note` and has no OctoMap figures.
     """
     from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
@@ -341,6 +352,9 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         other = world_grid(train, size)
         other_p = other.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * size)]))
         auc[f"grid_{size:g}m"] = roc_auc(other_p[:len(occupied)], other_p[len(occupied):])
+    octomap_figures = _octomap_scores(train, points, len(occupied), resolution) if octomap else {
+        "octomap_note": "not asked for"}
+    auc.update(octomap_figures.pop("auc", {}))
     started = time.perf_counter()
     raster = fused.rasterise(resolution)
     raster_s = time.perf_counter() - started
@@ -350,7 +364,31 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         occupied_points=len(occupied), free_points=len(free), auc=auc, coverage=float(observed.mean()),
         fused_bytes=fused.nbytes, grid_bytes=int(grid.nbytes), fit_s=report.fit_seconds, raster_s=raster_s,
         grid_s=grid_s, nav2=nav2_agreement(raster, train), nav2_grid=nav2_agreement(grid_raster(grid), train),
+        **octomap_figures,
     )
+
+
+def _octomap_scores(train: list[Position], points: FloatArray, n_occupied: int, resolution: float) -> dict[str, Any]:
+    """OctoMap's AUC on the test points, its bytes and build time; a note instead without pyoctomap."""
+    from occtool.compare import roc_auc
+    from occtool.errors import MissingDependencyError
+    from occtool.octomap import build_world_octomap
+
+    scans = []
+    for scan in train:
+        pose = scan.pose
+        assert pose is not None, "scored scans have poses"
+        scans.append((pose.translation, scan.features.points @ pose.rotation.T + pose.translation,
+                      scan.features.evidence))
+    started = time.perf_counter()
+    try:
+        model = build_world_octomap(scans, resolution=resolution)
+    except MissingDependencyError as exc:
+        return {"octomap_note": str(exc)}
+    seconds = time.perf_counter() - started
+    p = model.occupancy(points)
+    return {"auc": {"octomap": roc_auc(p[:n_occupied], p[n_occupied:])}, "octomap_bytes": model.memory_bytes,
+            "octomap_s": seconds}
 
 
 __all__ = ["LogScore", "evaluate_log", "grid_raster", "holdout_blocks", "holdout_test_points", "nav2_agreement",
