@@ -556,6 +556,13 @@ def whole_log_targets(log_map: dict[str, Any] | None, fleet: dict[str, Any] | No
         seconds = intel["fit_s"] + intel["raster_s"]
         out.append(("Intel: training positions fitted and fused (fit + raster) <= 60 s, one process",
                     f"{seconds:.0f} s ({intel['fused_positions']} keyframes fitted)", seconds <= 60))
+        for row in (log_map or {}).get("whole_log", []):
+            if row.get("exit_status") or row["keyframe_share"] != 0:
+                continue
+            out.append(("Intel whole log, every position fitted and fused (`occtool map --keyframe-share 0`): "
+                        "<= 60 s on one core (CPU of the one process)",
+                        f"{row['cpu_s']:.0f} s CPU, {row['wall_s']:.0f} s wall ({row['positions']} positions)",
+                        row["cpu_s"] <= 60))
         both = intel["nav2"]["scans_both_95"]
         out.append(("Nav2 map: >= 95 % of Intel scans with returns on occupied cells and beams clear (per beam)",
                     f"{both:.1%} of scans", both >= 0.95))
