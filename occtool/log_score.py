@@ -352,9 +352,10 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         other = world_grid(train, size)
         other_p = other.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * size)]))
         auc[f"grid_{size:g}m"] = roc_auc(other_p[:len(occupied)], other_p[len(occupied):])
-    octomap_figures = _octomap_scores(train, points, len(occupied), resolution) if octomap else {
-        "octomap_note": "not asked for"}
-    auc.update(octomap_figures.pop("auc", {}))
+    octomap_figures: dict[str, Any] = (_octomap_scores(train, points, len(occupied), resolution) if octomap
+                                       else {"octomap_note": "not asked for"})
+    octomap_auc: dict[str, float] = octomap_figures.pop("auc", {})
+    auc.update(octomap_auc)
     started = time.perf_counter()
     raster = fused.rasterise(resolution)
     raster_s = time.perf_counter() - started
