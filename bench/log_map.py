@@ -82,7 +82,7 @@ def whole_log_markdown(rows: list[dict[str, Any]]) -> list[str]:
     """The table of :func:`whole_log_time`'s runs."""
     lines = ["", "The whole log through the real command: `occtool map LOG -o DIR --no-mcap " + " ".join(MAP_ARGS)
              + "` (one process, one position after another) under /usr/bin/time -v; CPU is user + system.", "",
-             "| log | keyframe share | positions fitted (of all) | wall | CPU | fit alone | peak RSS | fused map |",
+             "| log | keyframe share | positions fitted (of all) | wall | CPU | fit alone (wall, summary.json) | peak RSS | fused map |",
              "|---|---|---|---|---|---|---|---|"]
     for row in rows:
         share = "default (0.05)" if row["keyframe_share"] is None else f"{row['keyframe_share']:g}"
