@@ -1,4 +1,4 @@
-"""The fused world map on real laser logs, for the bench (not wired into ``bench/run.py`` yet).
+"""The fused world map on real laser logs, for the bench (``bench/run.py`` calls it).
 
 :func:`log_map_section` runs :func:`occtool.log_score.evaluate_log` (the Hilbert-maps
 protocol: 10 % of scans held out in blocks of 40 consecutive scans; end points occupied,
@@ -31,9 +31,89 @@ GRID_RESOLUTIONS = (0.1, 0.2)
 PUBLISHED_INTEL = "occupancy grid 0.93, Fast-BHM 0.95, BHM 0.96, I-GPOM2 0.97 (BHM model 0.04 MB)"
 
 
+#: The whole-log run: ``occtool map`` with the laser robot of :data:`LASER_ROBOT` (the command
+#: fits in its own process, one position after another: one core).
+MAP_ARGS = ("--sensor-height", "0.3", "--body-height", "0.5", "--robot-radius", "0.25", "--no-return-range", "5")
+
+
+def whole_log_time(log: str | Path, *, keyframe_shares: tuple[float | None, ...] = (None, 0.0),
+                   keep: str | None = None) -> list[dict[str, Any]]:
+    """Time the real ``occtool map LOG -o DIR`` on a whole log under ``/usr/bin/time -v``.
+
+    One run per entry of ``keyframe_shares`` (``None``: the command's default; 0: every
+    position fitted). Each row: wall, CPU (user + system) and peak RSS of the command, and
+    from its summary.json the positions fitted, those left out as covered, the fit's own
+    seconds and the fused map's bytes.
+    """
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    from fleet import ROOT, _time_v
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}
+    rows = []
+    with tempfile.TemporaryDirectory(dir=keep) as scratch:
+        for n, share in enumerate(keyframe_shares):
+            out = Path(scratch) / f"map{n}"
+            extra = [] if share is None else ["--keyframe-share", f"{share:g}"]
+            command = ["/usr/bin/time", "-v", sys.executable, "-m", "occtool", "-q", "map", str(log), "-o", str(out),
+                       "--no-mcap", *MAP_ARGS, *extra]
+            done = subprocess.run(command, env=env, capture_output=True, text=True, check=False)
+            row: dict[str, Any] = {"log": Path(log).name, "keyframe_share": share, **_time_v(done.stderr),
+                                   "exit_status": done.returncode}
+            row["cpu_s"] = row["user_s"] + row["system_s"]
+            if done.returncode == 0:
+                summary = json.loads((out / "summary.json").read_text())
+                row.update(positions=summary["positions"], not_keyframes=summary.get("not_keyframes", 0),
+                           fit_seconds=summary.get("fit_seconds"), fused_bytes=summary["fused_map_bytes"])
+            else:
+                row["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
+            rows.append(row)
+            print(f"[bench] occtool map {Path(log).name} (keyframe share {share}): {row['wall_s']:.0f} s wall, "
+                  f"{row['cpu_s']:.0f} s CPU", flush=True)
+    return rows
+
+
+def whole_log_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    """The table of :func:`whole_log_time`'s runs."""
+    lines = ["", "The whole log through the real command: `occtool map LOG -o DIR --no-mcap " + " ".join(MAP_ARGS)
+             + "` (one process, one position after another) under /usr/bin/time -v; CPU is user + system.", "",
+             "| log | keyframe share | positions fitted (of all) | wall | CPU | fit alone (wall, summary.json) | peak RSS | fused map |",
+             "|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        share = "default (0.05)" if row["keyframe_share"] is None else f"{row['keyframe_share']:g}"
+        if row.get("exit_status"):
+            lines.append(f"| {row['log']} | {share} | failed: {row.get('error')} | | | | | |")
+            continue
+        lines.append(f"| {row['log']} | {share} | {row['positions']} ({row['positions'] + row['not_keyframes']}) | "
+                     f"{row['wall_s']:.1f} s | {row['cpu_s']:.1f} s | {row['fit_seconds']:.1f} s | "
+                     f"{row['peak_rss_mb']:.0f} MB | {row['fused_bytes'] / 1e6:.2f} MB |")
+    return lines
+
+
+def _octomap(row: dict[str, Any]) -> str:
+    if row.get("octomap_bytes") is None:
+        return f"not scored ({row.get('octomap_note', '')})"
+    return f"{row['auc']['octomap']:.3f} / {row['octomap_bytes'] / 1e6:.2f} MB / {row['octomap_s']:.0f} s"
+
+
+def _per_beam(nav2: dict[str, float]) -> str:
+    return f"{nav2['returns_on_occupied']:.1%} / {nav2['beams_clear']:.1%} / {nav2['scans_both_95']:.1%}"
+
+
+def _per_cell(nav2: dict[str, float]) -> str:
+    return (f"{nav2['endpoint_cells_on_occupied']:.1%} / {nav2['traversed_cells_clear']:.1%} / "
+            f"{nav2['scans_cells_both_95']:.1%}")
+
+
 def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LOGS, *, seed: int = 0,
-                    resolution: float = 0.05) -> tuple[str, dict[str, Any]]:
-    """Score the fused map of each log present under ``data_dir``; returns ``(markdown, json)``."""
+                    resolution: float = 0.05, whole_log: bool = True) -> tuple[str, dict[str, Any]]:
+    """Score the fused map of each log present under ``data_dir`` and (``whole_log``) time
+    ``occtool map`` on the whole Intel log (:func:`whole_log_time`); returns ``(markdown, json)``."""
     rows: list[dict[str, Any]] = []
     notes: list[str] = []
     for folder, name in logs:
@@ -57,15 +137,20 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
          f"models of the training keyframes (a position is fitted when 5 % of the 0.2 m cells its returns hit "
          f"are new; laser 0.3 m above the floor, robot 0.5 m tall), combined as named (log-odds: the default). "
          f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
-         f"{resolution:g} m and coarser. Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
+         f"{resolution:g} m and coarser. OctoMap: the same training scans inserted from each scan's pose "
+         f"(pyoctomap, {resolution:g} m, OctoMap's defaults; memory as its memoryUsage()). Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
          f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "
-         f"Nav2 reads a map, for reference. Published on Intel for orientation: {PUBLISHED_INTEL}."),
+         f"Nav2 reads a map, for reference. Per beam: a return agrees on an occupied cell or a neighbour, a beam "
+         f"when no cell it crosses up to 0.1 m before its end is occupied (one cell fails the whole beam). Per "
+         f"cell (OctoMap's map accuracy): each scan's distinct end-point cells and traversed cells (less its own "
+         f"end-point cells) counted once. Published on Intel for orientation: {PUBLISHED_INTEL}."),
         "",
         "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
             n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)
-        + " | test points covered | fused map | grid | fit / raster / grid build | returns on occupied "
-          "(+neighbour) | beams clear to 0.1 m | scans with both >= 95 % | grid's returns / beams / scans |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        + f" | OctoMap AUC / memory / build ({resolution:g} m) | test points covered | fused map | grid | fit / raster / grid build | per beam: returns on occupied "
+          "(+neighbour) / beams clear to 0.1 m / scans with both >= 95 % | per cell: end-point cells on occupied / "
+          "traversed cells clear / scans with both >= 95 % | grid's per beam | grid's per cell |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         auc = row["auc"]
@@ -74,14 +159,18 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
             f"| {row['log']} | {row['held_out_scans']} of {row['scans']} | "
             f"{auc['fused_log_odds']:.3f} / {auc['fused_dempster_shafer']:.3f} / {auc['fused_mean']:.3f} | "
             + " / ".join(f"{auc[n]:.3f}" for n in grid_names)
-            + f" | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
+            + f" | {_octomap(row)} | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
             f"{row['training_positions']} positions) | {row['grid_bytes'] / 1e6:.2f} MB | "
             f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
-            f"{nav2['returns_on_occupied']:.1%} | {nav2['beams_clear']:.1%} | {nav2['scans_both_95']:.1%} | "
-            f"{grid2['returns_on_occupied']:.1%} / {grid2['beams_clear']:.1%} / {grid2['scans_both_95']:.1%} |"
+            f"{_per_beam(nav2)} | {_per_cell(nav2)} | {_per_beam(grid2)} | {_per_cell(grid2)} |"
         )
+    whole: list[dict[str, Any]] = []
+    intel = Path(data_dir) / LOGS[0][0] / LOGS[0][1]
+    if whole_log and intel.is_file():
+        whole = whole_log_time(intel)
+        lines += whole_log_markdown(whole)
     lines += [""] + [f"- {note}" for note in notes]
-    return "\n".join(lines) + "\n", {"rows": rows, "notes": notes}
+    return "\n".join(lines) + "\n", {"rows": rows, "notes": notes, "whole_log": whole}
 
 
 if __name__ == "__main__":  # pragma: no cover

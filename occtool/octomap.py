@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -304,12 +305,7 @@ def build_octomap(
     if len(features) == 0:
         raise InputError("cannot build an OctoMap from no features")
     robot = robot or Robot()
-    tree = pyoctomap.OcTree(float(resolution))
-    tree.setProbHit(params.prob_hit)
-    tree.setProbMiss(params.prob_miss)
-    tree.setClampingThresMin(params.clamping_thres_min)
-    tree.setClampingThresMax(params.clamping_thres_max)
-    tree.setOccupancyThres(params.occupancy_thres)
+    tree = _new_tree(pyoctomap, resolution, params)
     for points, max_range in _insertions(features, robot, sensor, scans, resolution):
         tree.insertPointCloud(np.ascontiguousarray(points), np.zeros(3), max_range=max_range, lazy_eval=True)
     tree.updateInnerOccupancy()
@@ -322,6 +318,54 @@ def build_octomap(
     return OctoMapModel(
         tree=tree, resolution=float(resolution), footprint=float(robot.radius) if footprint_prior else 0.0
     )
+
+
+def _new_tree(pyoctomap: Any, resolution: float, params: LogOddsParams) -> Any:
+    tree = pyoctomap.OcTree(float(resolution))
+    tree.setProbHit(params.prob_hit)
+    tree.setProbMiss(params.prob_miss)
+    tree.setClampingThresMin(params.clamping_thres_min)
+    tree.setClampingThresMax(params.clamping_thres_max)
+    tree.setOccupancyThres(params.occupancy_thres)
+    return tree
+
+
+def build_world_octomap(scans: Sequence[tuple[ArrayLike, ArrayLike, ArrayLike]], *, resolution: float = 0.05,
+                        params: LogOddsParams = OCTOMAP_DEFAULTS) -> OctoMapModel:
+    """An OctoMap of a run in the world frame: each scan inserted from its own sensor origin.
+
+    ``scans`` holds, per scan, its sensor origin ``(3,)`` and its world end points
+    ``(N, 3)`` with their evidence ``(N,)``. Returns (evidence > 0) are one
+    ``insertPointCloud`` each scan (a miss on every cell its rays cross, a hit where they
+    end); free rays (evidence 0, a beam that returned nothing) are a second one, cut one
+    cell short of their end so they clear without a hit. No footprint prior.
+
+    Raises
+    ------
+    MissingDependencyError
+        If ``pyoctomap`` is not installed.
+    InputError
+        If the resolution is not positive.
+    """
+    pyoctomap = _pyoctomap()
+    if not (np.isfinite(resolution) and resolution > 0):
+        raise InputError(f"OctoMap resolution must be a positive number of metres, got {resolution}")
+    tree = _new_tree(pyoctomap, resolution, params)
+    for origin, points, evidence in scans:
+        origin = np.asarray(origin, dtype=np.float64).reshape(3)
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        hit = np.asarray(evidence, dtype=np.float64).reshape(-1) > 0
+        if hit.any():
+            tree.insertPointCloud(np.ascontiguousarray(points[hit]), origin, max_range=-1.0, lazy_eval=True)
+        if (~hit).any():
+            free = points[~hit]
+            # OctoMap cuts rays longer than max_range without a hit: one cut per scan, at its
+            # shortest free ray less a cell (a laser's free rays share their length).
+            length = float(np.linalg.norm(free - origin, axis=1).min()) - resolution
+            if length > 0:
+                tree.insertPointCloud(np.ascontiguousarray(free), origin, max_range=length, lazy_eval=True)
+    tree.updateInnerOccupancy()
+    return OctoMapModel(tree=tree, resolution=float(resolution), footprint=0.0)
 
 
 def _insertions(

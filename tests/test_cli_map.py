@@ -145,9 +145,31 @@ def test_evaluate_log_prints_the_figures(mapped):
     result = run("evaluate-log", log, "--block", "5", "--holdout", "0.2", "--json", *LASER)
     assert result.exit_code == 0, result.output
     figures = json.loads(result.output)
-    assert set(figures["auc"]) == {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid"}
+    expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid"}
+    from occtool.octomap import octomap_available
+
+    if octomap_available():
+        expected.add("octomap")
+        assert figures["octomap_bytes"] > 0 and figures["octomap_s"] >= 0
+        assert figures["auc"]["octomap"] > 0.5
+    assert set(figures["auc"]) == expected
     assert figures["auc"]["fused_log_odds"] > 0.9
     assert 0 < figures["fused_positions"] <= figures["training_positions"]
+    assert 0 <= figures["nav2"]["scans_cells_both_95"] <= 1
+
+
+def test_evaluate_log_without_pyoctomap_says_so(mapped, monkeypatch):
+    import sys
+
+    # An import of a module set to None in sys.modules raises ImportError, as when not installed.
+    monkeypatch.setitem(sys.modules, "pyoctomap", None)
+    log, _ = mapped
+    result = run("evaluate-log", log, "--block", "5", "--holdout", "0.2", *LASER)
+    assert result.exit_code == 0, result.output
+    assert "Traceback" not in result.output
+    line = next(line for line in result.output.splitlines() if "OctoMap:" in line)
+    assert "not scored" in line and "occtool[octomap]" in line
+    assert "AUC octomap" not in result.output
 
 
 def test_keyframe_share_zero_fits_every_position(mapped, tmp_path):

@@ -15,6 +15,7 @@ from occtool.fuse import (
     FusedMap,
     fuse_log,
     fuse_models,
+    nearest_returns,
     observed_reach,
     returns_from_guard,
     select_keyframes,
@@ -89,7 +90,9 @@ def test_memory_is_the_float32_trees_poses_reaches_and_returns(room):
     # float32 coefficients: half of tree_bytes' float64 ones, the same 8 bytes a node.
     trees = sum(tree_bytes(m.tree_) - m.tree_.coefficients.nbytes // 2 for m in models)
     assert fused.returns is not None and fused.returns.shape == (len(models), 360)
-    assert fused.nbytes == trees + 32 * len(models) + fused.reaches.nbytes + 720 * len(models)
+    # Returns: 360 uint16 distances and 360 uint8 angles within their bins a position.
+    assert fused.return_offsets is not None and fused.return_offsets.shape == (len(models), 360)
+    assert fused.nbytes == trees + 32 * len(models) + fused.reaches.nbytes + 1080 * len(models)
     assert fused.reaches.shape == (len(models), 2, 120)
 
 
@@ -205,6 +208,39 @@ def test_returns_are_the_guard_in_whole_millimetres():
     # None, and beyond what uint16 millimetres hold: no return.
     assert returns[359] == np.iinfo(np.uint16).max and returns[1] == np.iinfo(np.uint16).max
     assert (returns_from_guard(None) == np.iinfo(np.uint16).max).all()
+
+
+def test_nearest_returns_keep_each_bins_own_return_on_its_beam():
+    from occtool.features import Features, Pose
+
+    # Returns 3 m and 5 m away at angles off their bins' centres, a farther one in the 3 m
+    # return's bin, one inside the robot, one above the body band and a free ray.
+    angles = np.radians([10.2, 10.9, 47.77, 120.0, -30.0, 80.0])
+    ranges = np.array([3.0, 4.0, 5.0, 0.1, 2.0, 2.5])
+    z = np.array([0.0, 0.0, 0.0, 0.0, 0.4, 0.0])
+    points = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles), z])
+    features = Features(points, np.array([1.0, 1.0, 1.0, 1.0, 1.0, 0.0]))
+    millimetres, offsets = nearest_returns(features, LASER_ROBOT)
+    held = np.flatnonzero(millimetres != np.iinfo(np.uint16).max)
+    assert list(millimetres[held]) == [3000, 5000]  # the nearest whole millimetre
+    assert len(held) == 2
+    # Placed in a fused map at a turned pose, each lies on its own beam, not the bin's centre.
+    pose = Pose(1.0, -2.0, 0.0, 0.7)
+    fused = FusedMap([OccupancyRegressor(robot=LASER_ROBOT).fit(features).tree_], [pose],
+                     np.zeros((1, 2, 120), np.uint16), LASER_ROBOT, returns=millimetres[None],
+                     return_offsets=offsets[None])
+    expected = pose.to_world(points[[0, 2], :2])
+    assert np.abs(fused.return_points(0) - expected).max() < 2e-3
+    centres = FusedMap(fused.trees, [pose], fused.reaches, LASER_ROBOT, returns=millimetres[None])
+    assert np.abs(centres.return_points(0) - expected).max() > 0.01  # half a degree off at 5 m: 4 cm
+    # The guard's reach: nothing past it; a map's return_reach keeps far returns for walls only.
+    assert (nearest_returns(features, LASER_ROBOT, reach=4.0)[0] != np.iinfo(np.uint16).max).sum() == 1
+    assert np.abs(fused.return_points(0, within=4.0) - expected[:1]).max() < 2e-3
+    with pytest.raises(InputError, match="return_reach"):
+        FusedMap(fused.trees, [pose], fused.reaches, LASER_ROBOT, returns=millimetres[None], return_reach=0.0)
+    with pytest.raises(InputError, match="same shape"):
+        FusedMap(fused.trees, [pose], fused.reaches, LASER_ROBOT, returns=millimetres[None],
+                 return_offsets=offsets[None, :10])
 
 
 def test_keyframes_skip_positions_that_see_nothing_new(room):

@@ -15,7 +15,13 @@ from occtool.robot import Robot
 
 pyoctomap = pytest.importorskip("pyoctomap")
 
-from occtool.octomap import OctoMapModel, build_octomap, octomap_available, octomap_updates  # noqa: E402
+from occtool.octomap import (  # noqa: E402
+    OctoMapModel,
+    build_octomap,
+    build_world_octomap,
+    octomap_available,
+    octomap_updates,
+)
 
 
 def _wall(x: float = 2.03, n: int = 3000, seed: int = 0) -> Features:
@@ -191,3 +197,21 @@ def test_an_evidence_zero_feature_only_clears_its_ray() -> None:
     tree = build_octomap(beam, resolution=0.1, footprint_prior=False, sensor=SensorModel())
     assert tree.occupancy([[3.03, 0.02, -0.47]])[0] <= 0.5
     assert tree.occupancy([[1.52, 0.01, -0.235]])[0] == pytest.approx(0.4, rel=1e-5)
+
+
+def test_world_octomap_inserts_each_scan_from_its_own_origin():
+    # Two scans from different origins, in the z = 0.025 plane: a return 1 m ahead of each,
+    # and a free ray (evidence 0) 1 m long from the second.
+    z = 0.025
+    first = (np.array([0.0, 0.0, z]), np.array([[1.0, 0.0, z]]), np.array([1.0]))
+    second = (np.array([5.0, 5.0, z]), np.array([[5.0, 6.0, z], [4.0, 5.0, z]]), np.array([1.0, 0.0]))
+    model = build_world_octomap([first, second], resolution=0.05)
+    p = model.occupancy(np.array([[1.0, 0.0, z], [0.5, 0.0, z], [1.5, 0.0, z],  # first: hit, crossed, behind
+                                  [5.0, 6.0, z], [5.0, 5.5, z],  # second: hit, crossed (from its own origin)
+                                  [4.5, 5.0, z], [4.01, 5.0, z],  # free ray: crossed, its last cell
+                                  [0.5, 5.0, z]]))  # nothing passed here
+    assert p[0] > 0.5 and p[3] > 0.5
+    assert p[1] < 0.5 and p[4] < 0.5 and p[5] < 0.5
+    assert p[2] == 0.5 and p[6] == 0.5 and p[7] == 0.5
+    with pytest.raises(InputError):
+        build_world_octomap([first], resolution=0.0)

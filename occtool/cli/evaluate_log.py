@@ -28,10 +28,11 @@ from occtool.cli.options import config_option, fit_options, log_options, seed_op
 def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, keyframe_share: float | None,
                  as_json: bool, seed: int, **kwargs: Any) -> None:
     """Hold out --holdout of LOG's scans in blocks of --block consecutive scans, fuse the
-    local models of the rest and build a dense 2D log-odds grid from the same scans, and
-    score both on the held-out beams (end points occupied, points along each beam up to
-    0.1 m before its end free): ROC AUC, model bytes, build times, and how well the fused
-    map's raster agrees with its training scans (Nav2 agreement)."""
+    local models of the rest, build a dense 2D log-odds grid and an OctoMap (when
+    pyoctomap is installed) from the same scans, and score them on the held-out beams (end
+    points occupied, points along each beam up to 0.1 m before its end free): ROC AUC,
+    model bytes, build times, and how well the fused map's raster agrees with its
+    training scans (Nav2 agreement, per beam and per cell)."""
     import json
 
     from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs
@@ -57,7 +58,18 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
                f"fit {result['fit_s']:.1f} s, raster {result['raster_s']:.1f} s); "
                f"grid {result['grid_bytes'] / 1e6:.2f} MB (built in {result['grid_s']:.1f} s); "
                f"test points the fused map covers: {result['coverage']:.1%}")
-    nav2 = result["nav2"]
-    click.echo(f"  Nav2 agreement with the training scans: returns on an occupied cell or neighbour "
-               f"{nav2['returns_on_occupied']:.1%}, beams clear to 0.1 m before the end {nav2['beams_clear']:.1%}; "
-               f"scans with >= 95 % of both: {nav2['scans_both_95']:.1%}")
+    if result["octomap_bytes"] is not None:
+        click.echo(f"  OctoMap {result['octomap_bytes'] / 1e6:.2f} MB at {resolution:g} m "
+                   f"(built in {result['octomap_s']:.1f} s)")
+    else:
+        click.echo(f"  OctoMap: not scored ({result['octomap_note']})")
+    for name, label in (("nav2", "fused map's raster"), ("nav2_grid", "grid read as Nav2 reads it")):
+        nav2 = result[name]
+        click.echo(f"  Nav2 agreement with the training scans, {label}:")
+        click.echo(f"    per beam: returns on an occupied cell or neighbour {nav2['returns_on_occupied']:.1%}, "
+                   f"beams clear to 0.1 m before the end {nav2['beams_clear']:.1%}; "
+                   f"scans with >= 95 % of both: {nav2['scans_both_95']:.1%}")
+        click.echo(f"    per cell (OctoMap's map accuracy): end-point cells on occupied (or neighbour) "
+                   f"{nav2['endpoint_cells_on_occupied']:.1%}, traversed cells not occupied "
+                   f"{nav2['traversed_cells_clear']:.1%}; scans with >= 95 % of both: "
+                   f"{nav2['scans_cells_both_95']:.1%}")

@@ -19,7 +19,9 @@ observed the point:
 * ``"mean"``: the plain mean of the speaking models.
 
 Where no model speaks the place is *unknown* (never free). Each position also keeps its
-nearest returns (its return guard, 720 bytes): :meth:`FusedMap.predict` joins them to the
+nearest return per pan degree (:func:`nearest_returns`: 720 bytes of distances and 360 of
+angles within the bin; a model read from a file, its return guard's distances at the
+bins' centres): :meth:`FusedMap.predict` joins them to the
 models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
 unknown grid over the robot's body band with its walls where the returns fall.
 :func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
@@ -49,8 +51,10 @@ from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
 from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
 from occtool.fuse._reach import (
     NO_OBSTACLE,
+    OFFSET_STEPS,
     REACH_BINS,
     REACH_UNIT,
+    nearest_returns,
     observed_reach,
     reach_from_guard,
     returns_from_guard,
@@ -67,6 +71,7 @@ __all__ = [
     "FRONT_MARGIN",
     "NO_OBSTACLE",
     "OCCUPIED",
+    "OFFSET_STEPS",
     "REACH_BINS",
     "REACH_UNIT",
     "RETURN_KERNEL",
@@ -79,6 +84,7 @@ __all__ = [
     "fuse_log",
     "fuse_model_set",
     "fuse_models",
+    "nearest_returns",
     "observed_reach",
     "reach_from_guard",
     "returns_from_guard",

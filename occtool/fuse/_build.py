@@ -15,7 +15,7 @@ from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._map import FusedMap
-from occtool.fuse._reach import observed_reach, reach_from_guard, returns_from_guard
+from occtool.fuse._reach import nearest_returns, observed_reach, reach_from_guard, returns_from_guard
 from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.robot import Robot
 
@@ -73,7 +73,7 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     positions = [positions[k] for k in keep]
     focus_range = params.get("focus_range", math.inf) if params.get("focus", True) else math.inf
     started = time.perf_counter()
-    models, poses, reaches, returns, stamps, skipped = [], [], [], [], [], []
+    models, poses, reaches, returns, return_offsets, stamps, skipped = [], [], [], [], [], [], []
     fitted_positions: list[int] = []
     for done, item in enumerate(positions, start=1):
         try:
@@ -86,14 +86,19 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         poses.append(item.pose)
         stamps.append(item.stamp)
         reaches.append(observed_reach(item.features, robot, focus_range))
-        returns.append(returns_from_guard(getattr(model, "guard_", None)))
+        # Every return, far ones too: they mark walls; the map's return_reach keeps them from
+        # lending occupancy or clearing cells past the guard's reach.
+        nearest, offsets = nearest_returns(item.features, robot, level=model.level)
+        returns.append(nearest)
+        return_offsets.append(offsets)
         if progress is not None:
             progress(done, len(positions))
     fitted = time.perf_counter()
     if not models:
         raise InputError(f"{log.source or 'the log'}: no position could be fitted ({skipped[0][1]})")
     fused = FusedMap([m.tree_ for m in models], poses, np.stack(reaches), robot, combination=combination,  # type: ignore[arg-type]  # poses checked above
-                     threshold=threshold, stamps=stamps, returns=np.stack(returns))
+                     threshold=threshold, stamps=stamps, returns=np.stack(returns),
+                     return_offsets=np.stack(return_offsets), return_reach=focus_range + robot.radius)
     report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes, fitted_positions,
                         not_keyframes)
     return fused, models, report

@@ -13,7 +13,7 @@ from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse._combine import COMBINATIONS, DEFAULT_COMBINATION, RETURN_KERNEL, Evidence, _Sums
 from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
-from occtool.fuse._reach import NO_OBSTACLE, REACH_UNIT
+from occtool.fuse._reach import NO_OBSTACLE, OFFSET_STEPS, REACH_UNIT
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -59,6 +59,17 @@ class FusedMap:
         each position's nearest return per pan bin (its return guard). With them the
         raster's occupied cells are where the positions' returns fall (see
         :meth:`rasterise`); without, where the fused occupancy reaches ``threshold``.
+        :func:`fuse_log` keeps each bin's own nearest return instead
+        (:func:`nearest_returns`), with ``return_offsets``.
+    return_offsets
+        ``(len(trees), guard bins)`` uint8: each return's pan angle within its bin, in
+        :data:`OFFSET_STEPS` steps (:func:`nearest_returns`); without, the returns lie at
+        the bins' centres (half a bin off at most).
+    return_reach
+        Returns farther than this from their position (metres; :func:`fuse_log`: the fit's
+        focus range plus the robot's radius, the return guard's reach) mark the raster's
+        walls where they fall, but lend no occupancy to :meth:`predict` and clear no cells
+        past this distance: a far return's angle and its pose's error place it less surely.
 
     The trees' coefficients are kept as float32 (half the bytes; an occupancy moves by
     under 1e-6) and each tree is rebuilt in float64 for a query.
@@ -67,7 +78,8 @@ class FusedMap:
     def __init__(self, trees: Sequence[Any], poses: Sequence[Pose], reaches: ArrayLike, robot: Robot, *,
                  combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
                  stamps: Sequence[float | None] | None = None, front_margin: float = FRONT_MARGIN,
-                 returns: ArrayLike | None = None) -> None:
+                 returns: ArrayLike | None = None, return_offsets: ArrayLike | None = None,
+                 return_reach: float = math.inf) -> None:
         if combination not in COMBINATIONS:
             raise InputError(f"combination must be one of {', '.join(COMBINATIONS)}, got {combination!r}")
         if not 0.0 < threshold < 1.0:
@@ -84,7 +96,15 @@ class FusedMap:
             returns = np.asarray(returns, dtype=np.uint16)
             if returns.ndim != 2 or returns.shape[0] != len(trees) or returns.shape[1] < 8:
                 raise InputError(f"{len(trees)} models need as many rows of returns per pan bin, got {returns.shape}")
+        if return_offsets is not None:
+            return_offsets = np.asarray(return_offsets, dtype=np.uint8)
+            if returns is None or return_offsets.shape != returns.shape:
+                raise InputError(f"return offsets need returns of the same shape, got {return_offsets.shape}")
         self.returns = returns
+        self.return_offsets = return_offsets
+        if not return_reach > 0:
+            raise InputError(f"return_reach must be a positive number of metres, got {return_reach}")
+        self.return_reach = float(return_reach)
         self._basis = [t.basis for t in trees]
         self._roots = [t.root for t in trees]
         self._coefficients = [np.asarray(t.coefficients, dtype=np.float32) for t in trees]
@@ -105,10 +125,12 @@ class FusedMap:
     @property
     def nbytes(self) -> int:
         """Memory of the map's numbers: each tree's float32 coefficients and structure (8 bytes
-        a node, as :func:`occtool.compare.tree_bytes` counts it), poses, reaches, returns."""
+        a node, as :func:`occtool.compare.tree_bytes` counts it), poses, reaches, returns and
+        their offsets."""
         structure = sum(8 * _nodes(root) for root in self._roots)
         return int(sum(c.nbytes for c in self._coefficients) + structure + self._pose_array.nbytes
-                   + self.reaches.nbytes + (self.returns.nbytes if self.returns is not None else 0))
+                   + self.reaches.nbytes + (self.returns.nbytes if self.returns is not None else 0)
+                   + (self.return_offsets.nbytes if self.return_offsets is not None else 0))
 
     def tree(self, k: int) -> Any:
         """Model ``k``'s min/max tree (float64, from the stored float32 coefficients)."""
@@ -192,7 +214,7 @@ class FusedMap:
         from scipy.spatial import cKDTree
 
         if self._return_index is None:
-            world = [self.return_points(k) for k in range(len(self))]
+            world = [self.return_points(k, within=self.return_reach) for k in range(len(self))]
             self._return_index = cKDTree(np.concatenate(world) if world else np.zeros((0, 2)))
         amplitude, width = RETURN_KERNEL
         kernel = np.zeros(points.shape[0])
@@ -285,20 +307,23 @@ class FusedMap:
                       np.nan_to_num(best, nan=0.5).reshape(ny, nx).astype(np.float32), conflict.reshape(ny, nx))
 
 
-    def return_points(self, k: int) -> FloatArray:
-        """World ``(M, 2)`` x, y of position ``k``'s nearest returns (bin centres)."""
+    def return_points(self, k: int, within: float = math.inf) -> FloatArray:
+        """World ``(M, 2)`` x, y of position ``k``'s nearest returns no farther than ``within``
+        from it (at their own pan angles with :attr:`return_offsets`, else at the bins' centres)."""
         assert self.returns is not None
         millimetres = self.returns[k]
         bins = millimetres.size
-        held = np.flatnonzero(millimetres != NO_OBSTACLE)
-        alpha = -math.pi + (held + 0.5) * (2.0 * math.pi / bins)
+        held = np.flatnonzero((millimetres != NO_OBSTACLE) & (millimetres.astype(np.float64) / 1000.0 <= within))
+        within = (self.return_offsets[k, held] / OFFSET_STEPS if self.return_offsets is not None else 0.5)
+        alpha = -math.pi + (held + within) * (2.0 * math.pi / bins)
         distance = millimetres[held].astype(np.float64) / 1000.0
         return self.poses[k].to_world(np.column_stack([distance * np.cos(alpha), distance * np.sin(alpha)]))
 
     def _return_counts(self, origin: FloatArray, nx: int, ny: int,
                        resolution: float) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
         """Per raster cell: positions whose returns fall in it, and positions that saw
-        through it (its centre lies more than a cell in front of their return at that pan bin)."""
+        through it (its centre lies more than a cell in front of their return at that pan bin,
+        and no farther than :attr:`return_reach`)."""
         assert self.returns is not None
         hits = np.zeros(ny * nx, dtype=np.int32)
         through = np.zeros(ny * nx, dtype=np.int32)
@@ -313,7 +338,7 @@ class FusedMap:
             row = np.floor((world[:, 1] - origin[1]) / resolution).astype(np.int64)
             inside = (row >= 0) & (row < ny) & (col >= 0) & (col < nx)
             hits[np.unique(row[inside] * nx + col[inside])] += 1
-            distance = np.where(held, millimetres.astype(np.float64) / 1000.0, -np.inf)
+            distance = np.where(held, np.minimum(millimetres.astype(np.float64) / 1000.0, self.return_reach), -np.inf)
             r = float(distance.max())
             x, y, _, yaw = self._pose_array[k]
             ii, jj = _cells_around(x, y, r, origin, resolution, nx, ny)
