@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from occtool import guard as guard_module
 from occtool.features import Features, wrap_angle
 from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction, order_within_bins
-from occtool.fit._sight import contradicted_features
+from occtool.fit._sight import SightIndex, contradicted_features, sight_index
 from occtool.guard import GUARD_BINS, Support, guard_candidates, is_planar_scan, ray_spacing, support_count
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
@@ -44,6 +44,8 @@ class Screen:
     origin: float
     planar: bool
     mismatch: NDArray[np.bool_]
+    #: The line-of-sight test's index of the features (built by the first test that needs it).
+    sight: SightIndex | None = None
 
 
 def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, basis: str, focus: bool,
@@ -67,7 +69,9 @@ def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, ba
         # Only features the focus keeps can mislead the fit: test those alone.
         horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
         candidates = obstacle & (horizontal <= focus_range)
-        mismatch = contradicted_features(features, origin=origin, candidates=candidates)
+        sight = sight_index(features, origin)
+        mismatch = contradicted_features(features, origin=origin, candidates=candidates, index=sight)
+        return Screen(obstacle, origin, planar, mismatch, sight)
     return Screen(obstacle, origin, planar, mismatch)
 
 
@@ -85,8 +89,12 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # 3D data. A return is dropped as a mismatch only when rays clearly pass through it:
     # a stricter test than the fit's, which also drops the front edge of a thin seat or
     # table top that rays graze on their way to the floor beyond.
-    strict = contradicted_features(features, origin=screen.origin, candidates=returns & screen.mismatch,
-                                   tolerance=GUARD_SIGHT_TOLERANCE, ratio=GUARD_SIGHT_RATIO)
+    # Only the fit's mismatches are tested (none: no test, and no index built for it).
+    tested = returns & screen.mismatch
+    strict = np.zeros(len(features), dtype=bool)
+    if tested.any():
+        strict = contradicted_features(features, origin=screen.origin, candidates=tested,
+                                       tolerance=GUARD_SIGHT_TOLERANCE, ratio=GUARD_SIGHT_RATIO, index=screen.sight)
     returns &= ~strict
     spacing = ray_spacing(features.points)
     # A return alone may be a mismatch; one confirmed by returns on neighbouring rays at
