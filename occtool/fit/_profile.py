@@ -163,6 +163,8 @@ def mean_direction(alpha: FloatArray) -> float:
 def angle_bins(alpha: FloatArray, n_bins: int) -> NDArray[np.intp]:
     """Index of the angular bin (of ``n_bins`` over [-pi, pi)) holding each angle."""
     index = np.floor((np.asarray(alpha) + np.pi) * (n_bins / (2.0 * np.pi))).astype(np.intp)
+    if index.size and 0 <= int(index.min()) and int(index.max()) < n_bins:
+        return index  # every bin in range already: np.mod (an integer division) would keep it
     return np.mod(index, n_bins)
 
 
