@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features, wrap_angle
 from occtool.fit._construction import ProgressCallback, _Fitter
-from occtool.fit._focus import focus_samples, frontier_samples, join_samples
+from occtool.fit._focus import focused_with_frontier
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
 from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard
 from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT
@@ -309,9 +309,8 @@ class OccupancyRegressor:
         turned = Samples(wrap_angle(samples.alpha - origin), samples.h, samples.r, samples.m, samples.weight,
                          samples.kind)
         if self.focus:
-            frontier = frontier_samples(turned, robot, self.focus_range, planar=screen.planar)
-            focused = focus_samples(turned, robot, self.focus_range, floor_is_obstacle=sensor.floor == "obstacle")
-            turned = join_samples(focused, frontier)
+            turned = focused_with_frontier(turned, robot, self.focus_range, planar=screen.planar,
+                                           floor_is_obstacle=sensor.floor == "obstacle")
         fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin),
                          floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
                          progress=progress)
