@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features
+from occtool.features import Features, wrap_angle
 from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.robot import Robot
 
@@ -235,9 +235,17 @@ class SensorModel:
             Hit, near and robot samples per obstacle feature, the free samples of floor
             features, footprint and background samples.
         """
+        return self._samples(features, robot, rng)
+
+    def _samples(self, features: Features, robot: Robot | None = None, rng: np.random.Generator | None = None,
+                 turn: float | None = None) -> Samples:
+        """:meth:`samples`; with ``turn``, pan angles measured from ``turn``
+        (``wrap_angle(alpha - turn)``), turned a feature at a time rather than a sample."""
         robot = Robot() if robot is None else robot
         rng = np.random.default_rng(0) if rng is None else rng
         alpha, h, r = features.polar()
+        if turn is not None:
+            alpha = wrap_angle(alpha - turn)
         m = features.evidence
         on_floor = self.is_floor(h, robot)
         # A feature inside the robot's own body cylinder is the robot itself (a self-hit)
@@ -256,6 +264,8 @@ class SensorModel:
             extra.append(self._footprint(robot))
         if self.background_samples:
             extra.append(self._background(robot, rng))
+        if turn is not None:
+            extra = [(wrap_angle(block[0] - turn), *block[1:]) for block in extra]
         n_obs, n_ray = a_obs.size, a_ray.size
         total = 2 * n_obs + 3 * n_ray + sum(block[0].size for block in extra)
         # Each block is written into its slice of the columns: concatenating the blocks
