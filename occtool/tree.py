@@ -121,8 +121,8 @@ def _evaluate(node: Node, values: FloatArray) -> FloatArray:
         return values[node]
     reduce = np.minimum if node.op == "min" else np.maximum
     out = _evaluate(node.children[0], values)
-    if len(node.children) > 1 and isinstance(node.children[0], int):
-        out = out.copy()  # a row of ``values``: reduced into in place below
+    if len(node.children) > 1 and out.base is not None:
+        out = out.copy()  # a row of ``values`` (a leaf's, or a one-child node's): reduced into in place below
     for child in node.children[1:]:
         # In place: the same pairwise MIN/MAX in the same order, without a fresh array a child.
         reduce(out, _evaluate(child, values), out=out)

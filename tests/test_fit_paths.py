@@ -94,3 +94,15 @@ def test_chunked_evaluation_equals_evaluation_a_chunk_at_a_time():
     np.testing.assert_array_equal(tree.predict(alpha, h, r), np.concatenate(parts))
     active = [tree.active_piece(alpha[i:i + 1000], h[i:i + 1000], r[i:i + 1000]) for i in range(0, n, 1000)]
     np.testing.assert_array_equal(tree.active_piece(alpha, h, r), np.concatenate(active))
+
+
+def test_a_node_of_one_child_first_under_another_leaves_the_pieces_alone():
+    # max(min(p0), p1, p2): min(p0) is p0's own row of values, which the max must not reduce into.
+    W = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 1.0, 1.0, 0.0]])
+    tree = MinMaxTree("trig", W, Op("max", (Op("min", (0,)), 1, 2)))
+    r = np.linspace(0.0, 2.0, 9)
+    h = np.full(9, -0.5)
+    expected = np.maximum(np.maximum(r, 2.0 * r - 1.0), h + r)
+    np.testing.assert_array_equal(tree.predict(0.0, h, r), expected)
+    grid = tree.predict(np.zeros((3, 1)), -0.5, r[None, :])  # broadcast inputs: read-only rows
+    np.testing.assert_array_equal(grid, np.broadcast_to(expected, (3, 9)))
