@@ -222,20 +222,31 @@ class Support:
 
     def confirmed(self, points: ArrayLike, count: ArrayLike) -> NDArray[np.bool_]:
         """Whether each of ``points`` (x, y, z) has ``count`` (per point, or one for all) support."""
+        return self._confirmed(points, count)[0]
+
+    def _confirmed(self, points: ArrayLike, count: ArrayLike, *, steep: bool = False
+                   ) -> tuple[NDArray[np.bool_], tuple[FloatArray, NDArray[np.intp]] | None]:
+        """:meth:`confirmed`; with ``steep``, also each point's neighbours as
+        :meth:`seen_from_above` queries them (its ``k``), when one query can serve both (no
+        more than that ``k`` needed: asking for more neighbours than the needed-th changes
+        no count), else ``None``."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         count = np.broadcast_to(np.asarray(count, dtype=np.float64), (points.shape[0],))
         needed = np.ceil(count / self.step).astype(np.int64)
         if points.shape[0] == 0 or (needed <= 1).all() or self.tree.n == 0:
-            return needed <= 1
+            return needed <= 1, None
         # The needed-th nearest within reach, not a count of all: dense surfaces hold hundreds.
-        k = int(min(needed.max(), self.tree.n))
-        distance, _ = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        share = steep and int(needed.max()) <= STEEP_CANDIDATES
+        k = int(min(STEEP_CANDIDATES if share else needed.max(), self.tree.n))
+        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
         distance = np.asarray(distance).reshape(points.shape[0], k)
         within = np.isfinite(distance).sum(axis=1)
-        return within >= needed
+        neighbours = (distance, np.asarray(index).reshape(points.shape[0], k)) if share else None
+        return within >= needed, neighbours
 
 
-    def seen_from_above(self, points: ArrayLike) -> NDArray[np.bool_]:
+    def seen_from_above(self, points: ArrayLike,
+                        neighbours: tuple[FloatArray, NDArray[np.intp]] | None = None) -> NDArray[np.bool_]:
         """Whether each of ``points`` may lie on a surface seen from above (a table or
         crate top, a beam), whose first return can lie a ray spacing or two behind its
         front edge.
@@ -245,13 +256,17 @@ class Support:
         reach) lie a ray row or more higher or lower, at a horizontal distance that changes
         by at most :data:`STEEP_SLOPE` of the height. Its first return is then its front.
         Any other return, or one with too few neighbours to tell, counts as seen from
-        above: the safe side.
+        above: the safe side. ``neighbours``: the points' query result when
+        :meth:`_confirmed` made it already.
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if points.shape[0] == 0 or self.tree.n == 0:
             return np.ones(points.shape[0], dtype=bool)
         k = int(min(STEEP_CANDIDATES, self.tree.n))
-        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        if neighbours is None:
+            distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        else:
+            distance, index = neighbours
         found = np.isfinite(np.asarray(distance).reshape(points.shape[0], k))
         neighbours = self.points[np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)]
         horizontal = np.hypot(points[:, 0], points[:, 1])

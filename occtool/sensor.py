@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features
+from occtool.features import Features, wrap_angle
 from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.robot import Robot
 
@@ -235,9 +235,17 @@ class SensorModel:
             Hit, near and robot samples per obstacle feature, the free samples of floor
             features, footprint and background samples.
         """
+        return self._samples(features, robot, rng)
+
+    def _samples(self, features: Features, robot: Robot | None = None, rng: np.random.Generator | None = None,
+                 turn: float | None = None) -> Samples:
+        """:meth:`samples`; with ``turn``, pan angles measured from ``turn``
+        (``wrap_angle(alpha - turn)``), turned a feature at a time rather than a sample."""
         robot = Robot() if robot is None else robot
         rng = np.random.default_rng(0) if rng is None else rng
         alpha, h, r = features.polar()
+        if turn is not None:
+            alpha = wrap_angle(alpha - turn)
         m = features.evidence
         on_floor = self.is_floor(h, robot)
         # A feature inside the robot's own body cylinder is the robot itself (a self-hit)
@@ -248,31 +256,52 @@ class SensorModel:
         obstacle = ~(on_floor & (self.floor == "drop")) & ~free_only & ~on_robot
         rays = obstacle | free_only
 
-        parts: list[_SampleBlock] = []
         e = self.depth_error
         a_obs, h_obs, r_obs, m_obs = alpha[obstacle], h[obstacle], r[obstacle], m[obstacle]
-        for scale in (1.0 - e, 1.0 + e):
-            parts.append((a_obs, h_obs * scale, r_obs * scale, m_obs, np.ones_like(m_obs), SAMPLE_KINDS["hit"]))
         a_ray, h_ray, r_ray, m_ray = alpha[rays], h[rays], r[rays], m[rays]
+        extra: list[_SampleBlock] = []
+        if self.footprint_samples:
+            extra.append(self._footprint(robot))
+        if self.background_samples:
+            extra.append(self._background(robot, rng))
+        if turn is not None:
+            extra = [(wrap_angle(block[0] - turn), *block[1:]) for block in extra]
+        n_obs, n_ray = a_obs.size, a_ray.size
+        total = 2 * n_obs + 3 * n_ray + sum(block[0].size for block in extra)
+        # Each block is written into its slice of the columns: concatenating the blocks
+        # took a third of the samples' time at a million features (2.5 GB of copies).
+        alpha_out, h_out, r_out, m_out = (np.empty(total) for _ in range(4))
+        weight_out = np.ones(total)
+        kind_out = np.empty(total, dtype=np.int8)
+        start = 0
+        for scale in (1.0 - e, 1.0 + e):
+            part = slice(start, start + n_obs)
+            alpha_out[part] = a_obs
+            np.multiply(h_obs, scale, out=h_out[part])
+            np.multiply(r_obs, scale, out=r_out[part])
+            m_out[part] = m_obs
+            kind_out[part] = SAMPLE_KINDS["hit"]
+            start += n_obs
         near_kind = np.where(free_only[rays], SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"])
         for position, value in zip(self.near_positions, self.near_values):
-            parts.append((a_ray, h_ray * position, r_ray * position, m_ray * value, np.ones_like(m_ray), near_kind))
-        zeros = np.zeros_like(m_ray)
-        parts.append((a_ray, zeros, zeros, zeros, np.ones_like(m_ray), SAMPLE_KINDS["robot"]))
-        if self.footprint_samples:
-            parts.append(self._footprint(robot))
-        if self.background_samples:
-            parts.append(self._background(robot, rng))
-
-        columns = [np.concatenate([np.broadcast_to(p[i], p[0].shape) for p in parts]) for i in range(6)]
-        return Samples(
-            alpha=columns[0].astype(np.float64, copy=False),
-            h=columns[1].astype(np.float64, copy=False),
-            r=columns[2].astype(np.float64, copy=False),
-            m=columns[3].astype(np.float64, copy=False),
-            weight=columns[4].astype(np.float64, copy=False),
-            kind=columns[5].astype(np.int8, copy=False),
-        )
+            part = slice(start, start + n_ray)
+            alpha_out[part] = a_ray
+            np.multiply(h_ray, position, out=h_out[part])
+            np.multiply(r_ray, position, out=r_out[part])
+            np.multiply(m_ray, value, out=m_out[part])
+            kind_out[part] = near_kind
+            start += n_ray
+        part = slice(start, start + n_ray)
+        alpha_out[part] = a_ray
+        h_out[part] = r_out[part] = m_out[part] = 0.0
+        kind_out[part] = SAMPLE_KINDS["robot"]
+        start += n_ray
+        for block in extra:
+            part = slice(start, start + block[0].size)
+            for column, values in zip((alpha_out, h_out, r_out, m_out, weight_out, kind_out), block):
+                column[part] = values
+            start += block[0].size
+        return Samples(alpha=alpha_out, h=h_out, r=r_out, m=m_out, weight=weight_out, kind=kind_out)
 
     def is_on_robot(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
         """Whether features lie inside the robot's body cylinder (radius, floor to top)."""

@@ -10,6 +10,7 @@ free space into what was never seen.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from occtool.fit._profile import (
     FOCUS_ANGLE_BINS,
@@ -22,6 +23,8 @@ from occtool.fit._profile import (
 )
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples
+
+FloatArray = NDArray[np.float64]
 
 #: Samples up to this fraction (and the window) beyond the first obstacle are kept.
 FOCUS_MARGIN = 0.1
@@ -39,10 +42,22 @@ def focus_samples(samples: Samples, robot: Robot, focus_range: float = np.inf, *
     outside the height band: the navigation map never looks there, and samples farther
     than ``focus_range`` (horizontally).
     """
+    distance, bins = _geometry(samples)
+    return samples.select(_focus_mask(samples, robot, focus_range, floor_is_obstacle, distance, bins))
+
+
+def _geometry(samples: Samples) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Each sample's horizontal distance and its bin of :data:`FOCUS_ANGLE_BINS`: what the
+    focus and the frontier both read of every sample."""
+    return np.sqrt(np.maximum(samples.r**2 - samples.h**2, 0.0)), angle_bins(samples.alpha, FOCUS_ANGLE_BINS)
+
+
+def _focus_mask(samples: Samples, robot: Robot, focus_range: float, floor_is_obstacle: bool,
+                distance: FloatArray, bins: NDArray[np.intp]) -> NDArray[np.bool_]:
+    """Which samples :func:`focus_samples` keeps (``distance``, ``bins``: :func:`_geometry`)."""
     low = robot.floor_h - 0.05
     high = max(robot.body_band[1], 0.0) + 0.1
     in_band = (samples.h >= low) & (samples.h <= high)
-    distance = np.sqrt(np.maximum(samples.r**2 - samples.h**2, 0.0))
     band_low, band_high = robot.body_band
     if floor_is_obstacle:
         band_low = -np.inf
@@ -51,11 +66,36 @@ def focus_samples(samples: Samples, robot: Robot, focus_range: float = np.inf, *
     first = first_obstacle_distance(samples.alpha[hit], distance[hit], FOCUS_ANGLE_BINS, support)
     limit = first * (1.0 + FOCUS_WINDOW + FOCUS_MARGIN) + FOCUS_WINDOW_ABS
     limit = np.minimum(limit, focus_range)
-    in_front = distance <= limit[angle_bins(samples.alpha, FOCUS_ANGLE_BINS)]
-    always = np.isin(samples.kind, [SAMPLE_KINDS["robot"], SAMPLE_KINDS["footprint"], SAMPLE_KINDS["frontier"]])
-    return samples.select(always | (in_band & in_front))
+    in_front = distance <= limit[bins]
+    kind = samples.kind
+    always = (kind == SAMPLE_KINDS["robot"]) | (kind == SAMPLE_KINDS["footprint"]) | (kind == SAMPLE_KINDS["frontier"])
+    return always | (in_band & in_front)
 
 
+def focused_with_frontier(samples: Samples, robot: Robot, focus_range: float, *, planar: bool,
+                          floor_is_obstacle: bool) -> Samples:
+    """``join_samples(focus_samples(samples, ...), frontier_samples(samples, ...))`` in one
+    pass: the distances and bins made once for both, the kept samples written straight
+    into the joined columns (at a million features each copy of the samples is 0.1 s)."""
+    distance, bins = _geometry(samples)
+    frontier = _frontier(samples, robot, focus_range, planar, distance, bins)
+    keep = _focus_mask(samples, robot, focus_range, floor_is_obstacle, distance, bins)
+    kept = np.flatnonzero(keep)
+    count = kept.size
+    columns = []
+    for name in ("alpha", "h", "r", "m", "weight", "kind"):
+        values, extra = getattr(samples, name), getattr(frontier, name)
+        joined = np.empty(count + extra.size, dtype=np.result_type(values, extra))
+        np.take(values, kept, out=joined[:count])
+        joined[count:] = extra
+        columns.append(joined)
+    return Samples(*columns)
+
+
+#: Ray ends beyond which :func:`frontier_samples` first bounds each bin's rank-th farthest
+#: from every FRONTIER_STRIDE-th end, and groups only the ends that can reach it.
+FRONTIER_PRUNE = 1 << 17
+FRONTIER_STRIDE = 8
 #: Heights of the body band that get a frontier sample.
 FRONTIER_HEIGHTS = 4
 #: The frontier stands this share beyond the observed extent, no farther: an untextured
@@ -79,17 +119,38 @@ def frontier_samples(samples: Samples, robot: Robot, focus_range: float, *, plan
     neighbours takes the nearer neighbour's extent. One occupied sample (value 1) per
     height of the body band is placed just beyond the bin's observed extent.
     """
+    distance, bins = _geometry(samples)
+    return _frontier(samples, robot, focus_range, planar, distance, bins)
+
+
+def _frontier(samples: Samples, robot: Robot, focus_range: float, planar: bool, distance: FloatArray,
+              bins: NDArray[np.intp]) -> Samples:
+    """:func:`frontier_samples` (``distance``, ``bins``: :func:`_geometry`)."""
     # The ray ends are the hit samples and the free samples of floor features.
     kind = samples.kind
     rays = (kind == SAMPLE_KINDS["hit"]) | (kind == SAMPLE_KINDS["near"]) | (kind == SAMPLE_KINDS["floor"])
-    distance = np.sqrt(np.maximum(samples.r[rays] ** 2 - samples.h[rays] ** 2, 0.0))
-    order, bounds = group_by_bin(angle_bins(samples.alpha[rays], FOCUS_ANGLE_BINS), FOCUS_ANGLE_BINS)
-    distance = distance[order]
+    distance, ray_bins = distance[rays], bins[rays]
     # A planar scan has one beam a direction and no mismatches: its farthest end is seen.
     rank = 1 if planar else adaptive_support(samples.count("robot"))[1]
+    counts = np.bincount(ray_bins, minlength=FOCUS_ANGLE_BINS)
+    if distance.size > FRONTIER_PRUNE:
+        # Only ends at or beyond a bin's rank-th farthest of every FRONTIER_STRIDE-th end
+        # can be its rank-th farthest of all (that one is at least as far): the rest need
+        # not be grouped (at a million features 4.5M ends, 0.2 s of the fit).
+        subset_distance, subset_bins = distance[::FRONTIER_STRIDE], ray_bins[::FRONTIER_STRIDE]
+        order, bounds = group_by_bin(subset_bins, FOCUS_ANGLE_BINS)
+        subset_distance = subset_distance[order]
+        least = np.full(FOCUS_ANGLE_BINS, -np.inf)
+        for b, (first, end) in enumerate(zip(bounds[:-1], bounds[1:])):  # a loop over bins
+            if end - first >= rank:
+                least[b] = np.partition(subset_distance[first:end], end - first - rank)[end - first - rank]
+        candidates = distance >= least[ray_bins]
+        distance, ray_bins = distance[candidates], ray_bins[candidates]
+    order, bounds = group_by_bin(ray_bins, FOCUS_ANGLE_BINS)
+    distance = distance[order]
     extent = np.zeros(FOCUS_ANGLE_BINS)
     for b, (first, end) in enumerate(zip(bounds[:-1], bounds[1:])):  # a loop over bins
-        if end - first >= rank:
+        if counts[b] >= rank:
             # The rank-th farthest ray end: a partition, not a sort, of the bin's ends.
             extent[b] = np.partition(distance[first:end], end - first - rank)[end - first - rank]
     # A bin short of both its neighbours is a gap between sparse rays, not an edge of the

@@ -20,14 +20,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
-from occtool.features import Features, wrap_angle
+from occtool.features import Features
 from occtool.fit._construction import ProgressCallback, _Fitter
-from occtool.fit._focus import focus_samples, frontier_samples, join_samples
+from occtool.fit._focus import focused_with_frontier
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
 from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard
 from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT
 from occtool.robot import Robot
-from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
+from occtool.sensor import SAMPLE_KINDS, SensorModel
 from occtool.tree import BASES, InverseTree, MinMaxTree, Op
 
 log = logging.getLogger("occtool.fit")
@@ -308,16 +308,14 @@ class OccupancyRegressor:
             # more, and the samples of every feature would not fit in memory (10M features:
             # 50M samples, 5 GB). The screen and the return guard above saw every feature.
             usable = usable.select(np.arange(0, len(usable), -(-len(usable) // FIT_FEATURES)))
-        samples = sensor.samples(usable, robot, rng)
-        if samples.count("hit") + samples.count("near") + samples.count("floor") == 0:
+        # The samples with their pan angles measured from the origin, as the fit bins them.
+        turned = sensor._samples(usable, robot, rng, turn=origin)
+        if turned.count("hit") + turned.count("near") + turned.count("floor") == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
 
-        turned = Samples(wrap_angle(samples.alpha - origin), samples.h, samples.r, samples.m, samples.weight,
-                         samples.kind)
         if self.focus:
-            frontier = frontier_samples(turned, robot, self.focus_range, planar=screen.planar)
-            focused = focus_samples(turned, robot, self.focus_range, floor_is_obstacle=sensor.floor == "obstacle")
-            turned = join_samples(focused, frontier)
+            turned = focused_with_frontier(turned, robot, self.focus_range, planar=screen.planar,
+                                           floor_is_obstacle=sensor.floor == "obstacle")
         fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin),
                          floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
                          progress=progress)

@@ -16,12 +16,14 @@ from numpy.typing import NDArray
 from occtool import guard as guard_module
 from occtool.features import Features, wrap_angle
 from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction, order_within_bins
-from occtool.fit._sight import contradicted_features
+from occtool.fit._sight import SightIndex, contradicted_features, sight_index
 from occtool.guard import GUARD_BINS, Support, guard_candidates, is_planar_scan, ray_spacing, support_count
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 
 FloatArray = NDArray[np.float64]
+#: A support query's result: each point's neighbour distances and indices (:class:`Support`).
+Neighbours = tuple[FloatArray, NDArray[np.intp]]
 
 #: The return guard's line-of-sight test (:func:`guarded_mask`): rays
 #: must pass within 1 cm (+ 1 % of the distance) of a return's height, three of them and
@@ -44,6 +46,8 @@ class Screen:
     origin: float
     planar: bool
     mismatch: NDArray[np.bool_]
+    #: The line-of-sight test's index of the features (built by the first test that needs it).
+    sight: SightIndex | None = None
 
 
 def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, basis: str, focus: bool,
@@ -67,7 +71,9 @@ def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, ba
         # Only features the focus keeps can mislead the fit: test those alone.
         horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
         candidates = obstacle & (horizontal <= focus_range)
-        mismatch = contradicted_features(features, origin=origin, candidates=candidates)
+        sight = sight_index(features, origin)
+        mismatch = contradicted_features(features, origin=origin, candidates=candidates, index=sight)
+        return Screen(obstacle, origin, planar, mismatch, sight)
     return Screen(obstacle, origin, planar, mismatch)
 
 
@@ -85,8 +91,12 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # 3D data. A return is dropped as a mismatch only when rays clearly pass through it:
     # a stricter test than the fit's, which also drops the front edge of a thin seat or
     # table top that rays graze on their way to the floor beyond.
-    strict = contradicted_features(features, origin=screen.origin, candidates=returns & screen.mismatch,
-                                   tolerance=GUARD_SIGHT_TOLERANCE, ratio=GUARD_SIGHT_RATIO)
+    # Only the fit's mismatches are tested (none: no test, and no index built for it).
+    tested = returns & screen.mismatch
+    strict = np.zeros(len(features), dtype=bool)
+    if tested.any():
+        strict = contradicted_features(features, origin=screen.origin, candidates=tested,
+                                       tolerance=GUARD_SIGHT_TOLERANCE, ratio=GUARD_SIGHT_RATIO, index=screen.sight)
     returns &= ~strict
     spacing = ray_spacing(features.points)
     # A return alone may be a mismatch; one confirmed by returns on neighbouring rays at
@@ -116,13 +126,18 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     confirmed = np.zeros(index.size, dtype=bool)
     settled = np.zeros(GUARD_BINS, dtype=bool)
     confirming = Support(support, spacing)
+    # The neighbours each test found, for the seen-from-above test of the confirmed returns
+    # (one query for both where it can serve both).
+    found: list[tuple[NDArray[np.intp], Neighbours]] = []
     low_rank, chunk = 0, GUARD_TEST_CHUNK
     while low_rank < max(int(rank.max(initial=-1)) + 1, 0):
         tested = (rank >= low_rank) & (rank < low_rank + chunk) & ~settled[bins]
         if not tested.any():
             break
         chosen = np.flatnonzero(tested)
-        confirmed[chosen] = confirming.confirmed(candidates[chosen], needed[chosen])
+        confirmed[chosen], neighbours = confirming._confirmed(candidates[chosen], needed[chosen], steep=True)
+        if neighbours is not None:
+            found.append((chosen, neighbours))
         settled[bins[chosen[confirmed[chosen]]]] = True
         low_rank, chunk = low_rank + chunk, 2 * chunk
     returns[index[~confirmed]] = False
@@ -130,10 +145,33 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # edge: its returns are taken that much nearer. A wall's or a leg's first return is
     # its front (at 1k features the blanket shrink cost 0.07 IoU).
     scale = np.ones(len(features))
-    kept = np.flatnonzero(returns)
-    tops = confirming.seen_from_above(features.points[kept])
+    kept = np.flatnonzero(returns)  # index[confirmed]: returns was index before the test
+    tops = confirming.seen_from_above(features.points[kept], _neighbours_of(np.flatnonzero(confirmed), found))
     scale[kept[tops]] = max(0.0, 1.0 - guard_module.SPACING_FACTOR * spacing)
     return returns, scale, spacing
+
+
+def _neighbours_of(positions: NDArray[np.intp],
+                   found: list[tuple[NDArray[np.intp], Neighbours]]) -> Neighbours | None:
+    """The neighbours found for the candidates at ``positions``, in that order, if every
+    one of them has its neighbours among ``found`` (chunks of positions and their query)."""
+    if not found:
+        return None
+    total = sum(chosen.size for chosen, _ in found)
+    k = found[0][1][0].shape[1]
+    where = np.full(max(int(positions.max(initial=-1)) + 1, max(int(c.max(initial=-1)) + 1 for c, _ in found)), -1)
+    distance = np.empty((total, k))
+    index = np.empty((total, k), dtype=np.intp)
+    start = 0
+    for chosen, (chunk_distance, chunk_index) in found:
+        where[chosen] = np.arange(start, start + chosen.size)
+        distance[start:start + chosen.size] = chunk_distance
+        index[start:start + chosen.size] = chunk_index
+        start += chosen.size
+    rows = where[positions]
+    if (rows < 0).any():
+        return None
+    return distance[rows], index[rows]
 
 
 def profile_returns(features: Features, sensor: SensorModel, robot: Robot,

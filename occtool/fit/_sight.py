@@ -8,6 +8,7 @@ sampling, and the return guard drops those rays clearly pass through.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,28 +34,28 @@ SIGHT_MAX_RAYS = 128
 SIGHT_BLOCK = 1 << 16
 
 
-def contradicted_features(features: Features, origin: float = 0.0,
-                          candidates: NDArray[np.bool_] | None = None, *,
-                          tolerance: tuple[float, float] = (SIGHT_HEIGHT_TOLERANCE, SIGHT_HEIGHT_SHARE),
-                          ratio: int = 2) -> NDArray[np.bool_]:
-    """Features that other rays in nearly the same direction pass through.
+@dataclass(frozen=True)
+class SightIndex:
+    """What the line-of-sight test knows of the features whatever it tests: their
+    horizontal distance, height and bin, the bins' rays sorted by elevation and by
+    distance, and the features in bins of at least three (the only ones tested)."""
 
-    A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
-    range sits in space that other rays of its pan-angle bin cross on their way to
-    something farther. A feature is contradicted when at least two rays of its bin
-    (:data:`SIGHT_BINS`), and at least twice as many as end near it (itself included),
-    pass within :data:`SIGHT_HEIGHT_TOLERANCE` (+ :data:`SIGHT_HEIGHT_SHARE` of the
-    distance) of its height at its horizontal distance
-    and end beyond the focus window (:data:`FOCUS_WINDOW`, :data:`FOCUS_WINDOW_ABS`).
-    Near the robot the height tolerance spans a wide tilt range, so isolated mismatches
-    there, which would box the robot in, are the ones most surely caught. The bins start
-    at the pan angle ``origin``; only the ``candidates`` (default: all) are tested, every
-    feature counts as a ray.
-    """
+    distance: FloatArray
+    h: FloatArray
+    bins: NDArray[np.intp]
+    lane: float
+    by_elevation: tuple[FloatArray, NDArray[np.intp]]
+    by_distance: tuple[FloatArray, NDArray[np.intp]]
+    tested: NDArray[np.intp]
+
+
+def sight_index(features: Features, origin: float = 0.0) -> SightIndex:
+    """The :class:`SightIndex` of ``features`` with the bins starting at ``origin``."""
     alpha, h, r = features.polar()
-    contradicted = np.zeros(r.size, dtype=bool)
     if r.size == 0:
-        return contradicted
+        empty = np.zeros(0)
+        nothing = np.zeros(0, dtype=np.intp)
+        return SightIndex(empty, empty, nothing, 1.0, (empty, nothing), (empty, nothing), nothing)
     distance = np.sqrt(np.maximum(r**2 - h**2, 0.0))
     bins = angle_bins(alpha - origin, SIGHT_BINS)
     order, _ = group_by_bin(bins, SIGHT_BINS)
@@ -67,10 +68,6 @@ def contradicted_features(features: Features, origin: float = 0.0,
     slot = np.arange(ray_bin.size) - np.repeat(np.cumsum(n_rays) - n_rays, n_rays)
     rays = order[starts[ray_bin] + slot * step[ray_bin]]
     tested = np.flatnonzero(counts[bins] >= 3)
-    if candidates is not None:
-        tested = tested[candidates[tested]]
-    if tested.size == 0:
-        return contradicted
     # A ray passes a feature when it ends beyond it (d > D + window) and its height at the
     # feature's distance, z D / d, lies within `within` of the feature's: an interval of
     # the ray's elevation z / d. With the rays sorted by bin, then elevation (as an angle,
@@ -86,6 +83,39 @@ def contradicted_features(features: Features, origin: float = 0.0,
     lane = 2.0 * float(distance.max()) + 1.0
     order = np.lexsort((d_ray, ray_bin))
     by_distance = (ray_bin[order] * lane + d_ray[order], rays[order])
+    return SightIndex(distance, h, bins, lane, by_elevation, by_distance, tested)
+
+
+def contradicted_features(features: Features, origin: float = 0.0,
+                          candidates: NDArray[np.bool_] | None = None, *,
+                          tolerance: tuple[float, float] = (SIGHT_HEIGHT_TOLERANCE, SIGHT_HEIGHT_SHARE),
+                          ratio: int = 2, index: SightIndex | None = None) -> NDArray[np.bool_]:
+    """Features that other rays in nearly the same direction pass through.
+
+    A real surface stops the rays that meet it. A mismatch registered at a wrong, shorter
+    range sits in space that other rays of its pan-angle bin cross on their way to
+    something farther. A feature is contradicted when at least two rays of its bin
+    (:data:`SIGHT_BINS`), and at least twice as many as end near it (itself included),
+    pass within :data:`SIGHT_HEIGHT_TOLERANCE` (+ :data:`SIGHT_HEIGHT_SHARE` of the
+    distance) of its height at its horizontal distance
+    and end beyond the focus window (:data:`FOCUS_WINDOW`, :data:`FOCUS_WINDOW_ABS`).
+    Near the robot the height tolerance spans a wide tilt range, so isolated mismatches
+    there, which would box the robot in, are the ones most surely caught. The bins start
+    at the pan angle ``origin``; only the ``candidates`` (default: all) are tested, every
+    feature counts as a ray. ``index``: the features' :func:`sight_index` at ``origin``,
+    when it was built already (the screen and the return guard test the same features).
+    """
+    index = sight_index(features, origin) if index is None else index
+    contradicted = np.zeros(index.distance.size, dtype=bool)
+    if index.distance.size == 0:
+        return contradicted
+    distance, h, bins, lane = index.distance, index.h, index.bins, index.lane
+    by_elevation, by_distance = index.by_elevation, index.by_distance
+    tested = index.tested
+    if candidates is not None:
+        tested = tested[candidates[tested]]
+    if tested.size == 0:
+        return contradicted
     for first in range(0, tested.size, SIGHT_BLOCK):  # blocks of features bound the pairs' memory
         block = tested[first:first + SIGHT_BLOCK]
         D, H = distance[block], h[block]
@@ -119,3 +149,4 @@ def _runs(keys: FloatArray, items: NDArray[np.intp], low: NDArray[np.floating[An
     span = np.maximum(np.searchsorted(keys, high, side="right") - first, 0)
     owner = np.repeat(np.arange(span.size), span)
     return owner, items[np.repeat(first - np.cumsum(span) + span, span) + np.arange(owner.size)]
+

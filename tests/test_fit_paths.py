@@ -1,0 +1,108 @@
+"""The fit's fast paths give exactly the numbers of the plain ones they stand in for."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import occtool.fit._focus as focus_module
+from occtool.features import wrap_angle
+from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
+from occtool.fit._focus import focused_with_frontier
+from occtool.fit._profile import order_within_bins
+from occtool.guard import Support
+from occtool.robot import Robot
+from occtool.sensor import SAMPLE_KINDS, Samples
+from occtool.tree import EVALUATION_CHUNK, MinMaxTree, Op
+
+ROBOT = Robot()
+COLUMNS = ("alpha", "h", "r", "m", "weight", "kind")
+
+
+def test_wrap_angle_is_the_modulo_formula_bit_for_bit():
+    rng = np.random.default_rng(0)
+    edges = [np.pi, -np.pi, 0.0, -0.0, 3 * np.pi, -3 * np.pi, np.nextafter(np.pi, 0.0), np.nextafter(-np.pi, 0.0),
+             2 * np.pi, -2 * np.pi, 1e-300, -1e-300]
+    alpha = np.concatenate([edges, rng.uniform(-4 * np.pi, 4 * np.pi, 10_000), rng.uniform(-np.pi, np.pi, 10_000)])
+    expected = np.mod(alpha + np.pi, 2.0 * np.pi) - np.pi
+    wrapped = wrap_angle(alpha)
+    np.testing.assert_array_equal(wrapped, expected)
+    np.testing.assert_array_equal(np.signbit(wrapped), np.signbit(expected))
+    assert wrap_angle(3 * np.pi) == np.mod(3 * np.pi + np.pi, 2.0 * np.pi) - np.pi
+
+
+@pytest.mark.parametrize("per_bin", [3, 500])  # the two-key sort, and a sort a bin
+def test_grouping_within_bins_is_a_stable_two_key_sort(per_bin):
+    rng = np.random.default_rng(per_bin)
+    bins = rng.integers(0, 12, 12 * per_bin)
+    values = np.round(rng.uniform(0.0, 5.0, bins.size), 1)  # many ties
+    order, bounds = order_within_bins(bins, values, 12)
+    np.testing.assert_array_equal(order, np.lexsort((values, bins)))
+    grouped, same_bounds = sorted_within_bins(bins, values, 12)
+    np.testing.assert_array_equal(grouped, values[np.lexsort((values, bins))])
+    np.testing.assert_array_equal(bounds, same_bounds)
+    np.testing.assert_array_equal(np.diff(bounds), np.bincount(bins, minlength=12))
+
+
+def _samples(n: int, seed: int) -> Samples:
+    rng = np.random.default_rng(seed)
+    kind = rng.choice([SAMPLE_KINDS[k] for k in ("hit", "near", "robot", "floor", "footprint")], n,
+                      p=[0.4, 0.3, 0.2, 0.05, 0.05]).astype(np.int8)
+    # Ranges to 0.1 m (ties), some bins short of the focus range so that the frontier shows.
+    r = np.round(rng.uniform(0.1, 3.6, n) * np.where(rng.random(n) < 0.5, 1.0, 0.5), 1)
+    return Samples(rng.uniform(-np.pi, np.pi, n), -rng.uniform(0.0, 0.09, n), r, np.ones(n), np.ones(n), kind)
+
+
+@pytest.mark.parametrize("planar", [False, True])
+def test_pruned_frontier_and_fused_focus_equal_the_plain_ones(monkeypatch, planar):
+    samples = _samples(400_000, 3)  # ray ends beyond FRONTIER_PRUNE
+    pruned = frontier_samples(samples, ROBOT, 4.0, planar=planar)
+    fused = focused_with_frontier(samples, ROBOT, 4.0, planar=planar, floor_is_obstacle=False)
+    monkeypatch.setattr(focus_module, "FRONTIER_PRUNE", 10**12)
+    plain = frontier_samples(samples, ROBOT, 4.0, planar=planar)
+    joined = join_samples(focus_samples(samples, ROBOT, 4.0), plain)
+    assert len(plain) > 0
+    for name in COLUMNS:
+        np.testing.assert_array_equal(getattr(pruned, name), getattr(plain, name))
+        np.testing.assert_array_equal(getattr(fused, name), getattr(joined, name))
+        assert getattr(fused, name).dtype == getattr(joined, name).dtype
+
+
+def test_one_support_query_serves_the_seen_from_above_test():
+    rng = np.random.default_rng(4)
+    a = rng.uniform(-1.0, 1.0, 3000)
+    z = rng.uniform(-0.9, 0.5, 3000)
+    points = np.column_stack([2.0 * np.cos(a), 2.0 * np.sin(a), z])
+    support = Support(points, spacing=0.02)
+    confirmed, neighbours = support._confirmed(points[:500], 6, steep=True)
+    assert neighbours is not None
+    np.testing.assert_array_equal(confirmed, support.confirmed(points[:500], 6))
+    np.testing.assert_array_equal(support.seen_from_above(points[:500], neighbours),
+                                  support.seen_from_above(points[:500]))
+
+
+def test_chunked_evaluation_equals_evaluation_a_chunk_at_a_time():
+    rng = np.random.default_rng(5)
+    W = rng.normal(size=(12, 5))
+    W[:, 3] = np.abs(W[:, 3]) + 0.1
+    tree = MinMaxTree("trig", W, Op("max", (Op("min", (0, 1, 2, 3)), Op("min", (4, 5, 6, 7)),
+                                            Op("min", (8, 9, 10)), 11)))
+    n = 3 * EVALUATION_CHUNK + 17
+    alpha, h, r = rng.uniform(-np.pi, np.pi, n), rng.uniform(-1.0, 0.0, n), rng.uniform(0.0, 4.0, n)
+    # Up to EVALUATION_CHUNK points are evaluated whole, through the plain path.
+    parts = [tree.predict(alpha[i:i + 1000], h[i:i + 1000], r[i:i + 1000]) for i in range(0, n, 1000)]
+    np.testing.assert_array_equal(tree.predict(alpha, h, r), np.concatenate(parts))
+    active = [tree.active_piece(alpha[i:i + 1000], h[i:i + 1000], r[i:i + 1000]) for i in range(0, n, 1000)]
+    np.testing.assert_array_equal(tree.active_piece(alpha, h, r), np.concatenate(active))
+
+
+def test_a_node_of_one_child_first_under_another_leaves_the_pieces_alone():
+    # max(min(p0), p1, p2): min(p0) is p0's own row of values, which the max must not reduce into.
+    W = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 1.0, 1.0, 0.0]])
+    tree = MinMaxTree("trig", W, Op("max", (Op("min", (0,)), 1, 2)))
+    r = np.linspace(0.0, 2.0, 9)
+    h = np.full(9, -0.5)
+    expected = np.maximum(np.maximum(r, 2.0 * r - 1.0), h + r)
+    np.testing.assert_array_equal(tree.predict(0.0, h, r), expected)
+    grid = tree.predict(np.zeros((3, 1)), -0.5, r[None, :])  # broadcast inputs: read-only rows
+    np.testing.assert_array_equal(grid, np.broadcast_to(expected, (3, 9)))
