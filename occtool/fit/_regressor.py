@@ -44,8 +44,9 @@ DEFAULT_FOCUS_RANGE = 4.0
 #: A planar laser's focus range (:func:`occtool.modelset.estimator_for_log`): a laser's
 #: returns hold their accuracy far beyond a stereo camera's 4 m. Per-position held-out
 #: AUC against the 4 m default (every 25th position): Intel 0.929 -> 0.955, FR-079 0.926 ->
-#: 0.942, ACES 0.918 -> 0.953, CSAIL 0.919 -> 0.937, Freiburg campus 0.837 -> 0.865; the
-#: mean polygon within 1.5 m about 3 % smaller (Intel 1.47 -> 1.42 m2), none less safe.
+#: 0.942, ACES 0.918 -> 0.953, CSAIL 0.919 -> 0.937, Freiburg campus 0.837 -> 0.865, MIT
+#: infinite corridor 0.915 -> 0.947; the mean polygon within 1.5 m about 3 % smaller (Intel
+#: 1.47 -> 1.42 m2), none less safe. (The fused map keeps 4 m: docs/map.md.)
 PLANAR_FOCUS_RANGE = 8.0
 #: Features the pieces are placed from, at most (an even subsample beyond; the screen and the
 #: return guard see every feature).
