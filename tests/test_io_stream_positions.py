@@ -8,6 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
+from test_io_mcap import header, laserscan, quaternion, transform, write_ros2
 
 import occtool.io.csv as csv_module
 from occtool.errors import InputError
@@ -56,10 +57,56 @@ def test_a_gzip_carmen_log_streams_line_by_line_the_same_positions(fixtures_dir,
     assert_same_positions(path, **options)
 
 
-def test_the_mcap_twin_of_a_log_streams_the_same_positions(tmp_path):
+def test_occtools_own_mcap_channel_is_read_whole_with_the_same_positions(tmp_path):
     path = tmp_path / "log.mcap"
     write_mcap(_posed_log(), path)
     assert_same_positions(path)
+
+
+def _ros2_messages(pose_topic):
+    # A laser mounted 0.2 m ahead, turned left; scans before the first pose, then a drive.
+    tf_static = {"transforms": [transform(0.0, "base_link", "laser", (0.2, 0.0, 0.3), np.pi / 2)]}
+    messages = [("/tf_static", "tf2_msgs/msg/TFMessage", tf_static, 0.0),
+                ("/scan", "sensor_msgs/msg/LaserScan", laserscan(0.5, "laser", [1.0, 20.0], angle_min=0.0), 0.5)]
+    for k in range(6):
+        t, x, yaw = 1.0 + k, 0.3 * k, 0.2 * k
+        if pose_topic == "/tf":
+            messages.append(("/tf", "tf2_msgs/msg/TFMessage",
+                             {"transforms": [transform(t, "odom", "base_link", (x, 0, 0), yaw)]}, t))
+        elif pose_topic == "/odom":
+            messages.append(("/odom", "nav_msgs/msg/Odometry", {
+                "header": header(t, "odom"), "child_frame_id": "base_link",
+                "pose": {"pose": {"position": {"x": x, "y": 1.0, "z": 0.0}, "orientation": quaternion(yaw)},
+                         "covariance": [0.0] * 36},
+                "twist": {"twist": {"linear": {"x": 0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0}},
+                          "covariance": [0.0] * 36}}, t))
+        ranges = [1.0 + 0.1 * k, float("inf"), 2.0, float("nan")]
+        messages.append(("/scan", "sensor_msgs/msg/LaserScan", laserscan(t + 0.01, "laser", ranges), t + 0.01))
+    return messages
+
+
+@pytest.mark.parametrize("pose_topic", ["/tf", "/odom", None])
+@pytest.mark.parametrize("options", [{}, {"no_return_range": 4.0}, {"group_by": "message"},
+                                     {"sensor_frame": "base_link"}])
+def test_mcap_laser_scans_stream_message_by_message_the_same_positions(tmp_path, pose_topic, options):
+    path = write_ros2(tmp_path / "robot.mcap", _ros2_messages(pose_topic))
+    whole = assert_same_positions(path, **options)
+    assert len(whole.positions) >= 1
+
+
+def test_an_mcap_error_is_raised_before_the_first_position(tmp_path):
+    messages = _ros2_messages("/tf")
+    messages.append(("/cloud", "sensor_msgs/msg/LaserScan", laserscan(9.0, "laser", [1.0]), 9.0))
+    path = write_ros2(tmp_path / "two.mcap", messages)
+    with pytest.raises(InputError, match="several range channels"):
+        iter_positions(path).__iter__().__next__()
+    assert_same_positions(path, topics=["/scan", "/cloud"])
+
+
+def test_the_ccny_ros1_bag_and_its_mcap_twin_stream_the_same_positions(shared_data):
+    pytest.importorskip("rosbags")
+    assert_same_positions(shared_data / "ccny_hokuyo_bag" / "demo.bag")
+    assert_same_positions(shared_data / "ccny_hokuyo_bag" / "demo_ros2_converted.mcap")
 
 
 @pytest.mark.parametrize("chunk", [64, 1000, 1 << 22])

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from occtool.features import Position
@@ -51,7 +51,22 @@ class PositionStream:
         self.format = fmt
         self.options = options
         self.notes: list[str] = []
-        self._carmen = None
+        self._carmen: Any = None
+        self._mcap: Any = None
+
+    def _mcap_scans(self) -> Any:
+        from occtool.io.mcap._reader import McapScans
+
+        opener = None
+        if self.format == "rosbag":
+            from occtool.io.rosbag import BagReader
+
+            opener = BagReader
+        o = self.options
+        return McapScans(self.path, topics=o["topics"], evidence_field=o["evidence_field"], evidence=o["evidence"],
+                         use_intensities=o["use_intensities"], sensor_frame=o["sensor_frame"],
+                         base_frame=o["base_frame"], skip_invalid=o["skip_invalid"],
+                         no_return_range=o["no_return_range"], opener=opener)
 
     def __iter__(self) -> Iterator[Position]:
         from occtool.io import _read_errors
@@ -86,6 +101,15 @@ class PositionStream:
                                 position_tolerance=tolerance, group_by=group_by, skip_invalid=options["skip_invalid"],
                                 notes=self.notes)
             return
+        if self.format in ("mcap", "rosbag"):
+            if self._mcap is None:
+                self._mcap = self._mcap_scans()
+            if self._mcap.prepare():
+                scans = self._mcap
+                self.notes = scans.notes
+                yield from group_scans(scans, source=scans.name, tolerance=tolerance, group_by=group_by,
+                                       notes=scans.notes)
+                return
         from occtool.io import _read_format
 
         log = _read_format(self.path, self.format, options)
