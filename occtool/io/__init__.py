@@ -399,11 +399,17 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
         for key, value in extra.items():
             header.add_row(key, value)
         return Group(header, table)
-    log = read_log(target, format=fmt, skip_invalid=skip_invalid, no_return_range=no_return_range)
-    header.add_row("positions", f"{len(log.positions):,}")
-    header.add_row("features", f"{sum(len(p.features) for p in log.positions):,}")
-    header.add_row("poses", "yes" if log.has_poses else "no")
-    for note in log.notes:
+    stream = iter_positions(target, format=fmt, skip_invalid=skip_invalid, no_return_range=no_return_range)
+    positions = features = 0
+    has_poses = False
+    for position in stream:  # one at a time: a long log is counted in bounded memory
+        positions += 1
+        features += len(position.features)
+        has_poses = has_poses or position.pose is not None
+    header.add_row("positions", f"{positions:,}")
+    header.add_row("features", f"{features:,}")
+    header.add_row("poses", "yes" if has_poses else "no")
+    for note in stream.notes:
         header.add_row("note", note)
     return header
 

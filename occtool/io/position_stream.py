@@ -14,11 +14,17 @@ iteration. What is held at a time depends on the format:
     ``iter_csv``: it needs each position's rows to be contiguous, and falls back to reading
     the file whole when they are not).
 ``mcap``, ``rosbag``
-    one message, and the scans of the position being gathered; a first pass over the
-    transforms and odometry (not the range messages) decides where the poses come from.
-    occtool's own feature channel is read whole (its positions are sorted).
+    one message, and the scans of the position being gathered (:class:`~occtool.io.mcap._reader.McapScans`:
+    whether poses come from ``/tf`` or odometry depends on the whole file, so the first
+    iteration decodes every message once first, keeping counts only, and raises any
+    error before the first position). occtool's own feature channel is read whole (its
+    messages are sorted by position).
 ``xyz``, ``pcd``, ``ply``
     the whole file (one position in practice): read by :func:`occtool.io.read_log`.
+
+Who streams: :func:`occtool.modelset.fit_model_set` (``occtool fit LOG -o DIR/``) and
+``occtool info LOG``. ``occtool map`` keeps :func:`~occtool.io.read_log`: choosing
+keyframes and fusing compare positions across the whole log.
 """
 
 from __future__ import annotations

@@ -263,6 +263,17 @@ def fit_model_set(
         Fit a log of planar scans with a planar scanner's robot (:func:`estimator_for_log`);
         every log's geometry findings are logged either way.
 
+    Notes
+    -----
+    Memory does not grow with a log's length: a log file is read twice through
+    :func:`occtool.io.iter_positions`, one position at a time. The first pass checks every
+    line or message (a bad one is an error before any model is written), counts the
+    positions (for the progress bar and ``positions``) and surveys their geometry for
+    :func:`estimator_for_log`; the second pass hands positions to the executor in chunks,
+    at most its window of chunks in flight, and each model is written as it comes back.
+    Standard input (``"-"``) and a :class:`~occtool.features.RangeLog` are held whole; with
+    ``positions``, only the chosen positions are held.
+
     Returns
     -------
     SetSummary
