@@ -17,7 +17,7 @@ import functools
 import logging
 import os
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import IO
 
@@ -121,7 +121,7 @@ def _find_layout(handle: IO[str], name: str, evidence_field: str, constant_evide
 
 
 def _slow_parse(
-    handle: IO[str], layout: _Layout
+    handle: Iterable[str], layout: _Layout
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], list[tuple[int, str]]]:
     """Parse row by row: the fallback that finds the lines that do not parse.
 
@@ -466,7 +466,7 @@ def iter_csv(
         raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
     with open_text(path) as handle:
         layout = _find_layout(handle, name, evidence_field, evidence)
-    if layout.position is not None and not _ids_are_contiguous(path, layout):
+    if layout.position is not None and not _ids_are_contiguous(path, layout, layout.position):
         log = read_csv(path, evidence_field=evidence_field, evidence=evidence, position_tolerance=position_tolerance,
                        group_by=group_by, skip_invalid=skip_invalid)
         notes.extend(log.notes)
@@ -502,7 +502,7 @@ def iter_csv(
         notes.append(f"{gatherer.dropped} point(s) fell on their position's sensor origin and were dropped")
 
 
-def _ids_are_contiguous(path: str | os.PathLike[str], layout: _Layout) -> bool:
+def _ids_are_contiguous(path: str | os.PathLike[str], layout: _Layout, column: int) -> bool:
     """Whether every position id's rows form one run (parsing the ``position`` column alone)."""
     finished: set[float] = set()
     current: float | None = None
@@ -513,7 +513,7 @@ def _ids_are_contiguous(path: str | os.PathLike[str], layout: _Layout) -> bool:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", UserWarning)
-                    ids = np.loadtxt(lines, delimiter=",", comments="#", usecols=(layout.position,), ndmin=1,
+                    ids = np.loadtxt(lines, delimiter=",", comments="#", usecols=(column,), ndmin=1,
                                      dtype=np.float64)
             except ValueError:
                 return False
