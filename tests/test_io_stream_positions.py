@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from test_io_mcap import header, laserscan, quaternion, transform, write_ros2
 
-import occtool.io.csv as csv_module
+import occtool.io.csv_stream as csv_module
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
 from occtool.io import iter_positions, read_log, write_csv, write_mcap

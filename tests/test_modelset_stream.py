@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-import occtool.io.csv as csv_module
+import occtool.io.csv_stream as csv_module
 from occtool.cli.main import cli
 from occtool.errors import InputError
 from occtool.fit import OccupancyRegressor

@@ -10,7 +10,7 @@ iteration. What is held at a time depends on the format:
     the first iteration reads the laser lines once more first, for the no-return sentinel,
     so a bad line anywhere is an error before the first position).
 ``csv``
-    a chunk of rows, and the rows of the position being gathered (:mod:`occtool.io.csv`,
+    a chunk of rows, and the rows of the position being gathered (:mod:`occtool.io.csv_stream`,
     ``iter_csv``: it needs each position's rows to be contiguous, and falls back to reading
     the file whole when they are not).
 ``mcap``, ``rosbag``
@@ -100,7 +100,7 @@ class PositionStream:
             yield from group_scans(scans, source=scans.name, tolerance=tolerance, group_by=group_by, notes=scans.notes)
             return
         if self.format == "csv":
-            from occtool.io.csv import iter_csv
+            from occtool.io.csv_stream import iter_csv
 
             self.notes = []
             yield from iter_csv(self.path, evidence_field=options["evidence_field"], evidence=options["evidence"],
