@@ -132,7 +132,7 @@ def test_a_config_file_counts_as_given(carmen_log, tmp_path):
 def test_a_runtime_warning_is_one_log_line_without_source(monkeypatch, tmp_path):
     import occtool.io as io_module
 
-    real = io_module.read_log
+    real = io_module.iter_positions  # what `info` reads a log through
 
     def noisy(*args, **kwargs):
         with np.errstate(divide="warn"):
@@ -140,7 +140,7 @@ def test_a_runtime_warning_is_one_log_line_without_source(monkeypatch, tmp_path)
         warnings.warn("a second warning", UserWarning, stacklevel=1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(io_module, "read_log", noisy)
+    monkeypatch.setattr(io_module, "iter_positions", noisy)
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         result = run("info", FIXTURES / "office" / "features.csv")

@@ -3,7 +3,8 @@
 :func:`read_log` is the one entry point every command uses: it picks the reader by
 the file's content and extension (or ``format=``) and returns a
 :class:`~occtool.features.RangeLog` whose positions hold features in the
-sensor-centred robot frame. Supported formats (docs/formats.md):
+sensor-centred robot frame. :func:`iter_positions` yields the same positions one at
+a time, for fitting a long log in bounded memory. Supported formats (docs/formats.md):
 
 ``csv``
     header ``x,y,z,m`` (+ optional ``position`` / ``pose_*`` columns), ``.gz``/``.bz2`` too.
@@ -27,10 +28,11 @@ GeoJSON writers.
 from __future__ import annotations
 
 import bz2
+import contextlib
 import gzip
 import os
 import zlib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -40,9 +42,11 @@ from occtool.limits import MAX_DISTANCE
 
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
+    from occtool.io.position_stream import PositionStream
     from occtool.io.read_options import ReadOptions
 
-__all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "read_log", "write_csv", "write_mcap"]
+__all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "iter_positions", "read_log",
+           "write_csv", "write_mcap"]
 
 FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -216,6 +220,54 @@ def read_log(
     >>> log = read_log("fixtures/office/features.csv")  # doctest: +SKIP
     >>> features = log.single().features                # doctest: +SKIP
     """
+    fmt, options = _checked_options(
+        path, format=format, topics=topics, evidence_field=evidence_field, evidence=evidence,
+        use_intensities=use_intensities, sensor_frame=sensor_frame, base_frame=base_frame,
+        position_tolerance=position_tolerance, group_by=group_by, skip_invalid=skip_invalid,
+        no_return_range=no_return_range,
+    )
+    with _read_errors(path):
+        return _read_format(path, fmt, options)
+
+
+def iter_positions(path: str | os.PathLike[str], **options: Any) -> PositionStream:
+    """The positions of a range log, read one at a time (bounded memory).
+
+    ``options`` are those of :func:`read_log`, checked here. The result is an iterable
+    of :class:`~occtool.features.Position`; each iteration reads the file from its start
+    and yields the same positions, in the same order and with the same features, poses
+    and stamps as ``read_log(path, **options).positions``; ``notes`` is complete after a
+    full iteration. What is held at a time depends on the format: see
+    :class:`~occtool.io.position_stream.PositionStream`.
+
+    Raises
+    ------
+    InputError
+        For invalid options or a file of no supported format, here; for invalid data,
+        while iterating (naming the file and what is wrong).
+    """
+    from occtool.io.position_stream import PositionStream
+
+    fmt, checked = _checked_options(path, **options)
+    return PositionStream(path, fmt, checked)
+
+
+def _checked_options(
+    path: str | os.PathLike[str],
+    *,
+    format: str | None = None,
+    topics: Sequence[str] | None = None,
+    evidence_field: str = "evidence",
+    evidence: float | None = None,
+    use_intensities: bool = False,
+    sensor_frame: str | None = None,
+    base_frame: str | None = None,
+    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
+    group_by: str = "position",
+    skip_invalid: bool = False,
+    no_return_range: float | None = None,
+) -> tuple[str, ReadOptions]:
+    """The log's format and the reading options, checked (see :func:`read_log`)."""
     from occtool.io.positions import GROUP_BY_CHOICES, check_tolerance
 
     if not Path(path).exists():
@@ -238,8 +290,14 @@ def read_log(
         sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
         skip_invalid=skip_invalid, no_return_range=no_return_range,
     )
+    return fmt, options
+
+
+@contextlib.contextmanager
+def _read_errors(path: str | os.PathLike[str]) -> Iterator[None]:
+    """A damaged compressed file or an I/O error while reading as one :class:`InputError`."""
     try:
-        return _read_format(path, fmt, options)
+        yield
     except (EOFError, zlib.error) as exc:
         raise InputError(f"{path} is truncated or corrupt: {exc}") from None
     except OSError as exc:
@@ -341,11 +399,17 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
         for key, value in extra.items():
             header.add_row(key, value)
         return Group(header, table)
-    log = read_log(target, format=fmt, skip_invalid=skip_invalid, no_return_range=no_return_range)
-    header.add_row("positions", f"{len(log.positions):,}")
-    header.add_row("features", f"{sum(len(p.features) for p in log.positions):,}")
-    header.add_row("poses", "yes" if log.has_poses else "no")
-    for note in log.notes:
+    stream = iter_positions(target, format=fmt, skip_invalid=skip_invalid, no_return_range=no_return_range)
+    positions = features = 0
+    has_poses = False
+    for position in stream:  # one at a time: a long log is counted in bounded memory
+        positions += 1
+        features += len(position.features)
+        has_poses = has_poses or position.pose is not None
+    header.add_row("positions", f"{positions:,}")
+    header.add_row("features", f"{features:,}")
+    header.add_row("poses", "yes" if has_poses else "no")
+    for note in stream.notes:
         header.add_row("note", note)
     return header
 

@@ -30,7 +30,7 @@ obstacle.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,7 +39,7 @@ from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.io import check_no_return_range
 from occtool.io.csv import open_text
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, group_scans
 
 # The largest reading of a file is taken as the no-return sentinel when it occurs this
 # often (or, in short logs, at least twice and in 1% of the readings).
@@ -138,94 +138,146 @@ def read_carmen(
     InputError
         For a laser line that does not parse (naming it) or a log without scans.
     """
-    name = str(path)
-    if not 0.0 <= evidence <= 1.0:
-        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
-    no_return_range = check_no_return_range(no_return_range)
-    raw: list[tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None, float | None, int]] = []
-    skipped_lines = 0
-    unknown: set[str] = set()
-    try:
-        with open_text(path) as handle:
-            for line_number, line in enumerate(handle, start=1):
-                fields = line.split()
-                if not fields or fields[0].startswith("#"):
-                    continue
-                if fields[0] not in LASER_RECORDS:
-                    if fields[0] not in OTHER_RECORDS:
-                        unknown.add(fields[0][:20])
-                    continue
-                try:
-                    ranges, angles, pose, stamp, line_max = _parse_laser(fields)
-                except _Problem as problem:
-                    if not skip_invalid:
-                        raise InputError(f"{name}, line {line_number}: {problem}") from None
-                    skipped_lines += 1
-                    continue
-                raw.append((ranges, angles, pose, stamp, line_max, line_number))
-    except (OSError, EOFError) as exc:
-        if isinstance(exc, FileNotFoundError):
-            raise
-        raise InputError(f"{name}: cannot read the log ({exc})") from None
-    if not raw:
-        raise InputError(f"{name} holds no laser scans (FLASER, RLASER or ROBOTLASER1 lines)")
+    scans = CarmenScans(path, evidence=evidence, max_range=max_range, skip_invalid=skip_invalid,
+                        no_return_range=no_return_range)
+    positions = list(group_scans(scans, source=scans.name, tolerance=position_tolerance, group_by=group_by,
+                                 notes=scans.notes))
+    return RangeLog(positions=positions, source=scans.name, notes=scans.notes)
 
-    notes: list[str] = []
-    all_ranges = np.concatenate([r[0] for r in raw])
-    limit = max_range
-    if limit is None:
-        finite = all_ranges[np.isfinite(all_ranges)]
-        top = float(finite.max()) if finite.size else np.inf
-        repeats = int((finite == top).sum())
-        if repeats >= SENTINEL_MIN_COUNT or (repeats >= 2 and repeats >= 0.01 * finite.size):
-            limit = top
-    scans = []
-    no_return = 0
-    invalid = 0
-    free_ranges: list[NDArray[np.float64]] = []
-    for ranges, angles, pose, stamp, line_max, line_number in raw:
-        with np.errstate(invalid="ignore"):
-            # +inf is a no-return reading too (as in ROS's REP 117); NaN, -inf and <= 0 are not readings.
-            missing = np.isposinf(ranges) | (ranges >= limit if limit is not None else False)
-            valid = np.isfinite(ranges) & (ranges > 0.0) & ~missing
-        if no_return_range is None:
-            no_return += int(ranges.size - valid.sum())
-            r, a = ranges[valid], angles[valid]
-            values = np.full(r.size, evidence)
+
+class CarmenScans:
+    """The laser scans of a CARMEN log, read line by line: an iterable of
+    :class:`~occtool.io.positions.Scan` that holds one line at a time.
+
+    Each iteration reads the file again. Without ``max_range`` the no-return sentinel is
+    the file's repeated largest reading, which only the whole file tells: the first
+    iteration reads every laser line once before yielding anything (keeping only the
+    largest reading and its count), so a line that does not parse is an
+    :class:`InputError` before the first scan, wherever it lies. ``notes`` is complete
+    after a full iteration. Parameters are those of :func:`read_carmen`.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, evidence: float = 0.9, max_range: float | None = None,
+                 skip_invalid: bool = False, no_return_range: float | None = None) -> None:
+        if not 0.0 <= evidence <= 1.0:
+            raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
+        self.path = path
+        self.name = str(path)
+        self.evidence = evidence
+        self.max_range = max_range
+        self.skip_invalid = skip_invalid
+        self.no_return_range = check_no_return_range(no_return_range)
+        self.notes: list[str] = []
+        self._limit: tuple[float | None] | None = None  # (the sentinel or None,) once the file was read
+
+    def _lines(self) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None,
+                                       float | None, int]]:
+        """Every laser line, parsed; counts the skipped lines and unknown records as it goes."""
+        self.skipped_lines = 0
+        self.unknown: set[str] = set()
+        found = False
+        try:
+            with open_text(self.path) as handle:
+                for line_number, line in enumerate(handle, start=1):
+                    fields = line.split()
+                    if not fields or fields[0].startswith("#"):
+                        continue
+                    if fields[0] not in LASER_RECORDS:
+                        if fields[0] not in OTHER_RECORDS:
+                            self.unknown.add(fields[0][:20])
+                        continue
+                    try:
+                        ranges, angles, pose, stamp, line_max = _parse_laser(fields)
+                    except _Problem as problem:
+                        if not self.skip_invalid:
+                            raise InputError(f"{self.name}, line {line_number}: {problem}") from None
+                        self.skipped_lines += 1
+                        continue
+                    found = True
+                    yield ranges, angles, pose, stamp, line_max, line_number
+        except (OSError, EOFError) as exc:
+            if isinstance(exc, FileNotFoundError):
+                raise
+            raise InputError(f"{self.name}: cannot read the log ({exc})") from None
+        if not found:
+            raise InputError(f"{self.name} holds no laser scans (FLASER, RLASER or ROBOTLASER1 lines)")
+
+    def limit(self) -> float | None:
+        """Readings at or above this are no return: ``max_range``, else the file's repeated
+        largest reading (read once, then kept), else ``None``."""
+        if self.max_range is not None:
+            return self.max_range
+        if self._limit is None:
+            top, repeats, finite_count = -np.inf, 0, 0
+            for ranges, *_ in self._lines():
+                finite = ranges[np.isfinite(ranges)]
+                if not finite.size:
+                    continue
+                finite_count += finite.size
+                high = float(finite.max())
+                if high > top:
+                    top, repeats = high, int((finite == high).sum())
+                elif high == top:
+                    repeats += int((finite == high).sum())
+            sentinel = repeats >= SENTINEL_MIN_COUNT or (repeats >= 2 and repeats >= 0.01 * finite_count)
+            self._limit = (top if finite_count and sentinel else None,)
+        return self._limit[0]
+
+    def __iter__(self) -> Iterator[Scan]:
+        limit = self.limit()
+        evidence, no_return_range, name = self.evidence, self.no_return_range, self.name
+        self.notes.clear()
+        readings = 0
+        no_return = 0
+        invalid = 0
+        reach_low, reach_high = np.inf, -np.inf  # of every free ray
+        for ranges, angles, pose, stamp, line_max, line_number in self._lines():
+            readings += ranges.size
+            with np.errstate(invalid="ignore"):
+                # +inf is a no-return reading too (as in ROS's REP 117); NaN, -inf and <= 0 are not readings.
+                missing = np.isposinf(ranges) | (ranges >= limit if limit is not None else False)
+                valid = np.isfinite(ranges) & (ranges > 0.0) & ~missing
+            if no_return_range is None:
+                no_return += int(ranges.size - valid.sum())
+                r, a = ranges[valid], angles[valid]
+                values = np.full(r.size, evidence)
+            else:
+                no_return += int(missing.sum())
+                invalid += int(ranges.size - valid.sum() - missing.sum())
+                # A free ray out to min(R, the beam's max range): the line's own (ROBOTLASER1),
+                # else the file's limit; the features stay in beam order.
+                reach = min(no_return_range, line_max if line_max is not None else np.inf,
+                            limit if limit is not None else np.inf)
+                kept = valid | missing
+                r = np.where(missing, reach, ranges)[kept]
+                a = angles[kept]
+                values = np.where(missing, 0.0, evidence)[kept]
+                if missing.any():
+                    reach_low, reach_high = min(reach_low, reach), max(reach_high, reach)
+            points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
+            yield Scan(points, values, pose, stamp, f"{name}:{line_number}")
+        self.notes.extend(self._notes(limit, readings, no_return, invalid, reach_low, reach_high))
+
+    def _notes(self, limit: float | None, readings: int, no_return: int, invalid: int, reach_low: float,
+               reach_high: float) -> list[str]:
+        notes = []
+        where = f" (readings >= {limit:g} m)" if limit is not None else ""
+        if self.no_return_range is None:
+            if no_return:
+                notes.append(f"dropped {no_return} of {readings} readings as no return{where}")
         else:
-            no_return += int(missing.sum())
-            invalid += int(ranges.size - valid.sum() - missing.sum())
-            # A free ray out to min(R, the beam's max range): the line's own (ROBOTLASER1),
-            # else the file's limit; the features stay in beam order.
-            reach = min(no_return_range, line_max if line_max is not None else np.inf,
-                        limit if limit is not None else np.inf)
-            kept = valid | missing
-            r = np.where(missing, reach, ranges)[kept]
-            a = angles[kept]
-            values = np.where(missing, 0.0, evidence)[kept]
-            free_ranges.append(np.full(int(missing.sum()), reach))
-        points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
-        scans.append(Scan(points, values, pose, stamp, f"{name}:{line_number}"))
-    where = f" (readings >= {limit:g} m)" if limit is not None else ""
-    if no_return_range is None:
-        if no_return:
-            notes.append(f"dropped {no_return} of {all_ranges.size} readings as no return{where}")
-    else:
-        if no_return:
-            where = where or " (infinite readings)"
-            reach = np.concatenate(free_ranges)  # type: ignore[assignment]  # the reach of every free ray
-            low, high = float(reach.min()), float(reach.max())  # type: ignore[attr-defined]
-            at = f"{low:g} m" if low == high else f"{low:g} to {high:g} m"
-            notes.append(
-                f"kept {no_return} of {all_ranges.size} readings with no return{where} as free rays "
-                f"at {at} with evidence 0 (no_return_range={no_return_range:g})"
-            )
-        if invalid:
-            notes.append(f"dropped {invalid} of {all_ranges.size} readings <= 0 or NaN")
-    notes.append(f"constant evidence {evidence} for laser readings (evidence=)")
-    if skipped_lines:
-        notes.append(f"skipped {skipped_lines} laser line(s) that do not parse")
-    if unknown:
-        notes.append(f"ignored records of unknown type: {', '.join(sorted(unknown)[:5])}")
-    return build_log(scans, source=name, tolerance=position_tolerance, group_by=group_by, notes=notes)
-
+            if no_return:
+                where = where or " (infinite readings)"
+                at = f"{reach_low:g} m" if reach_low == reach_high else f"{reach_low:g} to {reach_high:g} m"
+                notes.append(
+                    f"kept {no_return} of {readings} readings with no return{where} as free rays "
+                    f"at {at} with evidence 0 (no_return_range={self.no_return_range:g})"
+                )
+            if invalid:
+                notes.append(f"dropped {invalid} of {readings} readings <= 0 or NaN")
+        notes.append(f"constant evidence {self.evidence} for laser readings (evidence=)")
+        if self.skipped_lines:
+            notes.append(f"skipped {self.skipped_lines} laser line(s) that do not parse")
+        if self.unknown:
+            notes.append(f"ignored records of unknown type: {', '.join(sorted(self.unknown)[:5])}")
+        return notes

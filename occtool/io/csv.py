@@ -13,10 +13,11 @@ slower pass run, to name the offending line or, with ``skip_invalid``, to drop i
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import IO
 
@@ -120,7 +121,7 @@ def _find_layout(handle: IO[str], name: str, evidence_field: str, constant_evide
 
 
 def _slow_parse(
-    handle: IO[str], layout: _Layout
+    handle: Iterable[str], layout: _Layout
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], list[tuple[int, str]]]:
     """Parse row by row: the fallback that finds the lines that do not parse.
 
@@ -239,40 +240,12 @@ def read_csv(
     if data.shape[0] == 0 and not unparsable:
         raise InputError(f"{name} has a header but no data rows")
 
+    data, skipped = _checked_rows(name, layout, data, line_numbers, unparsable, evidence, skip_invalid,
+                                  functools.partial(_data_line_numbers, path, layout))
     columns = {c: data[:, k] for k, c in enumerate(layout.used)}
     points = np.column_stack([columns[c] for c in layout.xyz])
     # (mypy: without an evidence column the layout has a constant evidence, checked in _find_layout.)
     m = columns[layout.evidence] if layout.evidence is not None else np.full(data.shape[0], float(evidence))  # type: ignore[arg-type]
-    bad_reason = np.zeros(data.shape[0], dtype=np.int8)
-    not_finite = ~np.isfinite(data).all(axis=1)
-    outside = ~not_finite & ((m < 0.0) | (m > 1.0))
-    at_origin = ~not_finite & ~(np.abs(points) > 0.0).any(axis=1)
-    too_far = ~not_finite & ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
-    bad_reason[too_far] = 4
-    bad_reason[at_origin] = 3
-    bad_reason[outside] = 2
-    bad_reason[not_finite] = 1
-    bad = bad_reason > 0
-    if (bad.any() or unparsable) and not skip_invalid:
-        problems = list(unparsable[:1])
-        if bad.any():
-            first = int(np.argmax(bad))
-            if line_numbers is None:
-                line_numbers = _data_line_numbers(path, layout)
-            reason = {
-                1: "a value is NaN or infinite",
-                2: f"evidence {float(m[first])!r} lies outside [0, 1]",
-                3: "the point lies at the sensor origin (0, 0, 0) and has no direction",
-                4: f"the point lies farther than {MAX_COORDINATE:g} m from the sensor: not range data",
-            }[int(bad_reason[first])]
-            problems.append((int(line_numbers[first]), reason))
-        line, problem = min(problems)
-        raise InputError(f"{name}, line {line}: {problem} (pass skip_invalid=True to drop bad rows)")
-    if bad.any():
-        keep = ~bad
-        data, points, m = data[keep], points[keep], m[keep]
-        columns = {c: data[:, k] for k, c in enumerate(layout.used)}
-    skipped = len(unparsable) + int(bad.sum())
     if skipped:
         notes.append(f"skipped {skipped} invalid row(s) of {name}")
         logger.debug("skipped %d invalid rows of %s", skipped, name)
@@ -428,3 +401,41 @@ def write_csv(
             chunk = rows[start : start + 65536]
             handle.write("\n".join(template.format(*row) for row in chunk) + "\n")
 
+
+
+def _checked_rows(
+    name: str, layout: _Layout, data: NDArray[np.float64], line_numbers: NDArray[np.int64] | None,
+    unparsable: list[tuple[int, str]], evidence: float | None, skip_invalid: bool,
+    lines_of: Callable[[], NDArray[np.int64]] | None = None,
+) -> tuple[NDArray[np.float64], int]:
+    """The rows of a chunk that are valid, and the count of those dropped (``skip_invalid``);
+    an :class:`InputError` naming the first bad row otherwise (the checks of :func:`read_csv`)."""
+    points = data[:, :3]  # x, y, z come first in layout.used
+    m = data[:, 3] if layout.evidence is not None else np.full(data.shape[0], float(evidence))  # type: ignore[arg-type]
+    not_finite = ~np.isfinite(data).all(axis=1)
+    outside = ~not_finite & ((m < 0.0) | (m > 1.0))
+    at_origin = ~not_finite & ~(np.abs(points) > 0.0).any(axis=1)
+    too_far = ~not_finite & ~(np.abs(points) <= MAX_COORDINATE).all(axis=1)
+    bad_reason = np.zeros(data.shape[0], dtype=np.int8)
+    bad_reason[too_far] = 4
+    bad_reason[at_origin] = 3
+    bad_reason[outside] = 2
+    bad_reason[not_finite] = 1
+    bad = bad_reason > 0
+    if (bad.any() or unparsable) and not skip_invalid:
+        problems = list(unparsable[:1])
+        if bad.any():
+            first = int(np.argmax(bad))
+            numbers = line_numbers if line_numbers is not None else lines_of()  # type: ignore[misc]
+            reason = {
+                1: "a value is NaN or infinite",
+                2: f"evidence {float(m[first])!r} lies outside [0, 1]",
+                3: "the point lies at the sensor origin (0, 0, 0) and has no direction",
+                4: f"the point lies farther than {MAX_COORDINATE:g} m from the sensor: not range data",
+            }[int(bad_reason[first])]
+            problems.append((int(numbers[first]), reason))
+        line, problem = min(problems)
+        raise InputError(f"{name}, line {line}: {problem} (pass skip_invalid=True to drop bad rows)")
+    if bad.any():
+        data = data[~bad]
+    return data, len(unparsable) + int(bad.sum())

@@ -11,7 +11,7 @@ position's features are all in one sensor-centred robot frame.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,6 +151,113 @@ def to_reference_frame(
     return out
 
 
+def group_scans(
+    scans: Iterable[Scan],
+    *,
+    source: str,
+    tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
+    group_by: str = "position",
+    notes: list[str] | None = None,
+) -> Iterator[Position]:
+    """Group scans into positions as they come, yielding each position once its last scan is read.
+
+    The same grouping as :func:`assign_positions` and :func:`build_log`, one scan at a time:
+    only the scans of the position being gathered are held. When ``scans`` is exhausted,
+    the grouping's notes (a log without poses, points dropped at the sensor origin) are
+    appended to ``notes``; a scan whose pose is not finite is an :class:`InputError` when
+    it is reached, and so is a log that yielded no position, at its end.
+    """
+    if group_by not in GROUP_BY_CHOICES:
+        raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {group_by!r}")
+    max_distance, max_angle = check_tolerance(tolerance)
+    notes = notes if notes is not None else []
+    group: list[Scan] = []
+    reference: Pose | None = None
+    count = 0
+    has_poses = False
+    produced = 0
+    dropped_at_origin = 0
+    for k, scan in enumerate(scans):
+        pose = scan.pose
+        if pose is not None and not np.isfinite([pose.x, pose.y, pose.z, pose.yaw]).all():
+            raise InputError(
+                f"{source}: scan {scan.source or k} was taken at a pose that is not finite "
+                f"(x {pose.x}, y {pose.y}, z {pose.z}, yaw {pose.yaw})"
+            )
+        count += 1
+        new_position = False
+        if pose is not None:
+            has_poses = True
+        if group_by == "message":
+            new_position = bool(group)
+        elif pose is not None:
+            # A scan without a pose joins the current position: nothing says the robot moved.
+            if reference is None:
+                reference = pose
+            elif (float(np.hypot(pose.x - reference.x, pose.y - reference.y)) > max_distance
+                  or _angle_difference(pose.yaw, reference.yaw) > max_angle):
+                new_position = True
+                reference = pose
+        if new_position and group:
+            position, dropped = _merge_scans(group, produced)
+            dropped_at_origin += dropped
+            group = []
+            if position is not None:
+                produced += 1
+                yield position
+        group.append(scan)
+    if group:
+        position, dropped = _merge_scans(group, produced)
+        dropped_at_origin += dropped
+        if position is not None:
+            produced += 1
+            yield position
+    # A single scan without a pose is the normal case of a one-shot file; say so only when
+    # several scans were merged on the assumption that the robot did not move.
+    if count > 1 and not has_poses and group_by == "position":
+        notes.append(f"the log has no poses: its {count} scans form one position (group_by='message' splits them)")
+    if dropped_at_origin:
+        notes.append(f"{dropped_at_origin} point(s) fell on the position's sensor origin and were dropped")
+    if not produced:
+        raise InputError(f"{source} holds no range data")
+
+
+def _merge_scans(group: list[Scan], index: int) -> tuple[Position | None, int]:
+    """The scans of one position in the frame of its first pose, and the count of points
+    dropped at its sensor origin (``None`` for a position left without features)."""
+    reference = next((s.pose for s in group if s.pose is not None), None)
+    parts_points = []
+    parts_evidence = []
+    for scan in group:
+        if scan.points.shape[0] == 0:
+            continue
+        points = np.asarray(scan.points, dtype=np.float64)
+        if reference is not None and scan.pose is not None and scan.pose != reference:
+            rotation, translation = relative_transform(scan.pose, reference)
+            points = points @ rotation.T + translation
+        parts_points.append(points)
+        parts_evidence.append(np.asarray(scan.evidence, dtype=np.float64))
+    if not parts_points:
+        return None, 0
+    points = np.concatenate(parts_points)
+    evidence = np.concatenate(parts_evidence)
+    keep = (np.abs(points) > 0.0).any(axis=1)
+    dropped = int((~keep).sum())
+    if not keep.all():
+        points, evidence = points[keep], evidence[keep]
+    if not points.shape[0]:
+        return None, dropped
+    stamps = [s.stamp for s in group if s.stamp is not None]
+    sources = sorted({s.source for s in group if s.source})
+    return Position(
+        index=index,
+        features=Features(points, evidence),
+        pose=reference,
+        stamp=stamps[0] if stamps else None,
+        source=", ".join(sources) if len(sources) <= 3 else f"{sources[0]} ... ({len(group)} scans)",
+    ), dropped
+
+
 def build_log(
     scans: Iterable[Scan],
     *,
@@ -159,7 +266,7 @@ def build_log(
     group_by: str = "position",
     notes: list[str] | None = None,
 ) -> RangeLog:
-    """Group scans into positions and return the :class:`RangeLog`.
+    """Group scans into positions and return the :class:`RangeLog` (:func:`group_scans`, held whole).
 
     A scan whose pose holds a NaN or infinity is an :class:`InputError` (readers refuse or
     drop such poses first, naming the line or message). Scans with no points are kept
@@ -169,62 +276,5 @@ def build_log(
     """
     scan_list = list(scans)
     notes = list(notes or [])
-    for k, scan in enumerate(scan_list):
-        if scan.pose is not None and not np.isfinite([scan.pose.x, scan.pose.y, scan.pose.z, scan.pose.yaw]).all():
-            raise InputError(
-                f"{source}: scan {scan.source or k} was taken at a pose that is not finite "
-                f"(x {scan.pose.x}, y {scan.pose.y}, z {scan.pose.z}, yaw {scan.pose.yaw})"
-            )
-    labels = assign_positions([s.pose for s in scan_list], tolerance=tolerance, group_by=group_by)
-    has_poses = any(s.pose is not None for s in scan_list)
-    # A single scan without a pose is the normal case of a one-shot file; say so only when
-    # several scans were merged on the assumption that the robot did not move.
-    if len(scan_list) > 1 and not has_poses and group_by == "position":
-        notes.append(
-            f"the log has no poses: its {len(scan_list)} scans form one position (group_by='message' splits them)"
-        )
-    positions: list[Position] = []
-    dropped_at_origin = 0
-    start = 0
-    while start < len(scan_list):
-        stop = start
-        while stop < len(scan_list) and labels[stop] == labels[start]:
-            stop += 1
-        group = scan_list[start:stop]
-        reference = next((s.pose for s in group if s.pose is not None), None)
-        parts_points = []
-        parts_evidence = []
-        for scan in group:
-            if scan.points.shape[0] == 0:
-                continue
-            points = np.asarray(scan.points, dtype=np.float64)
-            if reference is not None and scan.pose is not None and scan.pose != reference:
-                rotation, translation = relative_transform(scan.pose, reference)
-                points = points @ rotation.T + translation
-            parts_points.append(points)
-            parts_evidence.append(np.asarray(scan.evidence, dtype=np.float64))
-        if parts_points:
-            points = np.concatenate(parts_points)
-            evidence = np.concatenate(parts_evidence)
-            keep = (np.abs(points) > 0.0).any(axis=1)
-            dropped_at_origin += int((~keep).sum())
-            if not keep.all():
-                points, evidence = points[keep], evidence[keep]
-            if points.shape[0]:
-                stamps = [s.stamp for s in group if s.stamp is not None]
-                sources = sorted({s.source for s in group if s.source})
-                positions.append(
-                    Position(
-                        index=len(positions),
-                        features=Features(points, evidence),
-                        pose=reference,
-                        stamp=stamps[0] if stamps else None,
-                        source=", ".join(sources) if len(sources) <= 3 else f"{sources[0]} ... ({len(group)} scans)",
-                    )
-                )
-        start = stop
-    if dropped_at_origin:
-        notes.append(f"{dropped_at_origin} point(s) fell on the position's sensor origin and were dropped")
-    if not positions:
-        raise InputError(f"{source} holds no range data")
+    positions = list(group_scans(scan_list, source=source, tolerance=tolerance, group_by=group_by, notes=notes))
     return RangeLog(positions=positions, source=source, notes=notes)

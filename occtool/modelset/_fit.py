@@ -8,6 +8,7 @@ import json
 import os
 import stat
 import time
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -101,18 +102,94 @@ CHUNK_FEATURES = 20_000
 CHUNK_POSITIONS = 16
 
 
-def _read_source(source: Any, read_options: dict[str, Any]) -> Any:
+def _open_source(source: Any, read_options: dict[str, Any]) -> Any:
+    """The positions of a log as an iterable that can be read twice: a
+    :class:`~occtool.io.position_stream.PositionStream` for a file (read one position at a
+    time), the positions of a :class:`~occtool.features.RangeLog` as they are, and standard
+    input read whole (it is copied to a temporary file that is gone after reading)."""
     from occtool.features import RangeLog
 
-    if isinstance(source, RangeLog):
-        return source
-    if str(source) == "-":
+    if str(source) == "-" and not isinstance(source, RangeLog):
         from occtool.io.stream import read_log_stream
 
-        return read_log_stream(**read_options)
-    from occtool.io import read_log
+        source = read_log_stream(**read_options)
+    if isinstance(source, RangeLog):
+        return _HeldLog(source)
+    from occtool.io import iter_positions
 
-    return read_log(source, **read_options)
+    return iter_positions(source, **read_options)
+
+
+class _HeldLog:
+    """A log already in memory, with the interface of a position stream."""
+
+    def __init__(self, range_log: Any) -> None:
+        self.source = range_log.source
+        self.notes = range_log.notes
+        self.positions = range_log.positions
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(self.positions)
+
+
+class _GeometrySurvey:
+    """What :func:`estimator_for_log` needs to know of a log's positions, gathered one
+    position at a time: their count, whether all are planar, and for the estimator's robot
+    and a planar laser's the first position with geometry findings and how many have some."""
+
+    def __init__(self, estimator: Any, planar_defaults: bool) -> None:
+        from dataclasses import replace
+
+        from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
+
+        self.estimator = estimator
+        self.planar_defaults = planar_defaults
+        robot = estimator.robot if estimator.robot is not None else Robot()
+        self.robots = {"given": robot}
+        if planar_defaults:
+            self.robots["planar"] = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT,
+                                            body_height=PLANAR_LASER_BODY_HEIGHT)
+        self.count = 0
+        self.all_planar = True
+        self.first: dict[str, tuple[int, list[str]] | None] = dict.fromkeys(self.robots)
+        self.flagged: dict[str, int] = dict.fromkeys(self.robots, 0)
+
+    def add(self, position: Any) -> None:
+        from occtool.sensor import geometry_findings, is_planar
+
+        self.count += 1
+        if self.planar_defaults and self.all_planar:
+            self.all_planar = is_planar(position.features)
+        for name, robot in self.robots.items():
+            findings = geometry_findings(position.features, robot)
+            if findings:
+                self.flagged[name] += 1
+                if self.first[name] is None:
+                    self.first[name] = (position.index, findings)
+
+    def result(self) -> Any:
+        """The estimator for the log (logging what :func:`estimator_for_log` logs)."""
+        from occtool.fit import DEFAULT_FOCUS_RANGE, PLANAR_FOCUS_RANGE
+
+        estimator = self.estimator
+        name = "given"
+        if self.planar_defaults and self.count and self.all_planar:
+            name = "planar"
+            robot = self.robots[name]
+            params = {**estimator.get_params(deep=False), "robot": robot}
+            if params.get("focus_range") == DEFAULT_FOCUS_RANGE:
+                params["focus_range"] = PLANAR_FOCUS_RANGE
+            estimator = type(estimator)(**params)
+            log.info("a planar laser log: sensor height %g m, body height %g m, focus range %g m",
+                     robot.sensor_height, robot.body_height, estimator.focus_range)
+        first, flagged = self.first[name], self.flagged[name]
+        if first is not None:
+            index, findings = first
+            where = f"position {index}: " if self.count > 1 else ""
+            more = f" (and {flagged - 1} more position(s))" if flagged > 1 else ""
+            for finding in findings:
+                log.warning("%s%s%s", where, finding, more)
+        return estimator
 
 
 def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False) -> Any:
@@ -125,31 +202,25 @@ def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaul
     is other than the default, a laser's (:data:`occtool.fit.PLANAR_FOCUS_RANGE`): the
     command line does so unless the user gave a sensor or body height. Each finding of
     :func:`occtool.sensor.geometry_findings` is logged as one warning (the first position's,
-    with a count of the others that have findings too).
+    with a count of the others that have findings too). ``positions`` may be any iterable
+    read once (a :func:`occtool.io.iter_positions` stream): nothing of it is held.
     """
-    from dataclasses import replace
+    survey = _GeometrySurvey(estimator, planar_defaults)
+    for position in positions:
+        survey.add(position)
+    return survey.result()
 
-    from occtool.fit import DEFAULT_FOCUS_RANGE, PLANAR_FOCUS_RANGE
-    from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
-    from occtool.sensor import geometry_findings, is_planar
 
-    robot = estimator.robot if estimator.robot is not None else Robot()
-    if planar_defaults and positions and all(is_planar(p.features) for p in positions):
-        robot = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT, body_height=PLANAR_LASER_BODY_HEIGHT)
-        params = {**estimator.get_params(deep=False), "robot": robot}
-        if params.get("focus_range") == DEFAULT_FOCUS_RANGE:
-            params["focus_range"] = PLANAR_FOCUS_RANGE
-        estimator = type(estimator)(**params)
-        log.info("a planar laser log: sensor height %g m, body height %g m, focus range %g m", robot.sensor_height,
-                 robot.body_height, estimator.focus_range)
-    flagged = [(p, findings) for p in positions if (findings := geometry_findings(p.features, robot))]
-    if flagged:
-        position, findings = flagged[0]
-        where = f"position {position.index}: " if len(positions) > 1 else ""
-        more = f" (and {len(flagged) - 1} more position(s))" if len(flagged) > 1 else ""
-        for finding in findings:
-            log.warning("%s%s%s", where, finding, more)
-    return estimator
+def _chosen(stream: Any, positions: Sequence[int] | None) -> Iterator[Any]:
+    """The positions to fit, as the stream yields them (all), or those asked for in the
+    order asked (only those are held)."""
+    if positions is None:
+        yield from stream
+        return
+    wanted = set(positions)
+    held = {k: item for k, item in enumerate(stream) if k in wanted}  # as RangeLog.single numbers them
+    for index in positions:
+        yield held[index]
 
 
 def fit_model_set(
@@ -197,6 +268,17 @@ def fit_model_set(
     planar_defaults
         Fit a log of planar scans with a planar scanner's robot (:func:`estimator_for_log`);
         every log's geometry findings are logged either way.
+
+    Notes
+    -----
+    Memory does not grow with a log's length: a log file is read twice through
+    :func:`occtool.io.iter_positions`, one position at a time. The first pass checks every
+    line or message (a bad one is an error before any model is written), counts the
+    positions (for the progress bar and ``positions``) and surveys their geometry for
+    :func:`estimator_for_log`; the second pass hands positions to the executor in chunks,
+    at most its window of chunks in flight, and each model is written as it comes back.
+    Standard input (``"-"``) and a :class:`~occtool.features.RangeLog` are held whole; with
+    ``positions``, only the chosen positions are held.
 
     Returns
     -------
@@ -263,12 +345,22 @@ def fit_model_set(
             writer = _IndexWriter(target, name)
             writers.append(writer)
             try:
-                range_log = _read_source(source, read_options)
-                chosen = list(range_log.positions)
+                # The first pass reads the whole log (checking every line, so a bad one is an
+                # error before any model is written), counts its positions and surveys their
+                # geometry, holding one position at a time; the second pass fits.
+                stream = _open_source(source, read_options)
+                survey = _GeometrySurvey(template, planar_defaults)
+                wanted = Counter(positions) if positions is not None else None
+                total = 0
+                for total, item in enumerate(stream, start=1):  # noqa: B007 - the count is used below
+                    for _ in range(1 if wanted is None else wanted[total - 1]):
+                        survey.add(item)  # the positions to fit, as estimator_for_log sees them
                 if positions is not None:
-                    chosen = [range_log.single(p) for p in positions]
-                elif not chosen:
-                    range_log.single(None)  # the "no range data" error
+                    for index in positions:
+                        if not 0 <= index < total:
+                            raise InputError(f"position {index} is out of range (the log has {total})")
+                elif not total:
+                    raise InputError(f"{stream.source or 'the log'} holds no range data")
             except (InputError, OSError) as exc:
                 if len(sources) == 1:
                     writers.pop()  # nothing of this set is written
@@ -281,18 +373,19 @@ def fit_model_set(
                 state["logs_read"] += 1
                 notify("failed", name)
                 continue
-            for note in range_log.notes:
+            for note in stream.notes:
                 log.warning("%s: %s", Path(name).name, note)
-            log_template = estimator_for_log(template, chosen, planar_defaults=planar_defaults)
+            log_template = survey.result()
             params = log_template.get_params(deep=False)
             settings = log_settings[number] = settings_digest(log_template)
             state["logs_read"] += 1
             target.mkdir(parents=True, exist_ok=True)
-            summary.positions += len(chosen)
-            outstanding[number] = len(chosen)
+            count = len(positions) if positions is not None else survey.count
+            summary.positions += count
+            outstanding[number] = count
             notify("read", name)
             chunk: list[tuple[dict[str, Any], Any]] = []
-            for item in chosen:
+            for item in _chosen(stream, positions):
                 digest = features_digest(item.features)
                 model_file = f"model_{item.index:04d}.json"
                 entry = {"position": item.index, "file": model_file,
@@ -312,7 +405,7 @@ def fit_model_set(
                 yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
                 chunk = []
             writer.all_submitted = True
-            del range_log, chosen
+            del stream, survey
 
     executor = make_executor(jobs, scheduler)
     summary.executor = executor.description

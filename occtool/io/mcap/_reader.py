@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -166,7 +166,9 @@ class _Scans:
     pose. The counts feed the log's notes.
     """
 
-    def __init__(self, name: str, base_name: str, sensor_frame: str | None, frames: _FrameTree, options: _Options):
+    def __init__(self, name: str, base_name: str, sensor_frame: str | None, frames: _FrameTree, options: _Options,
+                 *, keep: bool = True):
+        self.keep = keep  # hold every scan (read_mcap), or only count (a stream's passes)
         self.name = name
         self.base_name = base_name
         self.sensor_frame = sensor_frame
@@ -198,8 +200,9 @@ class _Scans:
                 _get(pose, "orientation"), _get(pose, "position"),
                 f"{self.name}, {topic}, message {record.sequence}: the odometry pose"))
 
-    def add_range(self, kind: str, schema: Any, topic: str, record: Any, message: Any) -> None:
-        """A range message: decoded, its evidence checked, mounted, posed."""
+    def add_range(self, kind: str, schema: Any, topic: str, record: Any, message: Any
+                  ) -> tuple[Scan, Pose | None, Pose | None]:
+        """A range message: decoded, its evidence checked, mounted; with its /tf and odometry poses."""
         where = f"{self.name}, topic {topic}, message {record.sequence or self.count}"
         try:
             decoded = _DECODERS[kind](message, self.options, where)
@@ -226,9 +229,14 @@ class _Scans:
             self.dropped_origin += int(at_origin.sum())
             points, values = points[~at_origin], values[~at_origin]
         stamp = decoded.stamp if decoded.stamp else record.log_time * 1e-9
-        self.scans.append(Scan(points, values, None, stamp, topic))
-        self.tf_poses.append(_compose_sensor(self.tf_pose, mounting.translation))
-        self.odom_poses.append(_compose_sensor(self.odom_pose, mounting.translation))
+        scan = Scan(points, values, None, stamp, topic)
+        tf_pose = _compose_sensor(self.tf_pose, mounting.translation)
+        odom_pose = _compose_sensor(self.odom_pose, mounting.translation)
+        if self.keep:
+            self.scans.append(scan)
+            self.tf_poses.append(tf_pose)
+            self.odom_poses.append(odom_pose)
+        return scan, tf_pose, odom_pose
 
     def _mounting(self, message_frame: str) -> _Rigid | None:
         """The message frame (or ``sensor_frame``) into the base frame, from ``/tf_static``."""
@@ -251,11 +259,15 @@ class _Scans:
         else:
             poses, pose_source = [None] * len(self.scans), None
         if pose_source:
-            notes.append(f"poses from {pose_source}")
-            missing = sum(p is None for p in poses)
-            if missing:
-                notes.append(f"{missing} scan(s) before the first pose joined the first position")
+            notes += _pose_notes(pose_source, sum(p is None for p in poses))
         return [Scan(s.points, s.evidence, p, s.stamp, s.source) for s, p in zip(self.scans, poses)], notes
+
+
+def _pose_notes(pose_source: str, missing: int) -> list[str]:
+    notes = [f"poses from {pose_source}"]
+    if missing:
+        notes.append(f"{missing} scan(s) before the first pose joined the first position")
+    return notes
 
 
 def _reading_notes(scans: _Scans, evidence: float | None, no_return_range: float | None) -> list[str]:
@@ -315,3 +327,110 @@ def _read_occtool_channel(reader: _Reader, topic: str, name: str) -> RangeLog:
         raise InputError(f"{name} holds no messages on {topic}")
     return RangeLog(positions=positions, source=name, notes=notes)
 
+
+
+class McapScans:
+    """The range messages of an MCAP file (or a ROS bag, through ``opener``) as scans, read
+    message by message: an iterable of :class:`~occtool.io.positions.Scan` holding one
+    message at a time, for :func:`occtool.io.iter_positions`.
+
+    Whether the poses come from ``/tf`` or odometry depends on the whole file (``/tf`` if
+    any scan has one), so :meth:`prepare` reads every message once first, keeping only
+    counts: every error :func:`read_mcap` raises is raised there, before the first scan.
+    Each iteration then reads the file again. occtool's own feature channel is not
+    streamed (its messages are sorted by position): :meth:`prepare` says so and the caller
+    reads it with :func:`read_mcap`. Parameters are those of :func:`read_mcap`; ``notes``
+    is complete after a full iteration.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, topics: Sequence[str] | None = None,
+                 evidence_field: str = "evidence", evidence: float | None = None, use_intensities: bool = False,
+                 sensor_frame: str | None = None, base_frame: str | None = None, skip_invalid: bool = False,
+                 no_return_range: float | None = None,
+                 opener: Callable[[str | os.PathLike[str]], Any] | None = None) -> None:
+        from occtool.io import check_no_return_range
+
+        self.path = path
+        self.name = str(path)
+        self.topics = topics
+        self.evidence_field = evidence_field
+        self.evidence = evidence
+        self.use_intensities = use_intensities
+        self.sensor_frame = sensor_frame
+        self.base_frame = base_frame
+        self.skip_invalid = skip_invalid
+        self.no_return_range = check_no_return_range(no_return_range)
+        self.opener = opener or _Reader
+        self.notes: list[str] = []
+        self.own_channel = False
+        self._pose_source: str | None = None
+        self._notes: list[str] | None = None
+
+    def _messages(self) -> Iterator[tuple[Scan, Pose | None, Pose | None]]:
+        """Each range message's scan with its /tf and odometry poses (the loop of read_mcap)."""
+        name = self.name
+        with self.opener(self.path) as reader:
+            rows = _channel_rows(reader, self.topics)
+            chosen = _choose_channels(rows, self.topics, name)
+            self.chosen_topics = [r.topic for r in chosen]
+            kinds = {r.topic: r.kind for r in chosen}
+            if any(k == OCCTOOL for k in kinds.values()):
+                if len(chosen) > 1:
+                    raise InputError(f"{name}: read occtool's features channel on its own, not with other topics")
+                self.own_channel = True
+                return
+            static_topics = [r.topic for r in rows if r.kind == TF and r.topic.endswith("tf_static")]
+            tf_topics = [r.topic for r in rows if r.kind == TF and r.topic not in static_topics]
+            odom_topics = [r.topic for r in rows if r.kind == ODOMETRY]
+            frames = _static_frames(reader, static_topics, name)
+            base = _strip_frame(self.base_frame) if self.base_frame else None
+            if (base is not None and base not in frames and not tf_topics and not odom_topics
+                    and self.sensor_frame is None):
+                raise InputError(f"{name}: base frame '{base}' appears in no transform of the log")
+            options = _Options(self.evidence_field, self.evidence, self.use_intensities, self.skip_invalid,
+                               self.no_return_range)
+            scans = self.state = _Scans(name, base or "base_link", self.sensor_frame, frames, options, keep=False)
+            for schema, channel, record, message in reader.messages(self.chosen_topics + tf_topics + odom_topics):
+                if channel.topic in tf_topics:
+                    scans.add_transforms(message, channel.topic)
+                elif channel.topic in odom_topics:
+                    scans.add_odometry(message, channel.topic, record)
+                else:
+                    yield scans.add_range(kinds[channel.topic], schema, channel.topic, record, message)  # type: ignore[arg-type]
+
+    def prepare(self) -> bool:
+        """Read the file once (counts only); ``False`` for occtool's own channel, which is not streamed."""
+        if self._notes is not None:
+            return True
+        tf_missing = odom_missing = count = 0
+        with_points = False
+        for scan, tf_pose, odom_pose in self._messages():
+            count += 1
+            tf_missing += tf_pose is None
+            odom_missing += odom_pose is None
+            with_points = with_points or scan.points.shape[0] > 0
+        if self.own_channel:
+            return False
+        if count == 0:
+            raise InputError(f"{self.name} holds no messages on {', '.join(self.chosen_topics)}")
+        notes: list[str] = []
+        if tf_missing < count:
+            self._pose_source = "tf"
+            notes += _pose_notes(f"/tf (parent of {self.state.base_name})", tf_missing)
+        elif odom_missing < count:
+            self._pose_source = "odometry"
+            notes += _pose_notes("odometry", odom_missing)
+        notes += _reading_notes(self.state, self.evidence, self.no_return_range)
+        if not with_points:
+            raise InputError(f"{self.name}: the {count} range message(s) hold no valid points")
+        self._notes = notes
+        return True
+
+    def __iter__(self) -> Iterator[Scan]:
+        if not self.prepare():
+            raise InputError(f"{self.name}: occtool's own channel is read whole (read_mcap), not streamed")
+        self.notes.clear()
+        for scan, tf_pose, odom_pose in self._messages():
+            pose = tf_pose if self._pose_source == "tf" else odom_pose if self._pose_source == "odometry" else None
+            yield Scan(scan.points, scan.evidence, pose, scan.stamp, scan.source)
+        self.notes.extend(self._notes or [])
