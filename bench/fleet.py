@@ -4,7 +4,8 @@ The same call runs with ``-j 1``, ``-j N`` local processes and on a Dask ``Local
 this script starts (``--scheduler``). Each run's wall time, CPU time (user + system, of
 the command and its worker processes) and peak RSS come from ``/usr/bin/time -v`` (the
 peak is that of the largest single process, not the sum); the Dask workers' CPU time is
-read from the workers themselves (psutil). The models of every run are compared with
+read from the workers themselves (psutil), the scheduler's and nannies' from this process. The
+cluster is started with :data:`occtool.executor.DASK_CLUSTER_CONFIG`. The models of every run are compared with
 those of ``-j 1`` outside their ``run`` object: they must be the same.
 
     python bench/fleet.py ../shared/data [--jobs 2] [--dask-workers 2] [--json out.json]
@@ -95,15 +96,23 @@ def fleet_section(data_dir: str | os.PathLike[str], *, jobs: int = 2, dask_worke
         except ImportError:
             runs["dask"] = {"error": "dask[distributed] is not installed (occtool[dask])"}
         else:
-            with LocalCluster(n_workers=dask_workers, threads_per_worker=1, processes=True,
-                              dashboard_address=None) as cluster, Client(cluster) as client:
-                def cpu() -> float:
-                    times = psutil.Process().cpu_times()
-                    return times.user + times.system
+            import dask
 
-                before = sum(client.run(cpu).values())
+            from occtool.executor import DASK_CLUSTER_CONFIG
+
+            def cpu() -> float:
+                times = psutil.Process().cpu_times()
+                return times.user + times.system
+
+            # Started as occtool documents for its fits (the workers read the settings as
+            # they start); the scheduler and the nannies run in this process.
+            with dask.config.set(DASK_CLUSTER_CONFIG), \
+                    LocalCluster(n_workers=dask_workers, threads_per_worker=1, processes=True,
+                                 dashboard_address=None) as cluster, Client(cluster) as client:
+                before, scheduler_before = sum(client.run(cpu).values()), cpu()
                 figures = _run_fit(logs, base / "dask", ["--scheduler", cluster.scheduler_address], fit_args)
                 figures["workers_cpu_s"] = sum(client.run(cpu).values()) - before
+                figures["scheduler_cpu_s"] = cpu() - scheduler_before
                 figures["workers"] = dask_workers
                 runs["dask"] = figures
         reference = _models(base / "j1")
@@ -116,7 +125,9 @@ def fleet_section(data_dir: str | os.PathLike[str], *, jobs: int = 2, dask_worke
     lines = [
         (f"All positions of {len(logs)} CARMEN logs ({results.get('models', 0):,} models) in one "
          "`occtool fit LOG... -o DIR/` call. Wall and CPU from /usr/bin/time -v (CPU: the command and "
-         "its local workers; Dask workers' CPU read from the workers); peak RSS of the largest process."),
+         "its local workers; Dask workers' CPU read from the workers, the scheduler's and nannies' not "
+         "included); peak RSS of the largest process. The LocalCluster runs with "
+         "`occtool.executor.DASK_CLUSTER_CONFIG`."),
         "",
         "| run | wall | CPU | peak RSS | speed-up over -j 1 | models identical to -j 1 |",
         "|---|---|---|---|---|---|",
@@ -128,6 +139,10 @@ def fleet_section(data_dir: str | os.PathLike[str], *, jobs: int = 2, dask_worke
         cpu_s = figures["user_s"] + figures["system_s"] + figures.get("workers_cpu_s", 0.0)
         lines.append(f"| {name} | {figures['wall_s']:.1f} s | {cpu_s:.1f} s | {figures['peak_rss_mb']:.0f} MB | "
                      f"{figures['speedup']:.2f}x | {'yes' if figures['identical_models'] else 'NO'} |")
+    dask_run = results["runs"].get("dask", {})
+    if "scheduler_cpu_s" in dask_run:
+        lines += ["", f"The Dask scheduler and nannies (the bench's process) used {dask_run['scheduler_cpu_s']:.1f} s "
+                  "of CPU besides."]
     return "\n".join(lines) + "\n", results
 
 

@@ -98,15 +98,34 @@ def test_progress_counts_every_position_of_every_log(tmp_path):
 
 def test_a_dask_local_cluster_gives_the_same_models(tmp_path):
     distributed = pytest.importorskip("distributed")
+    import dask
+
+    from occtool.executor import DASK_CLUSTER_CONFIG
+
     log = write_log(tmp_path / "room.csv", 3)
     fit_model_set(log, tmp_path / "local", estimator=ESTIMATOR, jobs=1)
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None)
-    with cluster, distributed.Client(cluster) as client:
-        summary = fit_model_set(log, tmp_path / "dask", estimator=ESTIMATOR, scheduler=client)
+    with dask.config.set(DASK_CLUSTER_CONFIG):  # as documented for occtool's clusters
+        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                           dashboard_address=None)
+        with cluster, distributed.Client(cluster) as client:
+            summary = fit_model_set(log, tmp_path / "dask", estimator=ESTIMATOR, scheduler=client)
     assert summary.done == 3 and "Dask" in summary.executor
     assert models_without_run(tmp_path / "local") == models_without_run(tmp_path / "dask")
     run_block = json.loads((tmp_path / "dask" / "model_0000.json").read_text())["run"]
     assert "Dask" in run_block["executor"]
+
+
+def test_the_recommended_dask_settings_are_dask_settings():
+    # dask.config.set takes any key: a misspelt one would leave Dask's default in force unseen.
+    dask = pytest.importorskip("dask")
+    pytest.importorskip("distributed")
+    from occtool.executor import DASK_CLUSTER_CONFIG
+
+    missing = object()
+    for key, value in DASK_CLUSTER_CONFIG.items():
+        default = dask.config.get(key, default=missing)
+        assert default is not missing, key
+        assert type(default) is type(value) and default != value, key
 
 
 def test_the_run_object_is_filled_in_to_the_same_bytes_save_model_writes(tmp_path):
