@@ -268,10 +268,10 @@ class Support:
         else:
             distance, index = neighbours
         found = np.isfinite(np.asarray(distance).reshape(points.shape[0], k))
-        neighbours = self.points[np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)]
+        near = self.points[np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)]
         horizontal = np.hypot(points[:, 0], points[:, 1])
-        rise = np.abs(neighbours[..., 2] - points[:, None, 2])
-        run = np.abs(np.hypot(neighbours[..., 0], neighbours[..., 1]) - horizontal[:, None])
+        rise = np.abs(near[..., 2] - points[:, None, 2])
+        run = np.abs(np.hypot(near[..., 0], near[..., 1]) - horizontal[:, None])
         row = 0.5 * self.spacing * np.linalg.norm(points, axis=1)
         steep = found & (rise >= row[:, None]) & (run <= STEEP_SLOPE * rise)
         return steep.sum(axis=1) < STEEP_NEIGHBOURS

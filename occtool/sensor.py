@@ -28,6 +28,7 @@ Three further kinds of sample are occtool's own choices (see ``docs/method.md``)
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -298,7 +299,8 @@ class SensorModel:
         start += n_ray
         for block in extra:
             part = slice(start, start + block[0].size)
-            for column, values in zip((alpha_out, h_out, r_out, m_out, weight_out, kind_out), block):
+            columns: tuple[NDArray[Any], ...] = (alpha_out, h_out, r_out, m_out, weight_out, kind_out)
+            for column, values in zip(columns, block):
                 column[part] = values
             start += block[0].size
         return Samples(alpha=alpha_out, h=h_out, r=r_out, m=m_out, weight=weight_out, kind=kind_out)

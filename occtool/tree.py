@@ -212,7 +212,8 @@ class _PieceTree:
         buffers = np.empty((2, self.n_pieces, EVALUATION_CHUNK))
         result: NDArray[Any] | None = None
         for i in range(0, size, EVALUATION_CHUNK):
-            part = reduce(self._chunk_values(*(v[i:i + EVALUATION_CHUNK] for v in flat), buffers))
+            alpha_part, h_part, x_part = (v[i:i + EVALUATION_CHUNK] for v in flat)
+            part = reduce(self._chunk_values(alpha_part, h_part, x_part, buffers))
             if result is None:
                 result = np.empty(size, dtype=part.dtype)
             result[i:i + part.size] = part
