@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from occtool.errors import InputError
@@ -198,13 +198,18 @@ def test_region_agrees_with_a_direct_segment_check(seed: int, radius: float, max
 
 @settings(max_examples=20)
 @given(yaw=st.floats(-math.pi, math.pi), name=st.sampled_from(sorted(SCENES)))
+@example(yaw=3.048988447567546, name="aisle")  # a ray slips past the beam's tip in one sweep only
 def test_region_turns_with_the_scene(yaw: float, name: str) -> None:
     scene = build_scene(name)
-    region = reachable_region(scene, max_range=1.5, n_rays=1440)
-    turned = reachable_region(scene.rotated(yaw), max_range=1.5, n_rays=1440)
+    max_range, n_rays = 1.5, 1440
+    region = reachable_region(scene, max_range=max_range, n_rays=n_rays)
+    turned = reachable_region(scene.rotated(yaw), max_range=max_range, n_rays=n_rays)
     expected = shapely.affinity.rotate(region, yaw, origin=(0, 0), use_radians=True)
-    # Rays sample the turned scene at other angles: the two differ by slivers along the boundary.
-    assert shapely.symmetric_difference(expected, turned).area < 5e-3 * region.area
+    # Rays sample the turned scene at other angles: the two differ by slivers along the
+    # boundary, and by the wedge of a ray that passes a thin obstacle's tip in one sweep
+    # and not in the other (a few, each at most half the max range squared times the step).
+    wedge = 0.5 * max_range**2 * 2 * math.pi / n_rays
+    assert shapely.symmetric_difference(expected, turned).area < 5e-3 * region.area + 4 * wedge
 
 
 def test_office_truth_passes_the_doorway_and_stops_at_the_table() -> None:
