@@ -236,7 +236,9 @@ class Support:
         if points.shape[0] == 0 or (needed <= 1).all() or self.tree.n == 0:
             return needed <= 1, None
         # The needed-th nearest within reach, not a count of all: dense surfaces hold hundreds.
-        share = steep and int(needed.max()) <= STEEP_CANDIDATES
+        # Shared only while the wider answer stays small: at 10M features the candidates'
+        # 16 neighbours each took 1.8 GB (peak 1.3 -> 3.1 GB).
+        share = steep and int(needed.max()) <= STEEP_CANDIDATES and points.shape[0] <= SHARED_QUERY_POINTS
         k = int(min(STEEP_CANDIDATES if share else needed.max(), self.tree.n))
         distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
         distance = np.asarray(distance).reshape(points.shape[0], k)
@@ -279,6 +281,9 @@ class Support:
 
 #: Neighbours searched for returns of the same steep surface (:meth:`Support.seen_from_above`).
 STEEP_CANDIDATES = 16
+#: Most points whose confirmation query also serves :meth:`Support.seen_from_above`
+#: (16 neighbours each: 64 MB of answers at this count).
+SHARED_QUERY_POINTS = 250_000
 #: Returns above or below on the same steep surface that make a return a wall's or a leg's.
 STEEP_NEIGHBOURS = 2
 #: Largest change of horizontal distance per metre of height between two returns of one

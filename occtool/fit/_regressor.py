@@ -14,6 +14,7 @@ import inspect
 import logging
 import math
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -303,6 +304,9 @@ class OccupancyRegressor:
             guard = build_guard(np.arctan2(points[:, 1], points[:, 0]),
                                 np.hypot(points[:, 0], points[:, 1]) * scale[mask], self.level,
                                 reach=SPREAD_SHARE * spacing)
+        # The line-of-sight index served the screen and the guard; the samples need none of
+        # it (at 10M features it holds 250 MB).
+        screen = replace(screen, sight=None)
         origin = screen.origin
         if len(usable) > FIT_FEATURES:
             # The pieces are placed from an even subsample: a few dozen linear pieces need no
