@@ -346,7 +346,7 @@ ROBOT_OPTION_NAMES = ("robot_radius", "sensor_height", "body_height", "ground_cl
 EXTRACT_OPTION_NAMES = ("threshold", "heights", "slice_spacing", "max_range", "n_angles", "point_spacing",
                         "return_snap")
 #: The library's :data:`occtool.navigation.RETURN_SNAP` (not imported: the CLI starts without numpy).
-RETURN_SNAP = 0.3
+RETURN_SNAP = 0.5
 
 
 def _positive(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
