@@ -171,3 +171,21 @@ def test_a_bad_option_is_one_line_on_stderr_from_the_console_script(tmp_path):
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and result.stderr.startswith("Error: Invalid value for '--features'")
     assert "--help" in result.stderr and not (tmp_path / "d").exists()
+
+
+def test_an_interrupt_the_moment_the_temporary_file_exists_leaves_nothing(tmp_path, monkeypatch):
+    # A signal handled right after the temporary file is made (a SIGTERM on a loaded
+    # machine once landed there) must still remove it: its name is known before it exists.
+    import occtool.io._atomic as atomic
+
+    real_open = os.open
+
+    def open_then_interrupt(path, flags, mode=0o777):
+        real_open(path, flags, mode)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(atomic.os, "open", open_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_write(tmp_path / "out.json") as handle:
+            handle.write("{}")
+    assert list(tmp_path.iterdir()) == []

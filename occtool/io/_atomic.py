@@ -5,14 +5,16 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import secrets
 import sys
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
 #: Characters of the target's name kept in its temporary file's name (``.NAME.XXXXXXXX.tmp``).
 TEMP_PREFIX_CHARS = 32
+#: Random names tried for a temporary file before giving up.
+TEMP_ATTEMPTS = 100
 
 
 @contextlib.contextmanager
@@ -54,9 +56,22 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
     if not directory.is_dir():
         raise FileNotFoundError(f"output folder {directory} does not exist")
     # A short prefix: the temporary name must fit NAME_MAX (255) when the target's does.
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name[:TEMP_PREFIX_CHARS]}.", suffix=".tmp", dir=directory)
+    prefix = f".{target.name[:TEMP_PREFIX_CHARS]}."
+    tmp_name: str | None = None
     try:
-        # mkstemp makes the file private (0600); give the result the mode a plain open() would.
+        # The name is chosen before the file is made, inside this try: a Ctrl-C or SIGTERM
+        # arriving just after the file exists (between mkstemp's return and a try, as a
+        # loaded machine showed once) still finds its name and removes it.
+        for _ in range(TEMP_ATTEMPTS):
+            tmp_name = str(directory / f"{prefix}{secrets.token_hex(4)}.tmp")
+            try:
+                fd = os.open(tmp_name, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
+                break
+            except FileExistsError:
+                tmp_name = None  # someone else's: never ours to remove
+        else:
+            raise FileExistsError(errno.EEXIST, "no free temporary file name", str(directory))
+        # Made private (0600) while written; give the result the mode a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp_name, 0o666 & ~umask)
@@ -66,6 +81,7 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
             os.fsync(handle.fileno())
         os.replace(tmp_name, target)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp_name)
+        if tmp_name is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp_name)
         raise
