@@ -468,6 +468,65 @@ class _Program:
         return deepest
 
 
+@dataclass(frozen=True)
+class _Rows:
+    """Step of a :class:`_RowProgram`: ``buffers[buffer] = op`` over the piece rows ``start:stop``."""
+
+    op: str
+    start: int
+    stop: int
+    buffer: int
+
+
+class _RowProgram:
+    """A tree compiled to evaluate on a ``(L, points)`` array of piece values, one row a piece.
+
+    The leaf children of a node are reduced a run of consecutive pieces at a time (one
+    ``reduce`` over a slice of rows, no copy), which for a fitted tree (a MIN of MAX
+    groups of consecutive pieces) makes one call per group instead of one per piece.
+    MIN and MAX pick one of their inputs, so any order of reduction gives the same
+    numbers as :func:`_evaluate` wherever there is no NaN.
+    """
+
+    def __init__(self, root: Node) -> None:
+        self.steps: list[_Rows | _Reduce] = []
+        self.n_buffers = self._compile(root, 0) + 1
+
+    def _compile(self, node: Node, level: int) -> int:
+        """Append the steps that evaluate ``node`` into buffer ``level``; return the deepest buffer used."""
+        if isinstance(node, int):
+            self.steps.append(_Rows("min", node, node + 1, level))
+            return level
+        pieces = sorted(child for child in node.children if isinstance(child, int))
+        runs: list[Node | tuple[int, int]] = []
+        for piece in pieces:
+            if runs and isinstance(runs[-1], tuple) and runs[-1][1] == piece:
+                runs[-1] = (runs[-1][0], piece + 1)
+            else:
+                runs.append((piece, piece + 1))
+        runs.extend(child for child in node.children if not isinstance(child, int))
+        deepest = level
+        for index, part in enumerate(runs):
+            target = level if index == 0 else level + 1
+            if isinstance(part, tuple):
+                self.steps.append(_Rows(node.op, part[0], part[1], target))
+            else:
+                deepest = max(deepest, self._compile(part, target))
+            if index:
+                deepest = max(deepest, target)
+                self.steps.append(_Reduce(node.op, level, target))
+        return deepest
+
+    def run(self, values: FloatArray, buffers: list[FloatArray]) -> None:
+        """Evaluate on ``values`` (``(L, n)``) into ``buffers[0]`` (``n_buffers`` arrays of ``(n,)``)."""
+        for step in self.steps:
+            ufunc = np.minimum if step.op == "min" else np.maximum
+            if isinstance(step, _Rows):
+                ufunc.reduce(values[step.start:step.stop], axis=0, out=buffers[step.buffer])
+            else:
+                ufunc(buffers[step.target], buffers[step.source], out=buffers[step.target])
+
+
 class InverseTree(_PieceTree):
     """The inverted occupancy function ``r = F^-1(alpha, h, m)``.
 
@@ -565,39 +624,75 @@ class InverseTree(_PieceTree):
         k = len(self._names[self.basis]) - 3
         W = self.coefficients
         # u: least angle part over each interval, plus m's term and the offset: (L, N).
+        u = self._least_angle_part(lo, hi) + (W[:, k + 1] * m + W[:, k + 2])[:, None]
+        n_pieces, n_angles = u.shape
+        n_boxes = max(h_edges.size - 1, 0)
+        least = np.empty((n_boxes, n_angles))
+        if least.size == 0:
+            return least
+        # r and r^2 - h^2 at every height edge once: a box's least value lies at one of its
+        # two edges (concave in h when |b| <= 1), shared with its neighbour; b h and h^2 once.
+        height_part = W[:, k][:, None] * h_edges[None, :]
+        edge_squares = (h_edges * h_edges)[None, :, None]
+        curved = np.flatnonzero(np.abs(W[:, k]) > 1.0)
+        program = self._bound_program()
+        # Blocks of angles, so that the (L, heights, angles) values stay in cache and in
+        # reused buffers: made whole, they were a few MB a call, which the C allocator
+        # handed back to the kernel and took back page by page each time (half the time
+        # of a navigation map).
+        step = max(1, INVERSE_BLOCK // (n_pieces * h_edges.size))
+        block = min(step, n_angles)
+        edge_values, box, *levels = _scratch_buffers(
+            2 + program.n_buffers, (n_pieces, h_edges.size, block))
+        for first in range(0, n_angles, step):
+            n = min(step, n_angles - first)
+            angles = slice(first, first + n)
+            q = edge_values.reshape(-1)[:n_pieces * h_edges.size * n].reshape(n_pieces, h_edges.size, n)
+            np.add(u[:, None, angles], height_part[:, :, None], out=q)
+            # Where r < 0 the level is reached before the sensor: nothing is free. r is
+            # clamped to 0 there, which gives -h^2 <= 0 where the exact bound says -1: the
+            # same once the tree's result is clamped to 0 below (max(., 0) is monotone, so
+            # it commutes with MIN and MAX), and fmax turns a NaN (inf - inf) into 0 too.
+            np.fmax(q, 0.0, out=q)
+            np.multiply(q, q, out=q)
+            np.subtract(q, edge_squares, out=q)
+            boxes = box.reshape(-1)[:n_pieces * n_boxes * n].reshape(n_pieces, n_boxes, n)
+            np.minimum(q[:, :-1], q[:, 1:], out=boxes)
+            if curved.size:
+                # (b^2 - 1) h^2 + 2 u b h + u^2 is convex only when |b| > 1: then its vertex counts too.
+                bc = W[curved, k][:, None, None]
+                h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
+                uc = u[curved, angles][:, None, :]
+                vertex = np.clip(-uc * bc / (bc * bc - 1.0), h0, h1)
+                rv = uc + bc * vertex
+                boxes[curved] = np.minimum(boxes[curved], np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
+            size = n_boxes * n
+            outputs = [level.reshape(-1)[:size] for level in levels]
+            program.run(boxes.reshape(n_pieces, size), outputs)
+            least[:, angles] = outputs[0].reshape(n_boxes, n)
+        # sqrt(max(., 0)) is increasing, so it commutes with the tree: taken once, at the end.
+        return np.sqrt(np.maximum(least, 0.0, out=least), out=least)
+
+    def _least_angle_part(self, lo: FloatArray, hi: FloatArray) -> FloatArray:
+        """``(L, N)``: each piece's least angle terms over the intervals ``[lo, hi]``."""
+        W = self.coefficients
         if self.basis == "linear":
             a = W[:, :1]
-            angle_min = np.minimum(a * lo[None, :], a * hi[None, :])
-        else:
-            a1, a2 = W[:, :1], W[:, 1:2]
-            ends = np.minimum(a1 * np.cos(lo) + a2 * np.sin(lo), a1 * np.cos(hi) + a2 * np.sin(hi))
-            # a1 cos + a2 sin = R cos(alpha - phi) reaches -R at alpha = phi + pi.
-            radius = np.hypot(a1, a2)
-            trough = np.arctan2(a2, a1) + np.pi
-            inside = np.mod(trough - lo[None, :], 2.0 * np.pi) <= (hi - lo)[None, :]
-            angle_min = np.where(inside, -radius, ends)
-        u = angle_min + (W[:, k + 1] * m + W[:, k + 2])[:, None]
-        b = W[:, k][:, None, None]
-        # r and r^2 - h^2 at every height edge once: a box's least value lies at one of its
-        # two edges (concave in h when |b| <= 1), shared with its neighbour.
-        edges = h_edges[None, :, None]
-        r = u[:, None, :] + b * edges
-        q = r * r - edges * edges
-        q = np.where(r >= 0, q, -1.0)  # level reached before the sensor: nothing free
-        box = np.minimum(q[:, :-1], q[:, 1:])
-        # (b^2 - 1) h^2 + 2 u b h + u^2 is convex only when |b| > 1: then its vertex counts too.
-        curved = np.flatnonzero(np.abs(W[:, k]) > 1.0)
-        if curved.size:
-            bc = b[curved]
-            h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
-            uc = u[curved][:, None, :]
-            vertex = np.clip(-uc * bc / (bc * bc - 1.0), h0, h1)
-            rv = uc + bc * vertex
-            box[curved] = np.minimum(box[curved], np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
-        L, H, N = box.shape
-        # sqrt(max(., 0)) is increasing, so it commutes with the tree: taken once, at the end.
-        least = _evaluate(self.root, box.reshape(L, H * N)).reshape(H, N)
-        return np.sqrt(np.maximum(least, 0.0))
+            return np.minimum(a * lo[None, :], a * hi[None, :])
+        a1, a2 = W[:, :1], W[:, 1:2]
+        ends = np.minimum(a1 * np.cos(lo) + a2 * np.sin(lo), a1 * np.cos(hi) + a2 * np.sin(hi))
+        # a1 cos + a2 sin = R cos(alpha - phi) reaches -R at alpha = phi + pi.
+        radius = np.hypot(a1, a2)
+        trough = np.arctan2(a2, a1) + np.pi
+        inside = np.mod(trough - lo[None, :], 2.0 * np.pi) <= (hi - lo)[None, :]
+        return np.where(inside, -radius, ends)
+
+    def _bound_program(self) -> _RowProgram:
+        """The tree compiled over rows of piece values (built once)."""
+        cache = self.__dict__.setdefault("_programs", {})
+        if "rows" not in cache:
+            cache["rows"] = _RowProgram(self.root)
+        return cache["rows"]
 
     def _angle_part(self, alpha: FloatArray, constant: FloatArray) -> FloatArray:
         """``(L, *alpha.shape)``: each piece's constant plus its angle terms."""
