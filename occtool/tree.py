@@ -478,18 +478,44 @@ class _Rows:
     buffer: int
 
 
+@dataclass(frozen=True)
+class _Groups:
+    """Step of a :class:`_RowProgram`: ``buffers[buffer] = op`` over ``groups`` groups of
+    ``size`` consecutive piece rows from ``start``, each reduced by ``inner`` first (into
+    ``buffers[buffer + 1]``)."""
+
+    op: str
+    inner: str
+    start: int
+    groups: int
+    size: int
+    buffer: int
+
+
+def _consecutive_runs(pieces: list[int]) -> list[tuple[int, int]]:
+    """``(start, stop)`` of each run of consecutive piece indices in ``pieces``, ascending."""
+    runs: list[tuple[int, int]] = []
+    for piece in sorted(pieces):
+        if runs and runs[-1][1] == piece:
+            runs[-1] = (runs[-1][0], piece + 1)
+        else:
+            runs.append((piece, piece + 1))
+    return runs
+
+
 class _RowProgram:
     """A tree compiled to evaluate on a ``(L, points)`` array of piece values, one row a piece.
 
     The leaf children of a node are reduced a run of consecutive pieces at a time (one
-    ``reduce`` over a slice of rows, no copy), which for a fitted tree (a MIN of MAX
-    groups of consecutive pieces) makes one call per group instead of one per piece.
-    MIN and MAX pick one of their inputs, so any order of reduction gives the same
-    numbers as :func:`_evaluate` wherever there is no NaN.
+    ``reduce`` over a slice of rows, no copy), and a node over equal groups of consecutive
+    pieces (a fitted tree: a MIN of MAX groups) in two reductions over its rows seen as
+    ``(groups, size, points)``, instead of a call or two per piece. MIN and MAX pick one
+    of their inputs, so any order of reduction gives the same numbers as
+    :func:`_evaluate` wherever there is no NaN.
     """
 
     def __init__(self, root: Node) -> None:
-        self.steps: list[_Rows | _Reduce] = []
+        self.steps: list[_Rows | _Groups | _Reduce] = []
         self.n_buffers = self._compile(root, 0) + 1
 
     def _compile(self, node: Node, level: int) -> int:
@@ -497,16 +523,15 @@ class _RowProgram:
         if isinstance(node, int):
             self.steps.append(_Rows("min", node, node + 1, level))
             return level
-        pieces = sorted(child for child in node.children if isinstance(child, int))
-        runs: list[Node | tuple[int, int]] = []
-        for piece in pieces:
-            if runs and isinstance(runs[-1], tuple) and runs[-1][1] == piece:
-                runs[-1] = (runs[-1][0], piece + 1)
-            else:
-                runs.append((piece, piece + 1))
-        runs.extend(child for child in node.children if not isinstance(child, int))
+        groups = self._groups(node, level)
+        if groups is not None:
+            self.steps.append(groups)
+            return level + 1
+        parts: list[Node | tuple[int, int]] = [
+            *_consecutive_runs([c for c in node.children if isinstance(c, int)]),
+            *(c for c in node.children if not isinstance(c, int))]
         deepest = level
-        for index, part in enumerate(runs):
+        for index, part in enumerate(parts):
             target = level if index == 0 else level + 1
             if isinstance(part, tuple):
                 self.steps.append(_Rows(node.op, part[0], part[1], target))
@@ -517,14 +542,43 @@ class _RowProgram:
                 self.steps.append(_Reduce(node.op, level, target))
         return deepest
 
-    def run(self, values: FloatArray, buffers: list[FloatArray]) -> None:
-        """Evaluate on ``values`` (``(L, n)``) into ``buffers[0]`` (``n_buffers`` arrays of ``(n,)``)."""
+    @staticmethod
+    def _groups(node: Op, level: int) -> _Groups | None:
+        """``node`` as one :class:`_Groups` step, when its children are nodes of one op,
+        each over a run of consecutive pieces, the runs equally long and together one run."""
+        inner: set[str] = set()
+        runs: list[tuple[int, int]] = []
+        for child in node.children:
+            if not isinstance(child, Op) or not all(isinstance(piece, int) for piece in child.children):
+                return None
+            inner.add(child.op)
+            runs.extend(_consecutive_runs([piece for piece in child.children if isinstance(piece, int)]))
+        if len(runs) < 2 or len(runs) != len(node.children) or len(inner) != 1:
+            return None
+        runs.sort()
+        size = runs[0][1] - runs[0][0]
+        if any(stop - start != size for start, stop in runs) or any(
+                following[0] != previous[1] for previous, following in zip(runs, runs[1:])):
+            return None
+        return _Groups(node.op, inner.pop(), runs[0][0], len(runs), size, level)
+
+    def run(self, values: FloatArray, buffers: list[FloatArray]) -> FloatArray:
+        """The tree on ``values`` (``(L, n)``), in ``buffers`` (at least ``n_buffers`` flat
+        arrays of at least ``L * n`` elements); returns a view of ``buffers[0]``."""
+        n = values.shape[1]
+        outputs = [buffer[:n] for buffer in buffers]
         for step in self.steps:
             ufunc = np.minimum if step.op == "min" else np.maximum
             if isinstance(step, _Rows):
-                ufunc.reduce(values[step.start:step.stop], axis=0, out=buffers[step.buffer])
+                ufunc.reduce(values[step.start:step.stop], axis=0, out=outputs[step.buffer])
+            elif isinstance(step, _Groups):
+                rows = values[step.start:step.start + step.groups * step.size].reshape(step.groups, step.size, n)
+                inner = buffers[step.buffer + 1][:step.groups * n].reshape(step.groups, n)
+                (np.minimum if step.inner == "min" else np.maximum).reduce(rows, axis=1, out=inner)
+                ufunc.reduce(inner, axis=0, out=outputs[step.buffer])
             else:
-                ufunc(buffers[step.target], buffers[step.source], out=buffers[step.target])
+                ufunc(outputs[step.target], outputs[step.source], out=outputs[step.target])
+        return outputs[0]
 
 
 class InverseTree(_PieceTree):
@@ -635,7 +689,7 @@ class InverseTree(_PieceTree):
         height_part = W[:, k][:, None] * h_edges[None, :]
         edge_squares = (h_edges * h_edges)[None, :, None]
         curved = np.flatnonzero(np.abs(W[:, k]) > 1.0)
-        program = self._bound_program()
+        program = self._row_program()
         # Blocks of angles, so that the (L, heights, angles) values stay in cache and in
         # reused buffers: made whole, they were a few MB a call, which the C allocator
         # handed back to the kernel and took back page by page each time (half the time
@@ -666,10 +720,8 @@ class InverseTree(_PieceTree):
                 vertex = np.clip(-uc * bc / (bc * bc - 1.0), h0, h1)
                 rv = uc + bc * vertex
                 boxes[curved] = np.minimum(boxes[curved], np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
-            size = n_boxes * n
-            outputs = [level.reshape(-1)[:size] for level in levels]
-            program.run(boxes.reshape(n_pieces, size), outputs)
-            least[:, angles] = outputs[0].reshape(n_boxes, n)
+            tree = program.run(boxes.reshape(n_pieces, n_boxes * n), [level.reshape(-1) for level in levels])
+            least[:, angles] = tree.reshape(n_boxes, n)
         # sqrt(max(., 0)) is increasing, so it commutes with the tree: taken once, at the end.
         return np.sqrt(np.maximum(least, 0.0, out=least), out=least)
 
@@ -687,7 +739,7 @@ class InverseTree(_PieceTree):
         inside = np.mod(trough - lo[None, :], 2.0 * np.pi) <= (hi - lo)[None, :]
         return np.where(inside, -radius, ends)
 
-    def _bound_program(self) -> _RowProgram:
+    def _row_program(self) -> _RowProgram:
         """The tree compiled over rows of piece values (built once)."""
         cache = self.__dict__.setdefault("_programs", {})
         if "rows" not in cache:
