@@ -234,3 +234,23 @@ def test_the_inverse_is_the_same_from_several_threads():
     for i, runs in enumerate(results):
         for got in runs:
             np.testing.assert_allclose(got, expected[i % 4], rtol=1e-13, atol=1e-13)
+
+
+TURN_EDGES = [0.0, -0.0, 2 * np.pi, -2 * np.pi, 4 * np.pi, np.pi, -np.pi, 3 * np.pi, 1e-300, -1e-300,
+              np.nextafter(2 * np.pi, 0), np.nextafter(-2 * np.pi, 0), np.nextafter(4 * np.pi, 0), 1e-17, -1e-17]
+
+
+@given(
+    angles=st.lists(st.one_of(st.floats(-8, 8), st.sampled_from(TURN_EDGES)), min_size=1, max_size=6),
+    starts=st.lists(st.tuples(st.one_of(st.floats(-8, 8), st.sampled_from(TURN_EDGES)),
+                              st.one_of(st.floats(-0.1, 7), st.sampled_from(TURN_EDGES[:10]))), min_size=1, max_size=6),
+    shift=st.sampled_from([0.0, 2 * np.pi, -2 * np.pi, 1e-16, -1e-16]),
+)
+def test_an_angle_within_an_interval_is_what_np_mod_says(angles, starts, shift):
+    from occtool.tree import _within_turn
+
+    angle = np.array(angles)[:, None]
+    given_start, width = np.array(starts).T
+    for start in (given_start, angle[:1, 0] + shift, angle[:1, 0] + shift + width[:1]):  # at the ends too
+        expected = np.mod(angle - start[None, :], 2 * np.pi) <= width[None, :len(start)]
+        np.testing.assert_array_equal(_within_turn(angle, start, width[:len(start)]), expected)
