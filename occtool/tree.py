@@ -390,10 +390,11 @@ _SCRATCH = threading.local()
 def _scratch_buffers(count: int, shape: tuple[int, ...]) -> list[FloatArray]:
     """``count`` scratch arrays of ``shape``, reused by later calls in the same thread.
 
-    At most :data:`INVERSE_BLOCK` elements each, so a thread keeps a few hundred KB per
-    tree level. Fresh arrays of that size come from the kernel page by page: freeing a
-    few of them at once makes the C allocator hand the memory back, and filling new
-    ones then costs more than the evaluation itself (0.2 ms of 0.7 ms for 97 x 360).
+    At most :data:`INVERSE_BLOCK` elements each (more only for a free-distance bound over
+    so many heights that one ray's pieces x heights exceed it), so a thread keeps a few
+    hundred KB per buffer. Fresh arrays of that size come from the kernel page by page:
+    freeing a few of them at once makes the C allocator hand the memory back, and filling
+    new ones then costs more than the evaluation itself (0.2 ms of 0.7 ms for 97 x 360).
     """
     pool: list[FloatArray] = _SCRATCH.__dict__.setdefault("buffers", [])
     size = math.prod(shape)
