@@ -390,10 +390,11 @@ _SCRATCH = threading.local()
 def _scratch_buffers(count: int, shape: tuple[int, ...]) -> list[FloatArray]:
     """``count`` scratch arrays of ``shape``, reused by later calls in the same thread.
 
-    At most :data:`INVERSE_BLOCK` elements each, so a thread keeps a few hundred KB per
-    tree level. Fresh arrays of that size come from the kernel page by page: freeing a
-    few of them at once makes the C allocator hand the memory back, and filling new
-    ones then costs more than the evaluation itself (0.2 ms of 0.7 ms for 97 x 360).
+    At most :data:`INVERSE_BLOCK` elements each (more only for a free-distance bound over
+    so many heights that one ray's pieces x heights exceed it), so a thread keeps a few
+    hundred KB per buffer. Fresh arrays of that size come from the kernel page by page:
+    freeing a few of them at once makes the C allocator hand the memory back, and filling
+    new ones then costs more than the evaluation itself (0.2 ms of 0.7 ms for 97 x 360).
     """
     pool: list[FloatArray] = _SCRATCH.__dict__.setdefault("buffers", [])
     size = math.prod(shape)
@@ -466,6 +467,141 @@ class _Program:
                 deepest = max(deepest, target)
                 self.steps.append(_Reduce(node.op, level, target))
         return deepest
+
+
+def _within_turn(angle: FloatArray, start: FloatArray, width: FloatArray) -> NDArray[np.bool_]:
+    """``np.mod(angle - start, 2 pi) <= width``: ``(L, N)`` for ``(L, 1)`` angles and ``(N,)``
+    starts and widths: whether each angle lies in each interval, counter-clockwise from
+    its start.
+
+    Bit for bit what :func:`numpy.mod` gives (``fmod``, plus the turn where that is
+    negative) when every difference lies within ``(-2 pi, 4 pi)`` (angles and starts
+    within a turn or two, as a sweep's), where ``fmod`` subtracts at most one turn,
+    exactly; a few comparisons instead of ``np.mod``'s division (several times as slow).
+    """
+    turn = 2.0 * np.pi
+    difference = angle - start[None, :]
+    # Rounding is monotone: the extreme differences are those of the extreme inputs.
+    if not (start.size and float(angle.min()) - float(start.max()) > -turn
+            and float(angle.max()) - float(start.min()) < 2.0 * turn):
+        return np.mod(difference, turn) <= width[None, :]
+    within: NDArray[np.bool_] = (difference >= 0.0) & (difference <= width)
+    within |= (difference >= turn) & (difference - turn <= width)
+    within |= (difference < 0.0) & (difference + turn <= width)
+    return within
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """Step of a :class:`_RowProgram`: ``buffers[buffer] = op`` over the piece rows ``start:stop``."""
+
+    op: str
+    start: int
+    stop: int
+    buffer: int
+
+
+@dataclass(frozen=True)
+class _Groups:
+    """Step of a :class:`_RowProgram`: ``buffers[buffer] = op`` over ``groups`` groups of
+    ``size`` consecutive piece rows from ``start``, each reduced by ``inner`` first (into
+    ``buffers[buffer + 1]``)."""
+
+    op: str
+    inner: str
+    start: int
+    groups: int
+    size: int
+    buffer: int
+
+
+def _consecutive_runs(pieces: list[int]) -> list[tuple[int, int]]:
+    """``(start, stop)`` of each run of consecutive piece indices in ``pieces``, ascending."""
+    runs: list[tuple[int, int]] = []
+    for piece in sorted(pieces):
+        if runs and runs[-1][1] == piece:
+            runs[-1] = (runs[-1][0], piece + 1)
+        else:
+            runs.append((piece, piece + 1))
+    return runs
+
+
+class _RowProgram:
+    """A tree compiled to evaluate on a ``(L, points)`` array of piece values, one row a piece.
+
+    The leaf children of a node are reduced a run of consecutive pieces at a time (one
+    ``reduce`` over a slice of rows, no copy), and a node over equal groups of consecutive
+    pieces (a fitted tree: a MIN of MAX groups) in two reductions over its rows seen as
+    ``(groups, size, points)``, instead of a call or two per piece. MIN and MAX pick one
+    of their inputs, so any order of reduction gives the same numbers as
+    :func:`_evaluate` wherever there is no NaN.
+    """
+
+    def __init__(self, root: Node) -> None:
+        self.steps: list[_Rows | _Groups | _Reduce] = []
+        self.n_buffers = self._compile(root, 0) + 1
+
+    def _compile(self, node: Node, level: int) -> int:
+        """Append the steps that evaluate ``node`` into buffer ``level``; return the deepest buffer used."""
+        if isinstance(node, int):
+            self.steps.append(_Rows("min", node, node + 1, level))
+            return level
+        groups = self._groups(node, level)
+        if groups is not None:
+            self.steps.append(groups)
+            return level + 1
+        parts: list[Node | tuple[int, int]] = [
+            *_consecutive_runs([c for c in node.children if isinstance(c, int)]),
+            *(c for c in node.children if not isinstance(c, int))]
+        deepest = level
+        for index, part in enumerate(parts):
+            target = level if index == 0 else level + 1
+            if isinstance(part, tuple):
+                self.steps.append(_Rows(node.op, part[0], part[1], target))
+            else:
+                deepest = max(deepest, self._compile(part, target))
+            if index:
+                deepest = max(deepest, target)
+                self.steps.append(_Reduce(node.op, level, target))
+        return deepest
+
+    @staticmethod
+    def _groups(node: Op, level: int) -> _Groups | None:
+        """``node`` as one :class:`_Groups` step, when its children are nodes of one op,
+        each over a run of consecutive pieces, the runs equally long and together one run."""
+        inner: set[str] = set()
+        runs: list[tuple[int, int]] = []
+        for child in node.children:
+            if not isinstance(child, Op) or not all(isinstance(piece, int) for piece in child.children):
+                return None
+            inner.add(child.op)
+            runs.extend(_consecutive_runs([piece for piece in child.children if isinstance(piece, int)]))
+        if len(runs) < 2 or len(runs) != len(node.children) or len(inner) != 1:
+            return None
+        runs.sort()
+        size = runs[0][1] - runs[0][0]
+        if any(stop - start != size for start, stop in runs) or any(
+                following[0] != previous[1] for previous, following in zip(runs, runs[1:])):
+            return None
+        return _Groups(node.op, inner.pop(), runs[0][0], len(runs), size, level)
+
+    def run(self, values: FloatArray, buffers: list[FloatArray]) -> FloatArray:
+        """The tree on ``values`` (``(L, n)``), in ``buffers`` (at least ``n_buffers`` flat
+        arrays of at least ``L * n`` elements); returns a view of ``buffers[0]``."""
+        n = values.shape[1]
+        outputs = [buffer[:n] for buffer in buffers]
+        for step in self.steps:
+            ufunc = np.minimum if step.op == "min" else np.maximum
+            if isinstance(step, _Rows):
+                ufunc.reduce(values[step.start:step.stop], axis=0, out=outputs[step.buffer])
+            elif isinstance(step, _Groups):
+                rows = values[step.start:step.start + step.groups * step.size].reshape(step.groups, step.size, n)
+                inner = buffers[step.buffer + 1][:step.groups * n].reshape(step.groups, n)
+                (np.minimum if step.inner == "min" else np.maximum).reduce(rows, axis=1, out=inner)
+                ufunc.reduce(inner, axis=0, out=outputs[step.buffer])
+            else:
+                ufunc(outputs[step.target], outputs[step.source], out=outputs[step.target])
+        return outputs[0]
 
 
 class InverseTree(_PieceTree):
@@ -565,39 +701,73 @@ class InverseTree(_PieceTree):
         k = len(self._names[self.basis]) - 3
         W = self.coefficients
         # u: least angle part over each interval, plus m's term and the offset: (L, N).
+        u = self._least_angle_part(lo, hi) + (W[:, k + 1] * m + W[:, k + 2])[:, None]
+        n_pieces, n_angles = u.shape
+        n_boxes = max(h_edges.size - 1, 0)
+        least = np.empty((n_boxes, n_angles))
+        if least.size == 0:
+            return least
+        # r and r^2 - h^2 at every height edge once: a box's least value lies at one of its
+        # two edges (concave in h when |b| <= 1), shared with its neighbour; b h and h^2 once.
+        height_part = W[:, k][:, None] * h_edges[None, :]
+        edge_squares = (h_edges * h_edges)[None, :, None]
+        curved = np.flatnonzero(np.abs(W[:, k]) > 1.0)
+        program = self._row_program()
+        # Blocks of angles, so that the (L, heights, angles) values stay in cache and in
+        # reused buffers: made whole, they were a few MB a call, which the C allocator
+        # handed back to the kernel and took back page by page each time (half the time
+        # of a navigation map).
+        step = max(1, INVERSE_BLOCK // (n_pieces * h_edges.size))
+        block = min(step, n_angles)
+        edge_values, box, *levels = _scratch_buffers(
+            2 + program.n_buffers, (n_pieces, h_edges.size, block))
+        for first in range(0, n_angles, step):
+            n = min(step, n_angles - first)
+            angles = slice(first, first + n)
+            q = edge_values.reshape(-1)[:n_pieces * h_edges.size * n].reshape(n_pieces, h_edges.size, n)
+            np.add(u[:, None, angles], height_part[:, :, None], out=q)
+            # Where r < 0 the level is reached before the sensor: nothing is free. r is
+            # clamped to 0 there, which gives -h^2 <= 0 where the exact bound says -1: the
+            # same once the tree's result is clamped to 0 below (max(., 0) is monotone, so
+            # it commutes with MIN and MAX), and fmax turns a NaN (inf - inf) into 0 too.
+            np.fmax(q, 0.0, out=q)
+            np.multiply(q, q, out=q)
+            np.subtract(q, edge_squares, out=q)
+            boxes = box.reshape(-1)[:n_pieces * n_boxes * n].reshape(n_pieces, n_boxes, n)
+            np.minimum(q[:, :-1], q[:, 1:], out=boxes)
+            if curved.size:
+                # (b^2 - 1) h^2 + 2 u b h + u^2 is convex only when |b| > 1: then its vertex counts too.
+                bc = W[curved, k][:, None, None]
+                h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
+                uc = u[curved, angles][:, None, :]
+                vertex = np.clip(-uc * bc / (bc * bc - 1.0), h0, h1)
+                rv = uc + bc * vertex
+                boxes[curved] = np.minimum(boxes[curved], np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
+            tree = program.run(boxes.reshape(n_pieces, n_boxes * n), [level.reshape(-1) for level in levels])
+            least[:, angles] = tree.reshape(n_boxes, n)
+        # sqrt(max(., 0)) is increasing, so it commutes with the tree: taken once, at the end.
+        return np.sqrt(np.maximum(least, 0.0, out=least), out=least)
+
+    def _least_angle_part(self, lo: FloatArray, hi: FloatArray) -> FloatArray:
+        """``(L, N)``: each piece's least angle terms over the intervals ``[lo, hi]``."""
+        W = self.coefficients
         if self.basis == "linear":
             a = W[:, :1]
-            angle_min = np.minimum(a * lo[None, :], a * hi[None, :])
-        else:
-            a1, a2 = W[:, :1], W[:, 1:2]
-            ends = np.minimum(a1 * np.cos(lo) + a2 * np.sin(lo), a1 * np.cos(hi) + a2 * np.sin(hi))
-            # a1 cos + a2 sin = R cos(alpha - phi) reaches -R at alpha = phi + pi.
-            radius = np.hypot(a1, a2)
-            trough = np.arctan2(a2, a1) + np.pi
-            inside = np.mod(trough - lo[None, :], 2.0 * np.pi) <= (hi - lo)[None, :]
-            angle_min = np.where(inside, -radius, ends)
-        u = angle_min + (W[:, k + 1] * m + W[:, k + 2])[:, None]
-        b = W[:, k][:, None, None]
-        # r and r^2 - h^2 at every height edge once: a box's least value lies at one of its
-        # two edges (concave in h when |b| <= 1), shared with its neighbour.
-        edges = h_edges[None, :, None]
-        r = u[:, None, :] + b * edges
-        q = r * r - edges * edges
-        q = np.where(r >= 0, q, -1.0)  # level reached before the sensor: nothing free
-        box = np.minimum(q[:, :-1], q[:, 1:])
-        # (b^2 - 1) h^2 + 2 u b h + u^2 is convex only when |b| > 1: then its vertex counts too.
-        curved = np.flatnonzero(np.abs(W[:, k]) > 1.0)
-        if curved.size:
-            bc = b[curved]
-            h0, h1 = h_edges[:-1][None, :, None], h_edges[1:][None, :, None]
-            uc = u[curved][:, None, :]
-            vertex = np.clip(-uc * bc / (bc * bc - 1.0), h0, h1)
-            rv = uc + bc * vertex
-            box[curved] = np.minimum(box[curved], np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
-        L, H, N = box.shape
-        # sqrt(max(., 0)) is increasing, so it commutes with the tree: taken once, at the end.
-        least = _evaluate(self.root, box.reshape(L, H * N)).reshape(H, N)
-        return np.sqrt(np.maximum(least, 0.0))
+            return np.minimum(a * lo[None, :], a * hi[None, :])
+        a1, a2 = W[:, :1], W[:, 1:2]
+        least = np.minimum(a1 * np.cos(lo) + a2 * np.sin(lo), a1 * np.cos(hi) + a2 * np.sin(hi))
+        # a1 cos + a2 sin = R cos(alpha - phi) reaches -R at alpha = phi + pi.
+        radius = np.hypot(a1, a2)
+        trough = np.arctan2(a2, a1) + np.pi
+        np.copyto(least, -radius, where=_within_turn(trough, lo, hi - lo))
+        return least
+
+    def _row_program(self) -> _RowProgram:
+        """The tree compiled over rows of piece values (built once)."""
+        cache = self.__dict__.setdefault("_programs", {})
+        if "rows" not in cache:
+            cache["rows"] = _RowProgram(self.root)
+        return cache["rows"]
 
     def _angle_part(self, alpha: FloatArray, constant: FloatArray) -> FloatArray:
         """``(L, *alpha.shape)``: each piece's constant plus its angle terms."""

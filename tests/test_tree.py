@@ -169,6 +169,60 @@ def test_the_inverse_in_blocks_and_flattened(monkeypatch, block):
         )
 
 
+def plain_horizontal_bound(inverse: InverseTree, lo, hi, h_edges, m) -> np.ndarray:
+    """Every piece's least ``r^2 - h^2`` over every box at once, then the tree, then the
+    root: the numbers :meth:`InverseTree.horizontal_lower_bound` must give, bit for bit."""
+    k = len(inverse.coefficients[0]) - 3
+    W = inverse.coefficients
+    if inverse.basis == "linear":
+        angle = np.minimum(W[:, :1] * lo, W[:, :1] * hi)
+    else:
+        def trig(alpha):
+            return W[:, :1] * np.cos(alpha) + W[:, 1:2] * np.sin(alpha)
+        inside = np.mod(np.arctan2(W[:, 1:2], W[:, :1]) + np.pi - lo, 2.0 * np.pi) <= hi - lo
+        angle = np.where(inside, -np.hypot(W[:, :1], W[:, 1:2]), np.minimum(trig(lo), trig(hi)))
+    u = (angle + (W[:, k + 1] * m + W[:, k + 2])[:, None])[:, None, :]
+    b, edges = W[:, k][:, None, None], h_edges[None, :, None]
+    r = u + b * edges
+    q = np.where(r >= 0, r * r - edges * edges, -1.0)
+    box = np.minimum(q[:, :-1], q[:, 1:])
+    vertex = np.clip(-u * b / (b * b - 1.0), edges[:, :-1], edges[:, 1:])
+    rv = u + b * vertex
+    curved = np.minimum(box, np.where(rv >= 0, rv * rv - vertex * vertex, -1.0))
+    box = np.where(np.abs(b) > 1.0, curved, box)
+
+    def tree(node):
+        if isinstance(node, int):
+            return box[node]
+        return (np.minimum if node.op == "min" else np.maximum).reduce([tree(c) for c in node.children])
+
+    return np.sqrt(np.maximum(tree(inverse.root), 0.0))
+
+
+@pytest.mark.parametrize("block", [1, 300, 1000, None])  # 1, 3 and 10 angles a block, all
+@pytest.mark.parametrize("basis", ["trig", "linear"])
+def test_the_horizontal_lower_bound_in_blocks_is_every_piece_in_every_box(monkeypatch, block, basis):
+    import occtool.tree
+
+    if block is not None:
+        monkeypatch.setattr(occtool.tree, "INVERSE_BLOCK", block)
+    rng = np.random.default_rng(block or 0)
+    for make in (random_tree, shared_weight_tree):
+        model = make(3, basis)
+        coefficients = model.coefficients.copy()
+        coefficients[::3, -3] = rng.choice([-2.0, -1.0, 1.0, 1.5], size=len(coefficients[::3]))  # |b| >= 1 too
+        inverse = MinMaxTree(basis, coefficients, model.root).inverse()
+        lo = np.sort(rng.uniform(-np.pi, np.pi - 0.2, 50))
+        hi = lo + rng.uniform(0.0, 0.2, 50)
+        h_edges = np.sort(rng.uniform(-1.5, 0.3, 9))
+        for m in (-1.0, 0.6, 2.0):  # levels reached behind the sensor too
+            expected = plain_horizontal_bound(inverse, lo, hi, h_edges, m)
+            got = inverse.horizontal_lower_bound(lo, hi, h_edges, m)
+            assert got.shape == (8, 50)
+            np.testing.assert_array_equal(got, expected)
+    assert inverse.horizontal_lower_bound(lo, hi, h_edges[:1], 0.6).shape == (0, 50)
+
+
 def test_the_inverse_is_the_same_from_several_threads():
     from concurrent.futures import ThreadPoolExecutor
 
@@ -180,3 +234,23 @@ def test_the_inverse_is_the_same_from_several_threads():
     for i, runs in enumerate(results):
         for got in runs:
             np.testing.assert_allclose(got, expected[i % 4], rtol=1e-13, atol=1e-13)
+
+
+TURN_EDGES = [0.0, -0.0, 2 * np.pi, -2 * np.pi, 4 * np.pi, np.pi, -np.pi, 3 * np.pi, 1e-300, -1e-300,
+              np.nextafter(2 * np.pi, 0), np.nextafter(-2 * np.pi, 0), np.nextafter(4 * np.pi, 0), 1e-17, -1e-17]
+
+
+@given(
+    angles=st.lists(st.one_of(st.floats(-8, 8), st.sampled_from(TURN_EDGES)), min_size=1, max_size=6),
+    starts=st.lists(st.tuples(st.one_of(st.floats(-8, 8), st.sampled_from(TURN_EDGES)),
+                              st.one_of(st.floats(-0.1, 7), st.sampled_from(TURN_EDGES[:10]))), min_size=1, max_size=6),
+    shift=st.sampled_from([0.0, 2 * np.pi, -2 * np.pi, 1e-16, -1e-16]),
+)
+def test_an_angle_within_an_interval_is_what_np_mod_says(angles, starts, shift):
+    from occtool.tree import _within_turn
+
+    angle = np.array(angles)[:, None]
+    given_start, width = np.array(starts).T
+    for start in (given_start, angle[:1, 0] + shift, angle[:1, 0] + shift + width[:1]):  # at the ends too
+        expected = np.mod(angle - start[None, :], 2 * np.pi) <= width[None, :len(start)]
+        np.testing.assert_array_equal(_within_turn(angle, start, width[:len(start)]), expected)

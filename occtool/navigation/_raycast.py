@@ -52,9 +52,15 @@ def first_hits(
     key = wrap_angle(angles)  # in [-pi, pi), as the extents (+- 2 pi)
     ray_order = np.argsort(key, kind="stable")
     sorted_key = key[ray_order]
-    edges = np.arange(3 * len(start)) % len(start)
-    lows = np.concatenate([low - 2.0 * np.pi, low, low + 2.0 * np.pi])
-    highs = np.concatenate([high - 2.0 * np.pi, high, high + 2.0 * np.pi])
+    # Each extent turned back and on by a turn too, for the rays past +-pi; only the edges
+    # whose turned extent reaches a ray, in the same order (turned back, as is, turned on),
+    # so the pairs are those of every edge in all three.
+    index = np.arange(len(start))
+    back = high - 2.0 * np.pi >= sorted_key[0]
+    on = low + 2.0 * np.pi <= sorted_key[-1]
+    edges = np.concatenate([index[back], index, index[on]])
+    lows = np.concatenate([low[back] - 2.0 * np.pi, low, low[on] + 2.0 * np.pi])
+    highs = np.concatenate([high[back] - 2.0 * np.pi, high, high[on] + 2.0 * np.pi])
     first = np.searchsorted(sorted_key, lows, side="left")
     pairs = np.maximum(np.searchsorted(sorted_key, highs, side="right") - first, 0)
     # Rays and edges in the same arithmetic as a full (ray x edge) cast, so the same hits.
