@@ -157,17 +157,21 @@ def is_planar_scan(heights: ArrayLike) -> bool:
     return heights.size > 0 and float(heights.max() - heights.min()) <= PLANAR_TOLERANCE
 
 
-def guard_candidates(features: Features, evidence: ArrayLike, robot: Robot, level: float) -> NDArray[np.bool_]:
+def guard_candidates(features: Features, evidence: ArrayLike, robot: Robot, level: float, *,
+                     horizontal: FloatArray | None = None) -> NDArray[np.bool_]:
     """Features that are returns the robot must keep clear of (before the mismatch test).
 
     Evidence at or above ``level``, height within the robot's body band, horizontal
     distance beyond the robot's radius. ``evidence`` is the features' evidence (passed
-    apart so a caller may mask free rays or floor features beforehand).
+    apart so a caller may mask free rays or floor features beforehand); ``horizontal``
+    the features' ``hypot(x, y)``, when the caller has it.
     """
     x, y, z = features.points.T
     low, high = robot.body_band
+    if horizontal is None:
+        horizontal = np.hypot(x, y)
     return (
-        (np.asarray(evidence) >= level) & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
+        (np.asarray(evidence) >= level) & (z >= low) & (z <= high) & (horizontal > robot.radius)
     )
 
 

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features, wrap_angle
+from occtool.features import FeatureGeometry, Features, wrap_angle
 from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.robot import Robot
 
@@ -239,12 +239,15 @@ class SensorModel:
         return self._samples(features, robot, rng)
 
     def _samples(self, features: Features, robot: Robot | None = None, rng: np.random.Generator | None = None,
-                 turn: float | None = None) -> Samples:
+                 turn: float | None = None, geometry: FeatureGeometry | None = None) -> Samples:
         """:meth:`samples`; with ``turn``, pan angles measured from ``turn``
-        (``wrap_angle(alpha - turn)``), turned a feature at a time rather than a sample."""
+        (``wrap_angle(alpha - turn)``), turned a feature at a time rather than a sample;
+        ``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, when a
+        caller holds it already."""
         robot = Robot() if robot is None else robot
         rng = np.random.default_rng(0) if rng is None else rng
-        alpha, h, r = features.polar()
+        geometry = FeatureGeometry.of(features) if geometry is None else geometry
+        alpha, h, r = geometry.polar()
         if turn is not None:
             alpha = wrap_angle(alpha - turn)
         m = features.evidence
@@ -252,7 +255,7 @@ class SensorModel:
         # A feature inside the robot's own body cylinder is the robot itself (a self-hit)
         # or a mismatch: no obstacle can stand there. Two such mismatches a few centimetres
         # apart once made the robot "in collision where it stands" (office, 7k features).
-        on_robot = self.is_on_robot(features, robot)
+        on_robot = self.is_on_robot(features, robot, geometry=geometry)
         free_only = self.is_free_ray(features, robot, on_floor=on_floor) & ~on_robot
         obstacle = ~(on_floor & (self.floor == "drop")) & ~free_only & ~on_robot
         rays = obstacle | free_only
@@ -305,24 +308,30 @@ class SensorModel:
             start += block[0].size
         return Samples(alpha=alpha_out, h=h_out, r=r_out, m=m_out, weight=weight_out, kind=kind_out)
 
-    def is_on_robot(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
-        """Whether features lie inside the robot's body cylinder (radius, floor to top)."""
-        x, y, z = features.points.T
-        return (np.hypot(x, y) < robot.radius) & (z >= robot.floor_h) & (z <= robot.body_band[1])
+    def is_on_robot(self, features: Features, robot: Robot, *,
+                    geometry: FeatureGeometry | None = None) -> NDArray[np.bool_]:
+        """Whether features lie inside the robot's body cylinder (radius, floor to top)
+        (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+        horizontal = (geometry if geometry is not None else FeatureGeometry.of(features)).horizontal
+        z = features.points[:, 2]
+        return (horizontal < robot.radius) & (z >= robot.floor_h) & (z <= robot.body_band[1])
 
     def is_free_ray(self, features: Features, robot: Robot,
                     on_floor: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
         """Features that only say their ray is free: evidence 0, and floor features with
         ``floor="free"``. They give free-space samples and no hit."""
         if on_floor is None:
-            on_floor = self.is_floor(features.height, robot)
+            on_floor = self.is_floor(features.points[:, 2], robot)
         return (features.evidence == 0) | (on_floor & (self.floor == "free"))
 
-    def is_obstacle(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
-        """Features that give hit samples: not free rays, not dropped floor, not self-hits."""
-        on_floor = self.is_floor(features.height, robot)
+    def is_obstacle(self, features: Features, robot: Robot, *,
+                    geometry: FeatureGeometry | None = None) -> NDArray[np.bool_]:
+        """Features that give hit samples: not free rays, not dropped floor, not self-hits
+        (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+        on_floor = self.is_floor(features.points[:, 2], robot)
         dropped = on_floor & (self.floor == "drop")
-        return ~dropped & ~self.is_free_ray(features, robot, on_floor=on_floor) & ~self.is_on_robot(features, robot)
+        return ~dropped & ~self.is_free_ray(features, robot, on_floor=on_floor) & ~self.is_on_robot(
+            features, robot, geometry=geometry)
 
     def is_floor(self, h: ArrayLike, robot: Robot) -> NDArray[np.bool_]:
         """Whether features at sensor-frame heights ``h`` lie below the ground clearance."""

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
-from occtool.features import Features
+from occtool.features import FeatureGeometry, Features
 from occtool.fit._construction import ProgressCallback, _Fitter
 from occtool.fit._focus import focused_with_frontier
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
@@ -293,35 +293,43 @@ class OccupancyRegressor:
         rng = np.random.default_rng(self.seed)
         if len(features) == 0:
             raise InputError("no features to fit")
+        # Pan angles and distances of the features, computed once for the screen, the guard,
+        # the samples and the range profile.
+        geometry = FeatureGeometry.of(features)
         screen = screen_features(features, sensor, robot, basis=self.basis, focus=self.focus,
-                                 focus_range=self.focus_range)
-        usable = features.select(~screen.mismatch) if screen.mismatch.any() else features
+                                 focus_range=self.focus_range, geometry=geometry)
+        keep: NDArray[np.bool_] | NDArray[np.intp] | None = ~screen.mismatch if screen.mismatch.any() else None
         guard = None
         if self.guard:
             mask, scale, spacing = guarded_mask(features, screen, robot, level=self.level, focus=self.focus,
-                                                focus_range=self.focus_range)
-            points = features.points[mask]
-            guard = build_guard(np.arctan2(points[:, 1], points[:, 0]),
-                                np.hypot(points[:, 0], points[:, 1]) * scale[mask], self.level,
+                                                focus_range=self.focus_range, geometry=geometry)
+            guard = build_guard(geometry.alpha[mask], geometry.horizontal[mask] * scale[mask], self.level,
                                 reach=SPREAD_SHARE * spacing)
         # The line-of-sight index served the screen and the guard; the samples need none of
         # it (at 10M features it holds 250 MB).
         screen = replace(screen, sight=None)
         origin = screen.origin
-        if len(usable) > FIT_FEATURES:
+        usable_count = len(features) if keep is None else int(np.count_nonzero(keep))
+        if usable_count > FIT_FEATURES:
             # The pieces are placed from an even subsample: a few dozen linear pieces need no
             # more, and the samples of every feature would not fit in memory (10M features:
             # 50M samples, 5 GB). The screen and the return guard above saw every feature.
-            usable = usable.select(np.arange(0, len(usable), -(-len(usable) // FIT_FEATURES)))
+            subsample = np.arange(0, usable_count, -(-usable_count // FIT_FEATURES))
+            keep = subsample if keep is None else np.flatnonzero(keep)[subsample]
+        if keep is None:
+            usable = features
+        else:
+            usable = features.select(keep)
+            geometry = geometry.select(keep, usable.points)
         # The samples with their pan angles measured from the origin, as the fit bins them.
-        turned = sensor._samples(usable, robot, rng, turn=origin)
+        turned = sensor._samples(usable, robot, rng, turn=origin, geometry=geometry)
         if turned.count("hit") + turned.count("near") + turned.count("floor") == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
 
         if self.focus:
             turned = focused_with_frontier(turned, robot, self.focus_range, planar=screen.planar,
                                            floor_is_obstacle=sensor.floor == "obstacle")
-        fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin),
+        fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin, geometry),
                          floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
                          progress=progress)
         tree, loss_history = fitter.run()

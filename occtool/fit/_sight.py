@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.features import Features
+from occtool.features import FeatureGeometry, Features
 from occtool.fit._profile import FOCUS_WINDOW, FOCUS_WINDOW_ABS, angle_bins, group_by_bin
 
 FloatArray = NDArray[np.float64]
@@ -49,9 +49,10 @@ class SightIndex:
     tested: NDArray[np.intp]
 
 
-def sight_index(features: Features, origin: float = 0.0) -> SightIndex:
-    """The :class:`SightIndex` of ``features`` with the bins starting at ``origin``."""
-    alpha, h, r = features.polar()
+def sight_index(features: Features, origin: float = 0.0, *, geometry: FeatureGeometry | None = None) -> SightIndex:
+    """The :class:`SightIndex` of ``features`` with the bins starting at ``origin``
+    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+    alpha, h, r = (geometry if geometry is not None else FeatureGeometry.of(features)).polar()
     if r.size == 0:
         empty = np.zeros(0)
         nothing = np.zeros(0, dtype=np.intp)
