@@ -10,6 +10,7 @@ from occtool.features import wrap_angle
 from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
 from occtool.fit._focus import focused_with_frontier
 from occtool.fit._profile import order_within_bins
+from occtool.fit._sight import SortedRays
 from occtool.guard import Support
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples
@@ -42,6 +43,33 @@ def test_grouping_within_bins_is_a_stable_two_key_sort(per_bin):
     np.testing.assert_array_equal(grouped, values[np.lexsort((values, bins))])
     np.testing.assert_array_equal(bounds, same_bounds)
     np.testing.assert_array_equal(np.diff(bounds), np.bincount(bins, minlength=12))
+
+
+@pytest.mark.parametrize("layout", ["spread", "ties", "bins", "crowded"])
+def test_the_bucket_search_of_sorted_rays_is_searchsorted(layout):
+    rng = np.random.default_rng(len(layout))
+    if layout == "spread":
+        keys = rng.normal(size=3000)
+    elif layout == "ties":
+        keys = rng.integers(0, 1500, 3000).astype(float)
+    elif layout == "bins":  # as the sight index's: bin * 4 + elevation
+        keys = 4.0 * rng.integers(0, 120, 3000) + rng.uniform(-1.5, 1.5, 3000)
+    else:  # one bucket holds too many keys: a binary search
+        keys = np.concatenate([rng.uniform(0.0, 1.0, 100), np.full(500, 0.5)])
+    keys = np.sort(keys)
+    rays = SortedRays.build(keys, keys, keys)
+    assert (rays.first is None) == (layout == "crowded")
+    queries = np.concatenate([rng.choice(keys, 2000), np.nextafter(rng.choice(keys, 2000), np.inf),
+                              np.nextafter(rng.choice(keys, 2000), -np.inf),
+                              rng.uniform(keys[0] - 1.0, keys[-1] + 1.0, 2000)])
+    for side in ("left", "right"):
+        for asked in (queries, np.append(queries, [-np.inf, np.inf])):  # the table, and a binary search
+            np.testing.assert_array_equal(rays.search(asked, side), np.searchsorted(keys, asked, side=side))
+    owner, position = rays.pairs(queries - 0.01, queries + 0.01)
+    expected = [(i, j) for i, q in enumerate(queries[:300])
+                for j in np.flatnonzero((keys >= q - 0.01) & (keys <= q + 0.01))]
+    chosen = owner < 300
+    assert list(zip(owner[chosen].tolist(), position[chosen].tolist())) == expected
 
 
 def _samples(n: int, seed: int) -> Samples:
