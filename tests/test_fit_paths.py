@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 import occtool.fit._focus as focus_module
-from occtool.features import wrap_angle
+from occtool.features import Features, wrap_angle
 from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
-from occtool.fit._focus import focused_with_frontier
+from occtool.fit._focus import focused_blocks, focused_with_frontier
 from occtool.fit._profile import order_within_bins
 from occtool.fit._sight import SortedRays
 from occtool.guard import Support
 from occtool.robot import Robot
-from occtool.sensor import SAMPLE_KINDS, Samples
+from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
 from occtool.tree import EVALUATION_CHUNK, MinMaxTree, Op
 
 ROBOT = Robot()
@@ -94,6 +94,33 @@ def test_pruned_frontier_and_fused_focus_equal_the_plain_ones(monkeypatch, plana
         np.testing.assert_array_equal(getattr(pruned, name), getattr(plain, name))
         np.testing.assert_array_equal(getattr(fused, name), getattr(joined, name))
         assert getattr(fused, name).dtype == getattr(joined, name).dtype
+
+
+@pytest.mark.parametrize("floor", ["free", "drop", "obstacle"])
+def test_focused_sample_blocks_equal_the_focused_samples(monkeypatch, floor):
+    # Blocks of hits, near, robot, footprint and background samples, some free rays
+    # (evidence 0) and floor features: only the kept samples are written, the same ones
+    # as the plain focus and frontier of all samples keep and add (the blocks' frontier pruned).
+    rng = np.random.default_rng(7)
+    n = 30_000
+    a = rng.uniform(-np.pi, np.pi, n)
+    z = rng.uniform(-1.1, 0.4, n)
+    d = np.where(z > 0.0, rng.uniform(0.8, 1.0, n), rng.uniform(1.0, 5.0, n))  # nearer above the body band
+    points = np.column_stack([d * np.cos(a), d * np.sin(a), z])
+    features = Features(points, np.where(rng.random(n) < 0.1, 0.0, rng.uniform(0.3, 1.0, n)))
+    sensor = SensorModel(floor=floor, background_samples=2000)
+    blocks = sensor._sample_blocks(features, ROBOT, np.random.default_rng(1), turn=0.4)
+    whole = sensor._samples(features, ROBOT, np.random.default_rng(1), turn=0.4)
+    for planar in (False, True):
+        monkeypatch.setattr(focus_module, "FRONTIER_PRUNE", 1000)
+        fused = focused_blocks(blocks, ROBOT, 3.0, planar=planar, floor_is_obstacle=floor == "obstacle")
+        monkeypatch.setattr(focus_module, "FRONTIER_PRUNE", 10**12)
+        plain = join_samples(focus_samples(whole, ROBOT, 3.0, floor_is_obstacle=floor == "obstacle"),
+                             frontier_samples(whole, ROBOT, 3.0, planar=planar))
+        assert 0 < len(fused) < len(whole)
+        for name in COLUMNS:
+            np.testing.assert_array_equal(getattr(fused, name), getattr(plain, name))
+            assert getattr(fused, name).dtype == getattr(plain, name).dtype
 
 
 def test_one_support_query_serves_the_seen_from_above_test():

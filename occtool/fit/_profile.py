@@ -73,7 +73,15 @@ def first_obstacle_distance(alpha: FloatArray, distance: FloatArray, n_bins: int
     keeps a surface seen at a grazing angle (a table top, hits spread over its depth) at
     its front edge. ``inf`` where there is none.
     """
-    distance, bounds = sorted_within_bins(angle_bins(alpha, n_bins), distance, n_bins)
+    return first_obstacle_distance_in_bins(angle_bins(alpha, n_bins), distance, n_bins, support, front=front, cap=cap)
+
+
+def first_obstacle_distance_in_bins(bins: NDArray[np.intp], distance: FloatArray, n_bins: int,
+                                    support: int = FOCUS_SUPPORT, *, front: int = 0,
+                                    cap: float = np.inf) -> FloatArray:
+    """:func:`first_obstacle_distance` of hits already in their bins (``angle_bins(alpha, n_bins)``).
+    The hits' order does not matter: they are sorted by bin and distance first."""
+    distance, bounds = sorted_within_bins(bins, distance, n_bins)
     bins = np.repeat(np.arange(n_bins), np.diff(bounds))
     # One sortable key: bin number, then distance (distances are far below 1e6 m).
     key = bins * 1e6 + distance

@@ -23,12 +23,12 @@ from numpy.typing import ArrayLike, NDArray
 from occtool.errors import InputError, NotFittedError
 from occtool.features import FeatureGeometry, Features
 from occtool.fit._construction import ProgressCallback, _Fitter
-from occtool.fit._focus import focused_with_frontier
+from occtool.fit._focus import focused_blocks
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
 from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard
 from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT
 from occtool.robot import Robot
-from occtool.sensor import SAMPLE_KINDS, SensorModel
+from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
 from occtool.tree import BASES, InverseTree, MinMaxTree, Op
 
 log = logging.getLogger("occtool.fit")
@@ -322,13 +322,16 @@ class OccupancyRegressor:
             usable = features.select(keep)
             geometry = geometry.select(keep, usable.points)
         # The samples with their pan angles measured from the origin, as the fit bins them.
-        turned = sensor._samples(usable, robot, rng, turn=origin, geometry=geometry)
-        if turned.count("hit") + turned.count("near") + turned.count("floor") == 0:
+        blocks = sensor._sample_blocks(usable, robot, rng, turn=origin, geometry=geometry)
+        if sum(block.count(SAMPLE_KINDS[kind]) for block in blocks for kind in ("hit", "near", "floor")) == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
-
         if self.focus:
-            turned = focused_with_frontier(turned, robot, self.focus_range, planar=screen.planar,
-                                           floor_is_obstacle=sensor.floor == "obstacle")
+            # Only the samples the focus keeps are written (focused_with_frontier, in one pass).
+            turned = focused_blocks(blocks, robot, self.focus_range, planar=screen.planar,
+                                    floor_is_obstacle=sensor.floor == "obstacle")
+        else:
+            turned = Samples.of_blocks(blocks)
+        del blocks
         fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin, geometry),
                          floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
                          progress=progress)
