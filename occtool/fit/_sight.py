@@ -68,8 +68,10 @@ class SortedRays:
         scale = n_buckets / span if span > 0 and np.isfinite(span) else 0.0
         rays = cls(keys, distance, h, base, scale, None)
         if scale > 0:
-            first = np.searchsorted(rays._buckets(keys), np.arange(n_buckets + 3), side="left")
-            if int(np.diff(first).max()) <= SEARCH_CROWD:
+            crowd = np.bincount(rays._buckets(keys), minlength=n_buckets + 2)
+            if int(crowd.max()) <= SEARCH_CROWD:
+                first = np.zeros(n_buckets + 3, dtype=np.intp)
+                np.cumsum(crowd, out=first[1:])
                 rays = cls(keys, distance, h, base, scale, first)
         return rays
 
@@ -155,8 +157,11 @@ def sight_index(features: Features, origin: float = 0.0, *, geometry: FeatureGeo
     order = np.argsort(elevation_key, kind="stable")
     by_elevation = SortedRays.build(elevation_key[order], d_ray[ahead][order], z_ray[ahead][order])
     lane = 2.0 * float(distance.max()) + 1.0
-    order = np.lexsort((d_ray, ray_bin))
-    by_distance = SortedRays.build(ray_bin[order] * lane + d_ray[order], d_ray[order], z_ray[order])
+    # Any order that sorts the keys finds the same rays in a run (a two-key lexsort took
+    # a millisecond at 10k features).
+    distance_key = ray_bin * lane + d_ray
+    order = np.argsort(distance_key, kind="stable")
+    by_distance = SortedRays.build(distance_key[order], d_ray[order], z_ray[order])
     return SightIndex(distance, h, bins, lane, by_elevation, by_distance, tested)
 
 
