@@ -217,6 +217,14 @@ class FeatureGeometry:
         """``(alpha, h, r)``, as :meth:`Features.polar`."""
         return self.alpha, self.h, self.r
 
+    def turned(self, origin: float) -> FloatArray:
+        """Pan angles measured from ``origin``, ``wrap_angle(alpha - origin)`` (the last
+        origin's kept: the samples and the range profile both read them)."""
+        cached = self.__dict__.get("_turned")
+        if cached is None or cached[0] != origin:
+            cached = self.__dict__["_turned"] = (origin, wrap_angle(self.alpha - origin))
+        return cached[1]
+
     def select(self, index: ArrayLike, points: FloatArray) -> FeatureGeometry:
         """The geometry of the features ``points`` selected by ``index`` from these: the
         values computed already are selected, not computed again."""

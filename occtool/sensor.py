@@ -301,7 +301,7 @@ class SensorModel:
         geometry = FeatureGeometry.of(features) if geometry is None else geometry
         alpha, h, r = geometry.polar()
         if turn is not None:
-            alpha = wrap_angle(alpha - turn)
+            alpha = geometry.turned(turn)
         m = features.evidence
         on_floor = self.is_floor(h, robot)
         # A feature inside the robot's own body cylinder is the robot itself (a self-hit)

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool import guard as guard_module
-from occtool.features import FeatureGeometry, Features, wrap_angle
+from occtool.features import FeatureGeometry, Features
 from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction, order_within_bins
 from occtool.fit._sight import SightIndex, contradicted_features, sight_index
 from occtool.guard import GUARD_BINS, Support, guard_candidates, is_planar_scan, ray_spacing, support_count
@@ -191,4 +191,4 @@ def profile_returns(features: Features, sensor: SensorModel, robot: Robot,
         low = -np.inf
     z = features.points[:, 2]
     chosen = sensor.is_obstacle(features, robot, geometry=geometry) & (z >= low) & (z <= high)
-    return wrap_angle(geometry.alpha[chosen] - origin), geometry.horizontal[chosen]
+    return geometry.turned(origin)[chosen], geometry.horizontal[chosen]
