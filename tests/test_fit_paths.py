@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 import occtool.fit._focus as focus_module
+import occtool.fit._profile as profile_module
 from occtool.features import Features, wrap_angle
 from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
 from occtool.fit._focus import focused_blocks, focused_with_frontier
-from occtool.fit._profile import order_within_bins
+from occtool.fit._profile import first_obstacle_distance_in_bins, order_within_bins
 from occtool.fit._sight import SortedRays
 from occtool.guard import Support
 from occtool.robot import Robot
@@ -70,6 +71,36 @@ def test_the_bucket_search_of_sorted_rays_is_searchsorted(layout):
                 for j in np.flatnonzero((keys >= q - 0.01) & (keys <= q + 0.01))]
     chosen = owner < 300
     assert list(zip(owner[chosen].tolist(), position[chosen].tolist())) == expected
+
+
+def test_first_obstacles_from_each_bins_nearest_hits_equal_the_full_sort(monkeypatch):
+    # Few hits a bin tried first (one to 16), so that windows reach past them and the
+    # nearest are widened again and again; distances on grids (ties, windows ending
+    # exactly on a hit), at the sensor, and surfaces behind sparse mismatches.
+    rng = np.random.default_rng(0)
+    for trial in range(1500):
+        n_bins = int(rng.integers(1, 8))
+        n = int(rng.integers(1, 600))
+        bins = rng.integers(0, n_bins, n)
+        layout = trial % 5
+        if layout == 0:
+            distance = rng.uniform(0.0, 5.0, n)
+        elif layout == 1:
+            distance = np.round(rng.uniform(0.0, 5.0, n) / 0.05) * 0.05
+        elif layout == 2:
+            distance = np.round(rng.uniform(0.0, 3.0, n) * 64) / 64
+        elif layout == 3:
+            distance = np.abs(rng.uniform(0.2, 4.0, n_bins)[bins] + np.round(rng.normal(0.0, 0.03, n), 3))
+        else:
+            distance = np.where(rng.random(n) < 0.1, 0.0, np.round(rng.exponential(1.0, n), 2))
+        support = int(rng.choice([1, 1, 2, 3, 6, 20, 100]))
+        front = int(rng.choice([0, 1, 3, 10, 50, 200]))
+        cap = float(rng.choice([np.inf, 1.0, 1.03, 0.5]))
+        monkeypatch.setattr(profile_module, "NEAREST_FIRST", 10**9)
+        full = first_obstacle_distance_in_bins(bins, distance, n_bins, support, front=front, cap=cap)
+        monkeypatch.setattr(profile_module, "NEAREST_FIRST", int(rng.choice([1, 2, 4, 8, 16])))
+        nearest = first_obstacle_distance_in_bins(bins, distance, n_bins, support, front=front, cap=cap)
+        np.testing.assert_array_equal(nearest, full)
 
 
 def _samples(n: int, seed: int) -> Samples:
