@@ -182,6 +182,27 @@ def test_chunked_evaluation_equals_evaluation_a_chunk_at_a_time():
     np.testing.assert_array_equal(tree.active_piece(alpha, h, r), np.concatenate(active))
 
 
+def test_a_run_of_pieces_reduced_at_once_equals_their_minimum_one_by_one():
+    # min(0, 1, 2, 3) over consecutive rows takes one reduction; min(min(0), 1, 2, 3) the
+    # pairwise path. Identical and zero pieces make ties and signed zeros: the same bits.
+    rng = np.random.default_rng(6)
+    W = rng.normal(size=(12, 5))
+    W[:, 3] = np.abs(W[:, 3]) + 0.1
+    W[5] = W[4]
+    W[8] = [0.0, 0.0, 0.0, 1.0, -0.0]
+    W[9] = [-0.0, 0.0, -0.0, 1.0, 0.0]
+    groups = [(0, 1, 2, 3), (4, 5, 6, 7), (8, 9, 10, 11)]
+    at_once = MinMaxTree("trig", W, Op("max", tuple(Op("min", g) for g in groups)))
+    one_by_one = MinMaxTree("trig", W, Op("max", tuple(Op("min", (Op("min", (g[0],)), *g[1:])) for g in groups)))
+    n = 2 * EVALUATION_CHUNK + 5
+    alpha, h = rng.uniform(-np.pi, np.pi, n), rng.uniform(-1.0, 0.0, n)
+    r = np.where(rng.random(n) < 0.3, 0.0, rng.uniform(0.0, 4.0, n))
+    for args in ((alpha, h, r), (alpha[:100], h[:100], r[:100])):
+        fast, plain = at_once.predict(*args), one_by_one.predict(*args)
+        np.testing.assert_array_equal(fast, plain)
+        np.testing.assert_array_equal(np.signbit(fast), np.signbit(plain))
+
+
 def test_a_node_of_one_child_first_under_another_leaves_the_pieces_alone():
     # max(min(p0), p1, p2): min(p0) is p0's own row of values, which the max must not reduce into.
     W = np.array([[0.0, 0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 2.0, -1.0], [0.0, 0.0, 1.0, 1.0, 0.0]])
