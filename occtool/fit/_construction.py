@@ -219,7 +219,8 @@ class _Fitter:
     def irls_weights(self, residual: FloatArray, weights: FloatArray, hit: NDArray[np.bool_]) -> FloatArray:
         """Weights of one reweighted least-squares step: ``w min(1, delta/|res|)``, times
         ``safety`` where a hit is under-predicted."""
-        weights = np.where(hit & (residual < 0), weights * self.p.safety, weights)
+        if self.p.safety != 1.0:  # (times 1.0 the weights are themselves, bit for bit)
+            weights = np.where(hit & (residual < 0), weights * self.p.safety, weights)
         if not np.isfinite(self.delta):
             return weights
         a = np.abs(residual)
@@ -305,7 +306,6 @@ class _Fitter:
         profile = self.range_profile(n_bins)
         segments = self.initial_groups(n_groups, profile)
         width = 2.0 * np.pi / n_bins
-        sample_bin = angle_bins(self.samples.alpha, n_bins)
 
         pieces: list[FloatArray] = []
         members: list[list[int]] = []
@@ -319,7 +319,7 @@ class _Fitter:
 
         for g, (first, end) in enumerate(segments):
             group: list[int] = []
-            centres = self.profile_centres(profile, first, end, centres_per_group[g], sample_bin)
+            centres = self.profile_centres(profile, first, end, centres_per_group[g])
             for piece in centres:
                 group.append(len(pieces))
                 pieces.append(piece)
@@ -339,8 +339,7 @@ class _Fitter:
         self.progress_offset = len(segments)
         return self.alternate(W, members)
 
-    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int,
-                        sample_bin: NDArray[np.intp]) -> list[FloatArray]:
+    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int) -> list[FloatArray]:
         """Centre pieces whose level crossing lies just in front of the segment's first obstacles.
 
         In range terms a piece crosses ``level`` at ``r* = p0 + p_angle . angle_terms + p_h h``.
@@ -392,7 +391,7 @@ class _Fitter:
             rows[:, column] = np.repeat(values, PROFILE_HEIGHTS)
         rows[:, -1] = H_rows
 
-        c = self.crossing_slope(self.segment_ray_samples(first, end, sample_bin, n_bins), _median(D_bins))
+        c = self.crossing_slope(self.segment_ray_samples(first, end, n_bins), _median(D_bins))
         # Half the pan-weight budget is left to the side pieces that switch the group off.
         bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
         bound_h = self.p.b_max / c
@@ -471,7 +470,7 @@ class _Fitter:
             centres.append(self.project(piece))
         return centres
 
-    def segment_ray_samples(self, first: int, end: int, sample_bin: NDArray[np.intp], n_bins: int) -> NDArray[np.intp]:
+    def segment_ray_samples(self, first: int, end: int, n_bins: int) -> NDArray[np.intp]:
         """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
 
         Only the samples on rays near their feature say how sharp a crossing is; the robot
@@ -481,7 +480,7 @@ class _Fitter:
         """
         if self._ray_groups is None or self._ray_groups[1].size != n_bins + 1:
             rays = np.flatnonzero(self.on_rays)
-            order, bounds = group_by_bin(sample_bin[rays], n_bins)
+            order, bounds = group_by_bin(angle_bins(self.samples.alpha[rays], n_bins), n_bins)
             self._ray_groups = (rays[order], bounds)
         grouped, bounds = self._ray_groups
         start, length = first % n_bins, end - first
@@ -498,14 +497,15 @@ class _Fitter:
         r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
         x = s.r[rows] - r_star
         y = s.m[rows] - self.p.level
-        w = self.w[rows]
+        w = base = self.w[rows]
+        hit = self.hit[rows]
         c = 1.0
         for _ in range(4):
             denominator = float(np.dot(w, x * x))
             if denominator <= 0:
                 break
             c = float(np.dot(w, x * y)) / denominator
-            w = self.irls_weights(c * x - y, self.w[rows], self.hit[rows])
+            w = self.irls_weights(c * x - y, base, hit)
         return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
 
     def side_piece(self, centre: FloatArray, angle: float, direction: int) -> FloatArray:
