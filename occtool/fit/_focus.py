@@ -95,7 +95,9 @@ def _of_kinds(kind: NDArray[np.integer[Any]] | int, codes: tuple[int, ...]) -> N
     found = kind == codes[0]
     for code in codes[1:]:  # a few comparisons: np.isin took 12 ms a million samples
         found |= kind == code
-    return found
+    if found.all():  # one answer for the block: no mask to apply or copy by
+        return True
+    return found if found.any() else False
 
 
 def focused_blocks(blocks: list[SampleBlock], robot: Robot, focus_range: float, *, planar: bool,
@@ -146,12 +148,15 @@ def focused_blocks(blocks: list[SampleBlock], robot: Robot, focus_range: float, 
     limit = np.minimum(limit, focus_range)
     frontier = _frontier(ends, n_robot, robot, focus_range, planar)
     kept: list[NDArray[np.bool_] | None] = []
+    limits: dict[int, FloatArray] = {}  # each bin array's limits, gathered once
     for block, measures in zip(blocks, measured):
         if measures is None:
             kept.append(None)
             continue
         distance, bins, always = measures
-        keep = (block.h >= low) & (block.h <= high) & (distance <= limit[bins])
+        if id(bins) not in limits:
+            limits[id(bins)] = limit[bins]
+        keep = (block.h >= low) & (block.h <= high) & (distance <= limits[id(bins)])
         if not isinstance(always, bool):
             keep |= always
         kept.append(keep)
@@ -231,8 +236,11 @@ def _frontier(ends: list[tuple[FloatArray, NDArray[np.intp]]], n_robot: int, rob
     # A planar scan has one beam a direction and no mismatches: its farthest end is seen.
     rank = 1 if planar else adaptive_support(n_robot)[1]
     counts = np.zeros(FOCUS_ANGLE_BINS, dtype=np.intp)
+    binned: dict[int, NDArray[np.intp]] = {}  # blocks of one feature set share their bins
     for _, part_bins in ends:
-        counts += np.bincount(part_bins, minlength=FOCUS_ANGLE_BINS)
+        if id(part_bins) not in binned:
+            binned[id(part_bins)] = np.bincount(part_bins, minlength=FOCUS_ANGLE_BINS)
+        counts += binned[id(part_bins)]
     if sum(part.size for part, _ in ends) > FRONTIER_PRUNE:
         # Only ends at or beyond a bin's rank-th farthest of every FRONTIER_STRIDE-th end
         # can be its rank-th farthest of all (that one is at least as far): the rest need
@@ -245,7 +253,8 @@ def _frontier(ends: list[tuple[FloatArray, NDArray[np.intp]]], n_robot: int, rob
         for b, (first, end) in enumerate(zip(bounds[:-1], bounds[1:])):  # a loop over bins
             if end - first >= rank:
                 least[b] = np.partition(subset_distance[first:end], end - first - rank)[end - first - rank]
-        candidates = [part >= least[part_bins] for part, part_bins in ends]
+        bounds_of = {id(part_bins): least[part_bins] for _, part_bins in ends}
+        candidates = [part >= bounds_of[id(part_bins)] for part, part_bins in ends]
         ends = [(part[chosen], part_bins[chosen]) for (part, part_bins), chosen in zip(ends, candidates)]
     distance = _joined([part for part, _ in ends], np.float64)
     ray_bins = _joined([part_bins for _, part_bins in ends], np.intp)
