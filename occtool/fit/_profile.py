@@ -295,6 +295,17 @@ def segment_near_runs(profile: FloatArray, far: NDArray[np.bool_], n_segments: i
     run_from = [np.zeros(0, dtype=np.intp)]
     skip_from = [np.zeros(0, dtype=np.intp)]
     rows = np.arange(n + 1)
+    # A skip from a far run [a, b) to cut j + 1 costs the least run-ending cost in [a, j],
+    # from its earliest cut: a running minimum within each far run, found for all of them
+    # at once by doubling (log2 of the longest run steps, not a step a run).
+    member = np.concatenate([np.arange(a, b) for a, b in far_runs]) if far_runs else np.zeros(0, dtype=np.intp)
+    run_start = np.repeat([a for a, _ in far_runs], [b - a for a, b in far_runs]).astype(np.intp)
+    offset = member - run_start
+    shifts = []
+    shift = 1
+    while shift <= int(offset.max(initial=0)):
+        shifts.append((shift, np.flatnonzero(offset >= shift)))
+        shift *= 2
     for _ in range(n_segments):
         total = layers[-1][starts] + cost
         pick = np.argmin(total, axis=1)
@@ -302,13 +313,16 @@ def segment_near_runs(profile: FloatArray, far: NDArray[np.bool_], n_segments: i
         from_run = rows - lengths[pick]
         after_skip = np.full(n + 1, np.inf)
         from_skip = np.zeros(n + 1, dtype=np.intp)
-        for a, b in far_runs:  # a loop over far runs, not bins
-            values = after_run[a:b]
-            running = np.minimum.accumulate(values)
-            better = values < np.concatenate([[np.inf], running[:-1]])
-            first = np.maximum.accumulate(np.where(better, np.arange(b - a), 0))
-            after_skip[a + 1: b + 1] = running
-            from_skip[a + 1: b + 1] = a + first
+        least, earliest = after_run[member], offset.copy()
+        for shift, later in shifts:
+            # (least, earliest) over [i - 2 shift + 1, i]: the lexicographic minimum of the
+            # two halves; an earlier cut wins a tie, as a strict improvement would keep it.
+            before_least, before_earliest = least[later - shift], earliest[later - shift]
+            take = before_least <= least[later]
+            least[later] = np.where(take, before_least, least[later])
+            earliest[later] = np.where(take, before_earliest, earliest[later])
+        after_skip[member + 1] = least
+        from_skip[member + 1] = run_start + earliest
         use_skip = after_skip < after_run
         layers.append(np.where(use_skip, after_skip, after_run))
         run_from.append(from_run)
