@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -218,6 +219,14 @@ class Support:
         self.points = support[::self.step]
         self.tree = cKDTree(self._embedded(self.points))
 
+    @cached_property
+    def _heights(self) -> FloatArray:
+        return np.ascontiguousarray(self.points[:, 2])
+
+    @cached_property
+    def _horizontal(self) -> FloatArray:
+        return np.hypot(self.points[:, 0], self.points[:, 1])
+
     def _embedded(self, p: FloatArray) -> FloatArray:
         # Unit direction scaled so the angular reach is 1, log range so the range share is 1.
         r = np.linalg.norm(p, axis=1)
@@ -274,10 +283,11 @@ class Support:
         else:
             distance, index = neighbours
         found = np.isfinite(np.asarray(distance).reshape(points.shape[0], k))
-        near = self.points[np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)]
+        near = np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)
         horizontal = np.hypot(points[:, 0], points[:, 1])
-        rise = np.abs(near[..., 2] - points[:, None, 2])
-        run = np.abs(np.hypot(near[..., 0], near[..., 1]) - horizontal[:, None])
+        # The neighbours' heights and horizontal distances, each support point's computed once.
+        rise = np.abs(self._heights[near] - points[:, None, 2])
+        run = np.abs(self._horizontal[near] - horizontal[:, None])
         row = 0.5 * self.spacing * np.linalg.norm(points, axis=1)
         steep = found & (rise >= row[:, None]) & (run <= STEEP_SLOPE * rise)
         return steep.sum(axis=1) < STEEP_NEIGHBOURS
