@@ -313,11 +313,13 @@ class SensorModel:
         rays = obstacle | free_only
 
         e = self.depth_error
-        a_obs, h_obs, r_obs, m_obs = alpha[obstacle], h[obstacle], r[obstacle], m[obstacle]
-        a_ray, h_ray, r_ray, m_ray = alpha[rays], h[rays], r[rays], m[rays]
+        # Indices once, then takes: a boolean index scans its mask again for every array.
+        obstacle_index, ray_index = np.flatnonzero(obstacle), np.flatnonzero(rays)
+        a_obs, h_obs, r_obs, m_obs = (v.take(obstacle_index) for v in (alpha, h, r, m))
+        a_ray, h_ray, r_ray, m_ray = (v.take(ray_index) for v in (alpha, h, r, m))
         blocks = [SampleBlock(a_obs, h_obs * scale, r_obs * scale, m_obs, 1.0, SAMPLE_KINDS["hit"])
                   for scale in (1.0 - e, 1.0 + e)]
-        near_kind = np.where(free_only[rays], SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"]).astype(np.int8)
+        near_kind = np.where(free_only.take(ray_index), SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"]).astype(np.int8)
         blocks += [SampleBlock(a_ray, h_ray * position, r_ray * position, m_ray * value, 1.0, near_kind)
                    for position, value in zip(self.near_positions, self.near_values)]
         at_sensor = np.zeros(a_ray.size)

@@ -167,13 +167,16 @@ def focused_blocks(blocks: list[SampleBlock], robot: Robot, focus_range: float, 
     columns: tuple[NDArray[Any], ...] = (alpha, h, r, m, weight, kind)
     start = 0
     for block, chosen in zip(blocks, kept):
-        size = len(block) if chosen is None else int(np.count_nonzero(chosen))
+        index = None if chosen is None else np.flatnonzero(chosen)  # once for the block's columns
+        size = len(block) if index is None else index.size
         part = slice(start, start + size)
         for column, values in zip(columns, block.columns()):
-            if np.ndim(values) == 0 or chosen is None:
+            if np.ndim(values) == 0 or index is None:
                 column[part] = values
             else:
-                np.compress(chosen, values, out=column[part])
+                # mode="clip" writes straight into the column ("raise" buffers a copy first);
+                # the indices are the block's own, so nothing is ever clipped.
+                np.take(values, index, out=column[part], mode="clip")
         start += size
     for column, values in zip(columns, (frontier.alpha, frontier.h, frontier.r, frontier.m, frontier.weight,
                                         frontier.kind)):

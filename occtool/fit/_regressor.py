@@ -299,7 +299,7 @@ class OccupancyRegressor:
         geometry = FeatureGeometry.of(features)
         screen = screen_features(features, sensor, robot, basis=self.basis, focus=self.focus,
                                  focus_range=self.focus_range, geometry=geometry)
-        keep: NDArray[np.bool_] | NDArray[np.intp] | None = ~screen.mismatch if screen.mismatch.any() else None
+        keep: NDArray[np.intp] | None = np.flatnonzero(~screen.mismatch) if screen.mismatch.any() else None
         guard = None
         if self.guard:
             mask, scale, spacing = guarded_mask(features, screen, robot, level=self.level, focus=self.focus,
@@ -310,13 +310,13 @@ class OccupancyRegressor:
         # it (at 10M features it holds 250 MB).
         screen = replace(screen, sight=None)
         origin = screen.origin
-        usable_count = len(features) if keep is None else int(np.count_nonzero(keep))
+        usable_count = len(features) if keep is None else keep.size
         if usable_count > FIT_FEATURES:
             # The pieces are placed from an even subsample: a few dozen linear pieces need no
             # more, and the samples of every feature would not fit in memory (10M features:
             # 50M samples, 5 GB). The screen and the return guard above saw every feature.
             subsample = np.arange(0, usable_count, -(-usable_count // FIT_FEATURES))
-            keep = subsample if keep is None else np.flatnonzero(keep)[subsample]
+            keep = subsample if keep is None else keep[subsample]
         if keep is None:
             usable = features
         else:
