@@ -130,10 +130,10 @@ def focused_blocks(blocks: list[SampleBlock], robot: Robot, focus_range: float, 
         distance = _horizontal(block.r, block.h)
         hit = _of_kinds(block.kind, (hit_code,))
         if not isinstance(hit, bool) or hit:
-            hit = (block.h >= band_low) & (block.h <= band_high) & hit
-            if hit.any():
-                hit_bins.append(bins[hit])
-                hit_distance.append(distance[hit])
+            hit_index = np.flatnonzero((block.h >= band_low) & (block.h <= band_high) & hit)
+            if hit_index.size:
+                hit_bins.append(bins.take(hit_index))
+                hit_distance.append(distance.take(hit_index))
         rays = _of_kinds(block.kind, _RAY_ENDS)
         if isinstance(rays, bool):
             if rays:
@@ -257,8 +257,8 @@ def _frontier(ends: list[tuple[FloatArray, NDArray[np.intp]]], n_robot: int, rob
             if end - first >= rank:
                 least[b] = np.partition(subset_distance[first:end], end - first - rank)[end - first - rank]
         bounds_of = {id(part_bins): least[part_bins] for _, part_bins in ends}
-        candidates = [part >= bounds_of[id(part_bins)] for part, part_bins in ends]
-        ends = [(part[chosen], part_bins[chosen]) for (part, part_bins), chosen in zip(ends, candidates)]
+        candidates = [np.flatnonzero(part >= bounds_of[id(part_bins)]) for part, part_bins in ends]
+        ends = [(part.take(chosen), part_bins.take(chosen)) for (part, part_bins), chosen in zip(ends, candidates)]
     distance = _joined([part for part, _ in ends], np.float64)
     ray_bins = _joined([part_bins for _, part_bins in ends], np.intp)
     order, bounds = group_by_bin(ray_bins, FOCUS_ANGLE_BINS)

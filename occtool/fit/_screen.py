@@ -190,5 +190,5 @@ def profile_returns(features: Features, sensor: SensorModel, robot: Robot,
     if sensor.floor == "obstacle":
         low = -np.inf
     z = features.points[:, 2]
-    chosen = sensor.is_obstacle(features, robot, geometry=geometry) & (z >= low) & (z <= high)
-    return geometry.turned(origin)[chosen], geometry.horizontal[chosen]
+    chosen = np.flatnonzero(sensor.is_obstacle(features, robot, geometry=geometry) & (z >= low) & (z <= high))
+    return geometry.turned(origin).take(chosen), geometry.horizontal.take(chosen)
