@@ -256,10 +256,10 @@ class _Fitter:
         alpha, distance = self.returns
         keep = support // 2
         profile = first_obstacle_distance(alpha, distance, n_bins, keep, front=keep - 1, cap=1.0 + self.depth_error)
-        frontier = s.kind == SAMPLE_KINDS["frontier"]
-        if frontier.any():
-            reach = np.sqrt(np.maximum(s.r[frontier] ** 2 - s.h[frontier] ** 2, 0.0))
-            np.minimum.at(profile, angle_bins(s.alpha[frontier], n_bins), reach)
+        frontier = np.flatnonzero(s.kind == SAMPLE_KINDS["frontier"])  # a few hundred of millions
+        if frontier.size:
+            reach = np.sqrt(np.maximum(s.r.take(frontier) ** 2 - s.h.take(frontier) ** 2, 0.0))
+            np.minimum.at(profile, angle_bins(s.alpha.take(frontier), n_bins), reach)
         cap = self.p.focus_range if self.p.focus else (distance.max() if distance.size else 1.0)
         return np.minimum(profile, cap)
 

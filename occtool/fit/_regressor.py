@@ -304,8 +304,9 @@ class OccupancyRegressor:
         if self.guard:
             mask, scale, spacing = guarded_mask(features, screen, robot, level=self.level, focus=self.focus,
                                                 focus_range=self.focus_range, geometry=geometry)
-            guard = build_guard(geometry.alpha[mask], geometry.horizontal[mask] * scale[mask], self.level,
-                                reach=SPREAD_SHARE * spacing)
+            guarded = np.flatnonzero(mask)  # a few hundred of a million features
+            guard = build_guard(geometry.alpha.take(guarded), geometry.horizontal.take(guarded) * scale.take(guarded),
+                                self.level, reach=SPREAD_SHARE * spacing)
         # The line-of-sight index served the screen and the guard; the samples need none of
         # it (at 10M features it holds 250 MB).
         screen = replace(screen, sight=None)

@@ -63,11 +63,12 @@ def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, ba
     # exactly, not up to a bin.
     geometry = FeatureGeometry.of(features) if geometry is None else geometry
     obstacle = sensor.is_obstacle(features, robot, geometry=geometry) & ~sensor.is_floor(features.points[:, 2], robot)
-    origin = mean_direction(geometry.alpha[obstacle]) if basis == "trig" else 0.0
+    obstacle_index = np.flatnonzero(obstacle)
+    origin = mean_direction(geometry.alpha.take(obstacle_index)) if basis == "trig" else 0.0
     # A planar scan (a 2D laser) has one beam per direction: a beam passing beside a
     # return says only that the object is narrower than the beam spacing, never that
     # the return is a mismatch (a chair leg is often hit by a single beam).
-    planar = is_planar_scan(features.height[obstacle])
+    planar = is_planar_scan(features.points[:, 2].take(obstacle_index))
     mismatch = np.zeros(len(features), dtype=bool)
     if focus and not planar:
         # Only features the focus keeps can mislead the fit: test those alone.
