@@ -7,6 +7,7 @@ import pytest
 
 import occtool.fit._focus as focus_module
 import occtool.fit._profile as profile_module
+import occtool.guard as guard_module
 from occtool.features import Features, wrap_angle
 from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
 from occtool.fit._focus import focused_blocks, focused_with_frontier
@@ -165,6 +166,19 @@ def test_one_support_query_serves_the_seen_from_above_test():
     np.testing.assert_array_equal(confirmed, support.confirmed(points[:500], 6))
     np.testing.assert_array_equal(support.seen_from_above(points[:500], neighbours),
                                   support.seen_from_above(points[:500]))
+
+
+def test_support_of_rows_is_the_support_of_those_points(monkeypatch):
+    monkeypatch.setattr(guard_module, "SUPPORT_SAMPLE", 700)  # a subsample of every 5th row
+    rng = np.random.default_rng(8)
+    a = rng.uniform(-1.0, 1.0, 6000)
+    points = np.column_stack([2.0 * np.cos(a), 2.0 * np.sin(a), rng.uniform(-0.9, 0.5, 6000)])
+    rows = np.flatnonzero(rng.random(6000) < 0.55)
+    taken, gathered = Support.of_rows(points, rows, 0.02), Support(points[rows], 0.02)
+    assert taken.step == gathered.step > 1
+    np.testing.assert_array_equal(taken.points, gathered.points)
+    np.testing.assert_array_equal(taken.confirmed(points[:400], 12), gathered.confirmed(points[:400], 12))
+    np.testing.assert_array_equal(taken.seen_from_above(points[:400]), gathered.seen_from_above(points[:400]))
 
 
 def test_chunked_evaluation_equals_evaluation_a_chunk_at_a_time():

@@ -116,7 +116,7 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     low, high = robot.body_band
     near = (horizontal <= 1.2 * float(distance.max(initial=0.0)) + 0.1) & (
         z >= low - SUPPORT_HEIGHT_REACH) & (z <= high + SUPPORT_HEIGHT_REACH)
-    support = features.points[near & screen.obstacle & ~strict & (features.evidence >= level)]
+    support = np.flatnonzero(near & screen.obstacle & ~strict & (features.evidence >= level))
     # Near the robot a surface spans a wide tilt range and many rays end on it, while
     # two mismatches there box the robot in: the count grows as 1 / distance, as the fit's.
     needed = support_count(len(features)) * np.maximum(1.0, NEAR_SUPPORT_DISTANCE / np.maximum(distance, 1e-9))
@@ -131,7 +131,7 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     rank[order] = np.arange(order.size) - starts[bins[order]]
     confirmed = np.zeros(index.size, dtype=bool)
     settled = np.zeros(GUARD_BINS, dtype=bool)
-    confirming = Support(support, spacing)
+    confirming = Support.of_rows(features.points, support, spacing)
     # The neighbours each test found, for the seen-from-above test of the confirmed returns
     # (one query for both where it can serve both).
     found: list[tuple[NDArray[np.intp], Neighbours]] = []
