@@ -12,6 +12,7 @@ from occtool.features import Features, wrap_angle
 from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
 from occtool.fit._focus import focused_blocks, focused_with_frontier
 from occtool.fit._profile import first_obstacle_distance_in_bins, order_within_bins
+from occtool.fit._screen import _neighbours_of
 from occtool.fit._sight import SortedRays
 from occtool.guard import Support
 from occtool.robot import Robot
@@ -179,6 +180,22 @@ def test_support_of_rows_is_the_support_of_those_points(monkeypatch):
     np.testing.assert_array_equal(taken.points, gathered.points)
     np.testing.assert_array_equal(taken.confirmed(points[:400], 12), gathered.confirmed(points[:400], 12))
     np.testing.assert_array_equal(taken.seen_from_above(points[:400]), gathered.seen_from_above(points[:400]))
+
+
+def test_the_neighbours_of_confirmed_returns_are_their_chunks_rows():
+    rng = np.random.default_rng(9)
+    a = rng.uniform(-1.0, 1.0, 3000)
+    points = np.column_stack([2.0 * np.cos(a), 2.0 * np.sin(a), rng.uniform(-0.9, 0.5, 3000)])
+    support = Support(points, spacing=0.02)
+    chunks = [np.sort(rng.choice(np.arange(lo, lo + 500), 300, replace=False)) for lo in (0, 500, 1000)]
+    found = [(chosen, support._confirmed(points[chosen], 6, steep=True)[1]) for chosen in chunks]
+    positions = rng.permutation(np.concatenate(chunks))[:200]
+    distance, index = _neighbours_of(positions, found)
+    expected_distance, expected_index = support.tree.query(support._embedded(points[positions]), k=16,
+                                                           distance_upper_bound=1.0)
+    np.testing.assert_array_equal(distance, expected_distance)
+    np.testing.assert_array_equal(index, expected_index)
+    assert _neighbours_of(np.array([1700]), found) is None  # in no chunk
 
 
 def test_chunked_evaluation_equals_evaluation_a_chunk_at_a_time():

@@ -160,24 +160,27 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
 def _neighbours_of(positions: NDArray[np.intp],
                    found: list[tuple[NDArray[np.intp], Neighbours]]) -> Neighbours | None:
     """The neighbours found for the candidates at ``positions``, in that order, if every
-    one of them has its neighbours among ``found`` (chunks of positions and their query)."""
+    one of them has its neighbours among ``found`` (chunks of positions and their query).
+    Only their rows are copied (a million features: 499 of 132k)."""
     if not found:
         return None
-    total = sum(chosen.size for chosen, _ in found)
-    k = found[0][1][0].shape[1]
-    where = np.full(max(int(positions.max(initial=-1)) + 1, max(int(c.max(initial=-1)) + 1 for c, _ in found)), -1)
-    distance = np.empty((total, k))
-    index = np.empty((total, k), dtype=np.intp)
-    start = 0
-    for chosen, (chunk_distance, chunk_index) in found:
-        where[chosen] = np.arange(start, start + chosen.size)
-        distance[start:start + chosen.size] = chunk_distance
-        index[start:start + chosen.size] = chunk_index
-        start += chosen.size
-    rows = where[positions]
-    if (rows < 0).any():
+    size = max(int(positions.max(initial=-1)) + 1, max(int(c.max(initial=-1)) + 1 for c, _ in found))
+    chunk_of = np.full(size, -1)
+    row_of = np.zeros(size, dtype=np.intp)
+    for number, (chosen, _) in enumerate(found):
+        chunk_of[chosen] = number
+        row_of[chosen] = np.arange(chosen.size)
+    chunks, rows = chunk_of[positions], row_of[positions]
+    if (chunks < 0).any():
         return None
-    return distance[rows], index[rows]
+    k = found[0][1][0].shape[1]
+    distance = np.empty((positions.size, k))
+    index = np.empty((positions.size, k), dtype=np.intp)
+    for number, (_, (chunk_distance, chunk_index)) in enumerate(found):
+        mine = np.flatnonzero(chunks == number)
+        distance[mine] = chunk_distance[rows[mine]]
+        index[mine] = chunk_index[rows[mine]]
+    return distance, index
 
 
 def profile_returns(features: Features, sensor: SensorModel, robot: Robot,
