@@ -137,7 +137,8 @@ class _Fitter:
         self.w = samples.weight
         self.hit = samples.kind == SAMPLE_KINDS["hit"]
         self.on_rays = self.hit | (samples.kind == SAMPLE_KINDS["near"])
-        self.w_safe = self.w * params.safety
+        # (Times a safety of 1.0 the weights are themselves, bit for bit: no copy of them.)
+        self.w_safe = self.w * params.safety if params.safety != 1.0 else self.w
         self.w_total = float(self.w.sum())
         k = self.n_terms
         inf = np.inf
