@@ -60,6 +60,12 @@ def test_the_bucket_search_of_sorted_rays_is_searchsorted(layout):
     else:  # one bucket holds too many keys: a binary search
         keys = np.concatenate([rng.uniform(0.0, 1.0, 100), np.full(500, 0.5)])
     keys = np.sort(keys)
+    fine = SortedRays.build(keys, keys, keys, queries=10**6)  # many queries: a finer table
+    assert fine.n_buckets == 16 * keys.size
+    assert fine.first is not None or layout == "crowded"
+    for side in ("left", "right"):
+        queries = np.concatenate([keys, np.nextafter(keys, np.inf), np.nextafter(keys, -np.inf)])
+        np.testing.assert_array_equal(fine.search(queries, side), np.searchsorted(keys, queries, side=side))
     rays = SortedRays.build(keys, keys, keys)
     assert (rays.first is None) == (layout == "crowded")
     queries = np.concatenate([rng.choice(keys, 2000), np.nextafter(rng.choice(keys, 2000), np.inf),
