@@ -277,6 +277,15 @@ class Support:
         return within >= needed, neighbours
 
 
+    def steep_neighbours(self, points: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
+        """The query :meth:`seen_from_above` makes of ``points`` (a nonempty support):
+        their :data:`STEEP_CANDIDATES` nearest support points within reach, ``(n, k)``
+        distances (``inf`` beyond reach) and indices."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        k = int(min(STEEP_CANDIDATES, self.tree.n))
+        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        return np.asarray(distance).reshape(points.shape[0], k), np.asarray(index).reshape(points.shape[0], k)
+
     def seen_from_above(self, points: ArrayLike,
                         neighbours: tuple[FloatArray, NDArray[np.intp]] | None = None) -> NDArray[np.bool_]:
         """Whether each of ``points`` may lie on a surface seen from above (a table or
@@ -295,10 +304,7 @@ class Support:
         if points.shape[0] == 0 or self.tree.n == 0:
             return np.ones(points.shape[0], dtype=bool)
         k = int(min(STEEP_CANDIDATES, self.tree.n))
-        if neighbours is None:
-            distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
-        else:
-            distance, index = neighbours
+        distance, index = self.steep_neighbours(points) if neighbours is None else neighbours
         found = np.isfinite(np.asarray(distance).reshape(points.shape[0], k))
         near = np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)
         horizontal = np.hypot(points[:, 0], points[:, 1])

@@ -195,13 +195,14 @@ def test_the_neighbours_of_confirmed_returns_are_their_chunks_rows():
     support = Support(points, spacing=0.02)
     chunks = [np.sort(rng.choice(np.arange(lo, lo + 500), 300, replace=False)) for lo in (0, 500, 1000)]
     found = [(chosen, support._confirmed(points[chosen], 6, steep=True)[1]) for chosen in chunks]
-    positions = rng.permutation(np.concatenate(chunks))[:200]
-    distance, index = _neighbours_of(positions, found)
+    # Some in a chunk, some in none (those are queried): all as one query finds them.
+    positions = rng.permutation(np.concatenate([rng.permutation(np.concatenate(chunks))[:247], [1600, 1700, 2999]]))
+    distance, index = _neighbours_of(positions, found, support, points)
     expected_distance, expected_index = support.tree.query(support._embedded(points[positions]), k=16,
                                                            distance_upper_bound=1.0)
     np.testing.assert_array_equal(distance, expected_distance)
     np.testing.assert_array_equal(index, expected_index)
-    assert _neighbours_of(np.array([1700]), found) is None  # in no chunk
+    assert _neighbours_of(positions, [], support, points) is None  # no query shared
 
 
 def test_chunked_evaluation_equals_evaluation_a_chunk_at_a_time():

@@ -133,7 +133,10 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     settled = np.zeros(GUARD_BINS, dtype=bool)
     confirming = Support.of_rows(features.points, support, spacing)
     # The neighbours each test found, for the seen-from-above test of the confirmed returns
-    # (one query for both where it can serve both).
+    # (one query for both where it can serve both). Only the first test shares its query:
+    # each bin's nearest returns are mostly kept (10k features: 3,079 of 3,261), farther ones
+    # seldom (a million: 499 of 132k), so those ask for no more neighbours than they need
+    # (the kept ones are then queried again, and the same neighbours found).
     found: list[tuple[NDArray[np.intp], Neighbours]] = []
     low_rank, chunk = 0, GUARD_TEST_CHUNK
     while low_rank < max(int(rank.max(initial=-1)) + 1, 0):
@@ -141,7 +144,8 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
         if not tested.any():
             break
         chosen = np.flatnonzero(tested)
-        confirmed[chosen], neighbours = confirming._confirmed(candidates[chosen], needed[chosen], steep=True)
+        confirmed[chosen], neighbours = confirming._confirmed(candidates[chosen], needed[chosen],
+                                                              steep=low_rank == 0)
         if neighbours is not None:
             found.append((chosen, neighbours))
         settled[bins[chosen[confirmed[chosen]]]] = True
@@ -152,16 +156,17 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # its front (at 1k features the blanket shrink cost 0.07 IoU).
     scale = np.ones(len(features))
     kept = np.flatnonzero(returns)  # index[confirmed]: returns was index before the test
-    tops = confirming.seen_from_above(features.points[kept], _neighbours_of(np.flatnonzero(confirmed), found))
+    tops = confirming.seen_from_above(features.points[kept],
+                                      _neighbours_of(np.flatnonzero(confirmed), found, confirming, candidates))
     scale[kept[tops]] = max(0.0, 1.0 - guard_module.SPACING_FACTOR * spacing)
     return returns, scale, spacing
 
 
-def _neighbours_of(positions: NDArray[np.intp],
-                   found: list[tuple[NDArray[np.intp], Neighbours]]) -> Neighbours | None:
-    """The neighbours found for the candidates at ``positions``, in that order, if every
-    one of them has its neighbours among ``found`` (chunks of positions and their query).
-    Only their rows are copied (a million features: 499 of 132k)."""
+def _neighbours_of(positions: NDArray[np.intp], found: list[tuple[NDArray[np.intp], Neighbours]],
+                   support: Support, candidates: FloatArray) -> Neighbours | None:
+    """The neighbours :meth:`Support.seen_from_above` needs for the candidates at
+    ``positions`` (rows of ``candidates``), in that order: those ``found`` (chunks of
+    positions and their query) copied, the rest queried (none found: None)."""
     if not found:
         return None
     size = max(int(positions.max(initial=-1)) + 1, max(int(c.max(initial=-1)) + 1 for c, _ in found))
@@ -171,8 +176,6 @@ def _neighbours_of(positions: NDArray[np.intp],
         chunk_of[chosen] = number
         row_of[chosen] = np.arange(chosen.size)
     chunks, rows = chunk_of[positions], row_of[positions]
-    if (chunks < 0).any():
-        return None
     k = found[0][1][0].shape[1]
     distance = np.empty((positions.size, k))
     index = np.empty((positions.size, k), dtype=np.intp)
@@ -180,6 +183,9 @@ def _neighbours_of(positions: NDArray[np.intp],
         mine = np.flatnonzero(chunks == number)
         distance[mine] = chunk_distance[rows[mine]]
         index[mine] = chunk_index[rows[mine]]
+    missing = np.flatnonzero(chunks < 0)
+    if missing.size:
+        distance[missing], index[missing] = support.steep_neighbours(candidates[positions[missing]])
     return distance, index
 
 
