@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -157,17 +158,21 @@ def is_planar_scan(heights: ArrayLike) -> bool:
     return heights.size > 0 and float(heights.max() - heights.min()) <= PLANAR_TOLERANCE
 
 
-def guard_candidates(features: Features, evidence: ArrayLike, robot: Robot, level: float) -> NDArray[np.bool_]:
+def guard_candidates(features: Features, evidence: ArrayLike, robot: Robot, level: float, *,
+                     horizontal: FloatArray | None = None) -> NDArray[np.bool_]:
     """Features that are returns the robot must keep clear of (before the mismatch test).
 
     Evidence at or above ``level``, height within the robot's body band, horizontal
     distance beyond the robot's radius. ``evidence`` is the features' evidence (passed
-    apart so a caller may mask free rays or floor features beforehand).
+    apart so a caller may mask free rays or floor features beforehand); ``horizontal``
+    the features' ``hypot(x, y)``, when the caller has it.
     """
     x, y, z = features.points.T
     low, high = robot.body_band
+    if horizontal is None:
+        horizontal = np.hypot(x, y)
     return (
-        (np.asarray(evidence) >= level) & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
+        (np.asarray(evidence) >= level) & (z >= low) & (z <= high) & (horizontal > robot.radius)
     )
 
 
@@ -193,6 +198,11 @@ def support_count(n_features: int) -> int:
 SUPPORT_SAMPLE = 50_000
 
 
+def _support_step(count: int) -> int:
+    """The step of the even subsample that stands for ``count`` support points."""
+    return max(1, -(-count // SUPPORT_SAMPLE))
+
+
 class Support:
     """The returns that may confirm a guarded return, indexed once for many queries.
 
@@ -204,15 +214,35 @@ class Support:
     """
 
     def __init__(self, support: ArrayLike, spacing: float) -> None:
-        from scipy.spatial import cKDTree
-
         support = np.asarray(support, dtype=np.float64).reshape(-1, 3)
         # Beyond SUPPORT_SAMPLE points an even subsample stands for them, the count needed
         # scaled by the same step (at a million features the full set took 6.5 s of the fit).
-        self.step = max(1, -(-support.shape[0] // SUPPORT_SAMPLE))
+        self._index(support[::_support_step(support.shape[0])], support.shape[0], spacing)
+
+    @classmethod
+    def of_rows(cls, points: FloatArray, rows: NDArray[np.intp], spacing: float) -> Support:
+        """``Support(points[rows], spacing)``, without gathering the rows its subsample
+        leaves out (a million features: 480k rows gathered for 48k kept)."""
+        support = object.__new__(cls)
+        support._index(points.take(rows[::_support_step(rows.size)], axis=0), rows.size, spacing)
+        return support
+
+    def _index(self, points: FloatArray, count: int, spacing: float) -> None:
+        """Index ``points``, the subsample of ``count`` support points."""
+        from scipy.spatial import cKDTree
+
+        self.step = _support_step(count)
         self.spacing = float(spacing)
-        self.points = support[::self.step]
+        self.points = points
         self.tree = cKDTree(self._embedded(self.points))
+
+    @cached_property
+    def _heights(self) -> FloatArray:
+        return np.ascontiguousarray(self.points[:, 2])
+
+    @cached_property
+    def _horizontal(self) -> FloatArray:
+        return np.hypot(self.points[:, 0], self.points[:, 1])
 
     def _embedded(self, p: FloatArray) -> FloatArray:
         # Unit direction scaled so the angular reach is 1, log range so the range share is 1.
@@ -247,6 +277,15 @@ class Support:
         return within >= needed, neighbours
 
 
+    def steep_neighbours(self, points: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
+        """The query :meth:`seen_from_above` makes of ``points`` (a nonempty support):
+        their :data:`STEEP_CANDIDATES` nearest support points within reach, ``(n, k)``
+        distances (``inf`` beyond reach) and indices."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        k = int(min(STEEP_CANDIDATES, self.tree.n))
+        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        return np.asarray(distance).reshape(points.shape[0], k), np.asarray(index).reshape(points.shape[0], k)
+
     def seen_from_above(self, points: ArrayLike,
                         neighbours: tuple[FloatArray, NDArray[np.intp]] | None = None) -> NDArray[np.bool_]:
         """Whether each of ``points`` may lie on a surface seen from above (a table or
@@ -265,15 +304,13 @@ class Support:
         if points.shape[0] == 0 or self.tree.n == 0:
             return np.ones(points.shape[0], dtype=bool)
         k = int(min(STEEP_CANDIDATES, self.tree.n))
-        if neighbours is None:
-            distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
-        else:
-            distance, index = neighbours
+        distance, index = self.steep_neighbours(points) if neighbours is None else neighbours
         found = np.isfinite(np.asarray(distance).reshape(points.shape[0], k))
-        near = self.points[np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)]
+        near = np.where(found, np.asarray(index).reshape(points.shape[0], k), 0)
         horizontal = np.hypot(points[:, 0], points[:, 1])
-        rise = np.abs(near[..., 2] - points[:, None, 2])
-        run = np.abs(np.hypot(near[..., 0], near[..., 1]) - horizontal[:, None])
+        # The neighbours' heights and horizontal distances, each support point's computed once.
+        rise = np.abs(self._heights[near] - points[:, None, 2])
+        run = np.abs(self._horizontal[near] - horizontal[:, None])
         row = 0.5 * self.spacing * np.linalg.norm(points, axis=1)
         steep = found & (rise >= row[:, None]) & (run <= STEEP_SLOPE * rise)
         return steep.sum(axis=1) < STEEP_NEIGHBOURS

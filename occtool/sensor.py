@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features, wrap_angle
+from occtool.features import FeatureGeometry, Features, wrap_angle
 from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
 from occtool.robot import Robot
 
@@ -46,6 +46,32 @@ _SampleBlock = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray,
 SAMPLE_KINDS: dict[str, int] = {"hit": 0, "near": 1, "robot": 2, "floor": 3, "footprint": 4, "background": 5, "frontier": 6}
 
 FLOOR_MODES = ("free", "drop", "obstacle")
+
+
+@dataclass(frozen=True, eq=False)
+class SampleBlock:
+    """Samples of one origin (:meth:`SensorModel._sample_blocks`): pan angle, height and
+    range per sample; value, weight and kind per sample or one for the whole block."""
+
+    alpha: FloatArray
+    h: FloatArray
+    r: FloatArray
+    m: FloatArray | float
+    weight: FloatArray | float
+    kind: NDArray[np.integer[Any]] | int
+
+    def __len__(self) -> int:
+        return int(self.alpha.shape[0])
+
+    def count(self, code: int) -> int:
+        """Samples of the kind ``code`` (:data:`SAMPLE_KINDS`)."""
+        if np.ndim(self.kind) == 0:
+            return len(self) if int(self.kind) == code else 0
+        return int(np.count_nonzero(self.kind == code))
+
+    def columns(self) -> tuple[Any, ...]:
+        """``alpha, h, r, m, weight, kind``, each an array or one value for the block."""
+        return self.alpha, self.h, self.r, self.m, self.weight, self.kind
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,6 +109,23 @@ class Samples:
     def count(self, kind: str) -> int:
         """Number of samples of one kind (``"hit"``, ``"near"``, ...)."""
         return int(np.count_nonzero(self.kind == SAMPLE_KINDS[kind]))
+
+    @classmethod
+    def of_blocks(cls, blocks: list[SampleBlock]) -> Samples:
+        """The samples of ``blocks`` one after another."""
+        total = sum(len(block) for block in blocks)
+        # Each block is written into its slice of the columns: concatenating the blocks
+        # took a third of the samples' time at a million features (2.5 GB of copies).
+        alpha, h, r, m, weight = (np.empty(total) for _ in range(5))
+        kind = np.empty(total, dtype=np.int8)
+        columns: tuple[NDArray[Any], ...] = (alpha, h, r, m, weight, kind)
+        start = 0
+        for block in blocks:
+            part = slice(start, start + len(block))
+            for column, values in zip(columns, block.columns()):
+                column[part] = values
+            start = part.stop
+        return cls(alpha, h, r, m, weight, kind)
 
 
 @dataclass(frozen=True)
@@ -239,27 +282,48 @@ class SensorModel:
         return self._samples(features, robot, rng)
 
     def _samples(self, features: Features, robot: Robot | None = None, rng: np.random.Generator | None = None,
-                 turn: float | None = None) -> Samples:
+                 turn: float | None = None, geometry: FeatureGeometry | None = None) -> Samples:
         """:meth:`samples`; with ``turn``, pan angles measured from ``turn``
-        (``wrap_angle(alpha - turn)``), turned a feature at a time rather than a sample."""
+        (``wrap_angle(alpha - turn)``), turned a feature at a time rather than a sample;
+        ``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, when a
+        caller holds it already."""
+        return Samples.of_blocks(self._sample_blocks(features, robot, rng, turn=turn, geometry=geometry))
+
+    def _sample_blocks(self, features: Features, robot: Robot | None = None,
+                       rng: np.random.Generator | None = None, *, turn: float | None = None,
+                       geometry: FeatureGeometry | None = None) -> list[SampleBlock]:
+        """The samples of :meth:`_samples` as blocks of one origin each, in the columns'
+        order: hits at ``r (1 - depth_error)``, at ``r (1 + depth_error)``, the two near
+        samples, the robot samples, footprint and background. A caller that keeps only
+        some samples (the fit's focus) writes those alone, not every sample twice."""
         robot = Robot() if robot is None else robot
         rng = np.random.default_rng(0) if rng is None else rng
-        alpha, h, r = features.polar()
+        geometry = FeatureGeometry.of(features) if geometry is None else geometry
+        alpha, h, r = geometry.polar()
         if turn is not None:
-            alpha = wrap_angle(alpha - turn)
+            alpha = geometry.turned(turn)
         m = features.evidence
         on_floor = self.is_floor(h, robot)
         # A feature inside the robot's own body cylinder is the robot itself (a self-hit)
         # or a mismatch: no obstacle can stand there. Two such mismatches a few centimetres
         # apart once made the robot "in collision where it stands" (office, 7k features).
-        on_robot = self.is_on_robot(features, robot)
+        on_robot = self.is_on_robot(features, robot, geometry=geometry)
         free_only = self.is_free_ray(features, robot, on_floor=on_floor) & ~on_robot
         obstacle = ~(on_floor & (self.floor == "drop")) & ~free_only & ~on_robot
         rays = obstacle | free_only
 
         e = self.depth_error
-        a_obs, h_obs, r_obs, m_obs = alpha[obstacle], h[obstacle], r[obstacle], m[obstacle]
-        a_ray, h_ray, r_ray, m_ray = alpha[rays], h[rays], r[rays], m[rays]
+        # Indices once, then takes: a boolean index scans its mask again for every array.
+        obstacle_index, ray_index = np.flatnonzero(obstacle), np.flatnonzero(rays)
+        a_obs, h_obs, r_obs, m_obs = (v.take(obstacle_index) for v in (alpha, h, r, m))
+        a_ray, h_ray, r_ray, m_ray = (v.take(ray_index) for v in (alpha, h, r, m))
+        blocks = [SampleBlock(a_obs, h_obs * scale, r_obs * scale, m_obs, 1.0, SAMPLE_KINDS["hit"])
+                  for scale in (1.0 - e, 1.0 + e)]
+        near_kind = np.where(free_only.take(ray_index), SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"]).astype(np.int8)
+        blocks += [SampleBlock(a_ray, h_ray * position, r_ray * position, m_ray * value, 1.0, near_kind)
+                   for position, value in zip(self.near_positions, self.near_values)]
+        at_sensor = np.zeros(a_ray.size)
+        blocks.append(SampleBlock(a_ray, at_sensor, at_sensor, 0.0, 1.0, SAMPLE_KINDS["robot"]))
         extra: list[_SampleBlock] = []
         if self.footprint_samples:
             extra.append(self._footprint(robot))
@@ -267,62 +331,33 @@ class SensorModel:
             extra.append(self._background(robot, rng))
         if turn is not None:
             extra = [(wrap_angle(block[0] - turn), *block[1:]) for block in extra]
-        n_obs, n_ray = a_obs.size, a_ray.size
-        total = 2 * n_obs + 3 * n_ray + sum(block[0].size for block in extra)
-        # Each block is written into its slice of the columns: concatenating the blocks
-        # took a third of the samples' time at a million features (2.5 GB of copies).
-        alpha_out, h_out, r_out, m_out = (np.empty(total) for _ in range(4))
-        weight_out = np.ones(total)
-        kind_out = np.empty(total, dtype=np.int8)
-        start = 0
-        for scale in (1.0 - e, 1.0 + e):
-            part = slice(start, start + n_obs)
-            alpha_out[part] = a_obs
-            np.multiply(h_obs, scale, out=h_out[part])
-            np.multiply(r_obs, scale, out=r_out[part])
-            m_out[part] = m_obs
-            kind_out[part] = SAMPLE_KINDS["hit"]
-            start += n_obs
-        near_kind = np.where(free_only[rays], SAMPLE_KINDS["floor"], SAMPLE_KINDS["near"])
-        for position, value in zip(self.near_positions, self.near_values):
-            part = slice(start, start + n_ray)
-            alpha_out[part] = a_ray
-            np.multiply(h_ray, position, out=h_out[part])
-            np.multiply(r_ray, position, out=r_out[part])
-            np.multiply(m_ray, value, out=m_out[part])
-            kind_out[part] = near_kind
-            start += n_ray
-        part = slice(start, start + n_ray)
-        alpha_out[part] = a_ray
-        h_out[part] = r_out[part] = m_out[part] = 0.0
-        kind_out[part] = SAMPLE_KINDS["robot"]
-        start += n_ray
-        for block in extra:
-            part = slice(start, start + block[0].size)
-            columns: tuple[NDArray[Any], ...] = (alpha_out, h_out, r_out, m_out, weight_out, kind_out)
-            for column, values in zip(columns, block):
-                column[part] = values
-            start += block[0].size
-        return Samples(alpha=alpha_out, h=h_out, r=r_out, m=m_out, weight=weight_out, kind=kind_out)
+        blocks += [SampleBlock(*block) for block in extra]
+        return blocks
 
-    def is_on_robot(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
-        """Whether features lie inside the robot's body cylinder (radius, floor to top)."""
-        x, y, z = features.points.T
-        return (np.hypot(x, y) < robot.radius) & (z >= robot.floor_h) & (z <= robot.body_band[1])
+    def is_on_robot(self, features: Features, robot: Robot, *,
+                    geometry: FeatureGeometry | None = None) -> NDArray[np.bool_]:
+        """Whether features lie inside the robot's body cylinder (radius, floor to top)
+        (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+        horizontal = (geometry if geometry is not None else FeatureGeometry.of(features)).horizontal
+        z = features.points[:, 2]
+        return (horizontal < robot.radius) & (z >= robot.floor_h) & (z <= robot.body_band[1])
 
     def is_free_ray(self, features: Features, robot: Robot,
                     on_floor: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
         """Features that only say their ray is free: evidence 0, and floor features with
         ``floor="free"``. They give free-space samples and no hit."""
         if on_floor is None:
-            on_floor = self.is_floor(features.height, robot)
+            on_floor = self.is_floor(features.points[:, 2], robot)
         return (features.evidence == 0) | (on_floor & (self.floor == "free"))
 
-    def is_obstacle(self, features: Features, robot: Robot) -> NDArray[np.bool_]:
-        """Features that give hit samples: not free rays, not dropped floor, not self-hits."""
-        on_floor = self.is_floor(features.height, robot)
+    def is_obstacle(self, features: Features, robot: Robot, *,
+                    geometry: FeatureGeometry | None = None) -> NDArray[np.bool_]:
+        """Features that give hit samples: not free rays, not dropped floor, not self-hits
+        (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+        on_floor = self.is_floor(features.points[:, 2], robot)
         dropped = on_floor & (self.floor == "drop")
-        return ~dropped & ~self.is_free_ray(features, robot, on_floor=on_floor) & ~self.is_on_robot(features, robot)
+        return ~dropped & ~self.is_free_ray(features, robot, on_floor=on_floor) & ~self.is_on_robot(
+            features, robot, geometry=geometry)
 
     def is_floor(self, h: ArrayLike, robot: Robot) -> NDArray[np.bool_]:
         """Whether features at sensor-frame heights ``h`` lie below the ground clearance."""

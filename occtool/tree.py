@@ -116,10 +116,23 @@ def design_matrix(basis: str, alpha: ArrayLike, h: ArrayLike, r: ArrayLike) -> F
 EVALUATION_CHUNK = 1 << 12
 
 
+def _leaf_run(children: tuple[Node, ...]) -> int | None:
+    """The first of ``children`` when they are two or more consecutive pieces, else None."""
+    first = children[0]
+    if len(children) > 1 and isinstance(first, int) and children == tuple(range(first, first + len(children))):
+        return first
+    return None
+
+
 def _evaluate(node: Node, values: FloatArray) -> FloatArray:
     if isinstance(node, int):
         return values[node]
     reduce = np.minimum if node.op == "min" else np.maximum
+    first = _leaf_run(node.children)
+    if first is not None:
+        # One reduction over the pieces' rows: the same pairwise MIN/MAX in the same order
+        # (a fit's groups are consecutive pieces; a call a piece was most of a chunk's time).
+        return reduce.reduce(values[first:first + len(node.children)], axis=0)
     out = _evaluate(node.children[0], values)
     if len(node.children) > 1 and out.base is not None:
         out = out.copy()  # a row of ``values`` (a leaf's, or a one-child node's): reduced into in place below

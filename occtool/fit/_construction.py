@@ -137,7 +137,8 @@ class _Fitter:
         self.w = samples.weight
         self.hit = samples.kind == SAMPLE_KINDS["hit"]
         self.on_rays = self.hit | (samples.kind == SAMPLE_KINDS["near"])
-        self.w_safe = self.w * params.safety
+        # (Times a safety of 1.0 the weights are themselves, bit for bit: no copy of them.)
+        self.w_safe = self.w * params.safety if params.safety != 1.0 else self.w
         self.w_total = float(self.w.sum())
         k = self.n_terms
         inf = np.inf
@@ -155,6 +156,14 @@ class _Fitter:
         self.loss_rows = slice(None)
         # Hit and near samples grouped by profile bin, and the bins' bounds (built on first use).
         self._ray_groups: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None
+
+    @cached_property
+    def profile_heights(self) -> FloatArray:
+        """The :data:`PROFILE_HEIGHTS` heights, from the floor up, at which a centre's
+        crossing is kept in front of the obstacles (the map's lowest cut may lie a little
+        under the clearance)."""
+        low, high = self.robot.floor_h, self.robot.body_band[1]
+        return np.linspace(low, max(high, 0.0), PROFILE_HEIGHTS)
 
     @cached_property
     def X(self) -> FloatArray:
@@ -211,7 +220,8 @@ class _Fitter:
     def irls_weights(self, residual: FloatArray, weights: FloatArray, hit: NDArray[np.bool_]) -> FloatArray:
         """Weights of one reweighted least-squares step: ``w min(1, delta/|res|)``, times
         ``safety`` where a hit is under-predicted."""
-        weights = np.where(hit & (residual < 0), weights * self.p.safety, weights)
+        if self.p.safety != 1.0:  # (times 1.0 the weights are themselves, bit for bit)
+            weights = np.where(hit & (residual < 0), weights * self.p.safety, weights)
         if not np.isfinite(self.delta):
             return weights
         a = np.abs(residual)
@@ -247,10 +257,10 @@ class _Fitter:
         alpha, distance = self.returns
         keep = support // 2
         profile = first_obstacle_distance(alpha, distance, n_bins, keep, front=keep - 1, cap=1.0 + self.depth_error)
-        frontier = s.kind == SAMPLE_KINDS["frontier"]
-        if frontier.any():
-            reach = np.sqrt(np.maximum(s.r[frontier] ** 2 - s.h[frontier] ** 2, 0.0))
-            np.minimum.at(profile, angle_bins(s.alpha[frontier], n_bins), reach)
+        frontier = np.flatnonzero(s.kind == SAMPLE_KINDS["frontier"])  # a few hundred of millions
+        if frontier.size:
+            reach = np.sqrt(np.maximum(s.r.take(frontier) ** 2 - s.h.take(frontier) ** 2, 0.0))
+            np.minimum.at(profile, angle_bins(s.alpha.take(frontier), n_bins), reach)
         cap = self.p.focus_range if self.p.focus else (distance.max() if distance.size else 1.0)
         return np.minimum(profile, cap)
 
@@ -297,7 +307,6 @@ class _Fitter:
         profile = self.range_profile(n_bins)
         segments = self.initial_groups(n_groups, profile)
         width = 2.0 * np.pi / n_bins
-        sample_bin = angle_bins(self.samples.alpha, n_bins)
 
         pieces: list[FloatArray] = []
         members: list[list[int]] = []
@@ -311,7 +320,7 @@ class _Fitter:
 
         for g, (first, end) in enumerate(segments):
             group: list[int] = []
-            centres = self.profile_centres(profile, first, end, centres_per_group[g], sample_bin)
+            centres = self.profile_centres(profile, first, end, centres_per_group[g])
             for piece in centres:
                 group.append(len(pieces))
                 pieces.append(piece)
@@ -331,8 +340,7 @@ class _Fitter:
         self.progress_offset = len(segments)
         return self.alternate(W, members)
 
-    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int,
-                        sample_bin: NDArray[np.intp]) -> list[FloatArray]:
+    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int) -> list[FloatArray]:
         """Centre pieces whose level crossing lies just in front of the segment's first obstacles.
 
         In range terms a piece crosses ``level`` at ``r* = p0 + p_angle . angle_terms + p_h h``.
@@ -353,33 +361,38 @@ class _Fitter:
         right = np.where(bins < end - 1, np.minimum(D_bins, profile[np.mod(bins + 1, n_bins)]), D_bins)
         # The right edge of one bin is the left edge of the next, with the same bound:
         # keep each edge once (the nearer bound), halving the programmes' rows.
-        edge_index, first_of = np.unique(np.concatenate([bins, bins + 1]), return_inverse=True)
-        D_edges = np.full(edge_index.size, np.inf)
-        np.minimum.at(D_edges, first_of, np.concatenate([left, right]))
-        edges = edge_index * width - np.pi
+        D_edges = np.append(left, np.inf)
+        np.minimum(D_edges[1:], right, out=D_edges[1:])
+        edges = np.arange(first, end + 1) * width - np.pi
         # From the floor up: the map's lowest cut may lie a little under the clearance.
-        low, high = self.robot.floor_h, self.robot.body_band[1]
-        heights = np.linspace(low, max(high, 0.0), PROFILE_HEIGHTS)
+        heights = self.profile_heights
         if self.k_angle == 1:
             # The paper's basis is discontinuous at +-pi: keep the overlap on this side.
             keep = (edges >= -np.pi) & (edges <= np.pi)
             edges, D_edges = edges[keep], D_edges[keep]
-        A, H = np.meshgrid(edges, heights, indexing="ij")
-        D = np.repeat(D_edges, PROFILE_HEIGHTS).reshape(A.shape)
-        target = np.sqrt(D**2 + H**2).ravel()
-        cap = np.sqrt(np.minimum(D, NAVIGATION_REACH_SHARE * self.p.focus_range) ** 2 + H**2).ravel()
-        body = np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + H**2).ravel()
+        # Rows edge by edge, PROFILE_HEIGHTS heights each (the values of a meshgrid, formed
+        # per edge and per height: a group's rows took 0.4 ms of small arrays).
+        n_rows = edges.size * PROFILE_HEIGHTS
+        H_rows = np.tile(heights, edges.size)
+        target = np.sqrt((D_edges**2)[:, None] + (heights**2)[None, :]).ravel()
+        reach = np.minimum(D_edges, NAVIGATION_REACH_SHARE * self.p.focus_range)
+        cap = np.sqrt((reach**2)[:, None] + (heights**2)[None, :]).ravel()
+        body = np.tile(np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + heights**2), edges.size)
         keep_off = np.minimum(body, target - 1e-6)
-        nearest = np.sqrt(np.min(D, axis=0) ** 2 + heights**2)
-        floor_flat = np.minimum((FLAT_SHARE * nearest)[None, :].repeat(A.shape[0], axis=0).ravel(), target - 1e-6)
+        nearest = np.sqrt(D_edges.min(keepdims=True) ** 2 + heights**2)
+        floor_flat = np.minimum(np.tile(FLAT_SHARE * nearest, edges.size), target - 1e-6)
         # The crossing line in local angle terms about the segment's middle, where they are
         # well conditioned: 1, cos(da) - 1, sin(da), h (linear basis: 1, da, h).
         middle = (first + end) / 2.0 * width - np.pi
-        delta = A.ravel() - middle
+        delta = edges - middle
         local = [delta] if self.k_angle == 1 else [np.cos(delta) - 1.0, np.sin(delta)]
-        rows = np.column_stack([np.ones(target.size), *local, H.ravel()])
+        rows = np.empty((n_rows, 2 + len(local)))
+        rows[:, 0] = 1.0
+        for column, values in enumerate(local, start=1):
+            rows[:, column] = np.repeat(values, PROFILE_HEIGHTS)
+        rows[:, -1] = H_rows
 
-        c = self.crossing_slope(self.segment_ray_samples(first, end, sample_bin, n_bins), float(np.median(D_bins)))
+        c = self.crossing_slope(self.segment_ray_samples(first, end, n_bins), _median(D_bins))
         # Half the pan-weight budget is left to the side pieces that switch the group off.
         bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
         bound_h = self.p.b_max / c
@@ -394,7 +407,8 @@ class _Fitter:
             lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
             upper = np.array([np.inf, 0.0, bound_angle, bound_h])
         centres = []
-        heights_of_rows = H.ravel()
+        heights_of_rows = H_rows
+        low, high = self.robot.floor_h, self.robot.body_band[1]
         for j in range(count):
             # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
             # in h, and the group's crossing (the farthest of its pieces') follows it with one
@@ -424,11 +438,13 @@ class _Fitter:
             # Nor may it dip below (nearly) the segment's nearest obstacle at that height, which
             # a flat crossing would keep: a tilt that gains far away must not cost near by.
             # Each floor is dropped again if it makes the programme infeasible.
-            floors = [np.maximum(keep_off, floor_flat)[chosen], keep_off[chosen], None]
-            for floor in floors:
-                if floor is None:
+            for floor_kind in ("flat", "body", None):  # each formed only if the one before fails
+                if floor_kind is None:
                     result = solve_lp(objective, A_ub, b_ub, lower, upper)
                 else:
+                    floor = keep_off[chosen]
+                    if floor_kind == "flat":
+                        floor = np.maximum(floor, floor_flat[chosen])
                     result = solve_lp(objective, np.vstack([A_ub, -rows[chosen]]),
                                       np.concatenate([b_ub, -np.minimum(floor, cap[chosen])]), lower, upper)
                 if result.status == 0:
@@ -455,7 +471,7 @@ class _Fitter:
             centres.append(self.project(piece))
         return centres
 
-    def segment_ray_samples(self, first: int, end: int, sample_bin: NDArray[np.intp], n_bins: int) -> NDArray[np.intp]:
+    def segment_ray_samples(self, first: int, end: int, n_bins: int) -> NDArray[np.intp]:
         """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
 
         Only the samples on rays near their feature say how sharp a crossing is; the robot
@@ -465,7 +481,7 @@ class _Fitter:
         """
         if self._ray_groups is None or self._ray_groups[1].size != n_bins + 1:
             rays = np.flatnonzero(self.on_rays)
-            order, bounds = group_by_bin(sample_bin[rays], n_bins)
+            order, bounds = group_by_bin(angle_bins(self.samples.alpha[rays], n_bins), n_bins)
             self._ray_groups = (rays[order], bounds)
         grouped, bounds = self._ray_groups
         start, length = first % n_bins, end - first
@@ -482,14 +498,15 @@ class _Fitter:
         r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
         x = s.r[rows] - r_star
         y = s.m[rows] - self.p.level
-        w = self.w[rows]
+        w = base = self.w[rows]
+        hit = self.hit[rows]
         c = 1.0
         for _ in range(4):
             denominator = float(np.dot(w, x * x))
             if denominator <= 0:
                 break
             c = float(np.dot(w, x * y)) / denominator
-            w = self.irls_weights(c * x - y, self.w[rows], self.hit[rows])
+            w = self.irls_weights(c * x - y, base, hit)
         return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
 
     def side_piece(self, centre: FloatArray, angle: float, direction: int) -> FloatArray:
@@ -586,6 +603,18 @@ class _Fitter:
         self.prediction = F
         return MinMaxTree(self.basis, W, root), history
 
+
+
+def _median(values: FloatArray) -> float:
+    """``float(np.median(values))`` of a few finite values, without its general machinery:
+    the middle value, or the mean of the middle two (their sum halved, as np.mean takes it)."""
+    if values.size == 0 or not np.isfinite(values).all():
+        return float(np.median(values))
+    ordered = np.sort(values)
+    half = values.size // 2
+    if values.size % 2:
+        return float(ordered[half])
+    return float((ordered[half - 1] + ordered[half]) / 2.0)
 
 
 def pan_weight(a1: float, a2: float) -> float:

@@ -21,14 +21,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
-from occtool.features import Features
+from occtool.features import FeatureGeometry, Features
 from occtool.fit._construction import ProgressCallback, _Fitter
-from occtool.fit._focus import focused_with_frontier
+from occtool.fit._focus import focused_blocks
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
 from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard
 from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT
 from occtool.robot import Robot
-from occtool.sensor import SAMPLE_KINDS, SensorModel
+from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
 from occtool.tree import BASES, InverseTree, MinMaxTree, Op
 
 log = logging.getLogger("occtool.fit")
@@ -57,8 +57,9 @@ FIT_FEATURES = 1_000_000
 def features_digest(features: Features) -> str:
     """sha256 of the features' points and evidence (little-endian float64), hex."""
     digest = hashlib.sha256()
-    digest.update(np.ascontiguousarray(features.points, dtype="<f8").tobytes())
-    digest.update(np.ascontiguousarray(features.evidence, dtype="<f8").tobytes())
+    # The arrays' own buffers, not copies of them as bytes (a million features: 32 MB).
+    digest.update(np.ascontiguousarray(features.points, dtype="<f8").data.cast("B"))
+    digest.update(np.ascontiguousarray(features.evidence, dtype="<f8").data.cast("B"))
     return digest.hexdigest()
 
 
@@ -293,35 +294,47 @@ class OccupancyRegressor:
         rng = np.random.default_rng(self.seed)
         if len(features) == 0:
             raise InputError("no features to fit")
+        # Pan angles and distances of the features, computed once for the screen, the guard,
+        # the samples and the range profile.
+        geometry = FeatureGeometry.of(features)
         screen = screen_features(features, sensor, robot, basis=self.basis, focus=self.focus,
-                                 focus_range=self.focus_range)
-        usable = features.select(~screen.mismatch) if screen.mismatch.any() else features
+                                 focus_range=self.focus_range, geometry=geometry)
+        keep: NDArray[np.intp] | None = np.flatnonzero(~screen.mismatch) if screen.mismatch.any() else None
         guard = None
         if self.guard:
             mask, scale, spacing = guarded_mask(features, screen, robot, level=self.level, focus=self.focus,
-                                                focus_range=self.focus_range)
-            points = features.points[mask]
-            guard = build_guard(np.arctan2(points[:, 1], points[:, 0]),
-                                np.hypot(points[:, 0], points[:, 1]) * scale[mask], self.level,
-                                reach=SPREAD_SHARE * spacing)
+                                                focus_range=self.focus_range, geometry=geometry)
+            guarded = np.flatnonzero(mask)  # a few hundred of a million features
+            guard = build_guard(geometry.alpha.take(guarded), geometry.horizontal.take(guarded) * scale.take(guarded),
+                                self.level, reach=SPREAD_SHARE * spacing)
         # The line-of-sight index served the screen and the guard; the samples need none of
         # it (at 10M features it holds 250 MB).
         screen = replace(screen, sight=None)
         origin = screen.origin
-        if len(usable) > FIT_FEATURES:
+        usable_count = len(features) if keep is None else keep.size
+        if usable_count > FIT_FEATURES:
             # The pieces are placed from an even subsample: a few dozen linear pieces need no
             # more, and the samples of every feature would not fit in memory (10M features:
             # 50M samples, 5 GB). The screen and the return guard above saw every feature.
-            usable = usable.select(np.arange(0, len(usable), -(-len(usable) // FIT_FEATURES)))
+            subsample = np.arange(0, usable_count, -(-usable_count // FIT_FEATURES))
+            keep = subsample if keep is None else keep[subsample]
+        if keep is None:
+            usable = features
+        else:
+            usable = features.select(keep)
+            geometry = geometry.select(keep, usable.points)
         # The samples with their pan angles measured from the origin, as the fit bins them.
-        turned = sensor._samples(usable, robot, rng, turn=origin)
-        if turned.count("hit") + turned.count("near") + turned.count("floor") == 0:
+        blocks = sensor._sample_blocks(usable, robot, rng, turn=origin, geometry=geometry)
+        if sum(block.count(SAMPLE_KINDS[kind]) for block in blocks for kind in ("hit", "near", "floor")) == 0:
             raise InputError("no features left to fit (every feature was dropped as floor)")
-
         if self.focus:
-            turned = focused_with_frontier(turned, robot, self.focus_range, planar=screen.planar,
-                                           floor_is_obstacle=sensor.floor == "obstacle")
-        fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin),
+            # Only the samples the focus keeps are written (focused_with_frontier, in one pass).
+            turned = focused_blocks(blocks, robot, self.focus_range, planar=screen.planar,
+                                    floor_is_obstacle=sensor.floor == "obstacle")
+        else:
+            turned = Samples.of_blocks(blocks)
+        del blocks
+        fitter = _Fitter(self, turned, robot, profile_returns(usable, sensor, robot, origin, geometry),
                          floor_is_obstacle=sensor.floor == "obstacle", depth_error=sensor.depth_error,
                          progress=progress)
         tree, loss_history = fitter.run()

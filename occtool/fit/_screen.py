@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool import guard as guard_module
-from occtool.features import Features, wrap_angle
+from occtool.features import FeatureGeometry, Features
 from occtool.fit._profile import NEAR_SUPPORT_DISTANCE, mean_direction, order_within_bins
 from occtool.fit._sight import SightIndex, contradicted_features, sight_index
 from occtool.guard import GUARD_BINS, Support, guard_candidates, is_planar_scan, ray_spacing, support_count
@@ -51,8 +51,9 @@ class Screen:
 
 
 def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, basis: str, focus: bool,
-                    focus_range: float) -> Screen:
-    """Which features are obstacles, which are mismatches, and the fit's pan origin."""
+                    focus_range: float, geometry: FeatureGeometry | None = None) -> Screen:
+    """Which features are obstacles, which are mismatches, and the fit's pan origin
+    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
     # Mismatches a few centimetres apart can pass for a small obstacle; where other
     # rays in nearly the same direction see through them, they are dropped. Floor
     # features are not obstacles, and grazing rays see "through" them all the time.
@@ -60,31 +61,36 @@ def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, ba
     # at the mean direction of the obstacle features makes the whole fit (the mismatch
     # test included) turn with the scene: rotating the features rotates the model
     # exactly, not up to a bin.
-    obstacle = sensor.is_obstacle(features, robot) & ~sensor.is_floor(features.height, robot)
-    origin = mean_direction(features.alpha[obstacle]) if basis == "trig" else 0.0
+    geometry = FeatureGeometry.of(features) if geometry is None else geometry
+    obstacle = sensor.is_obstacle(features, robot, geometry=geometry) & ~sensor.is_floor(features.points[:, 2], robot)
+    obstacle_index = np.flatnonzero(obstacle)
+    origin = mean_direction(geometry.alpha.take(obstacle_index)) if basis == "trig" else 0.0
     # A planar scan (a 2D laser) has one beam per direction: a beam passing beside a
     # return says only that the object is narrower than the beam spacing, never that
     # the return is a mismatch (a chair leg is often hit by a single beam).
-    planar = is_planar_scan(features.height[obstacle])
+    planar = is_planar_scan(features.points[:, 2].take(obstacle_index))
     mismatch = np.zeros(len(features), dtype=bool)
     if focus and not planar:
         # Only features the focus keeps can mislead the fit: test those alone.
-        horizontal = np.hypot(features.points[:, 0], features.points[:, 1])
-        candidates = obstacle & (horizontal <= focus_range)
-        sight = sight_index(features, origin)
+        candidates = obstacle & (geometry.horizontal <= focus_range)
+        sight = sight_index(features, origin, geometry=geometry)
         mismatch = contradicted_features(features, origin=origin, candidates=candidates, index=sight)
         return Screen(obstacle, origin, planar, mismatch, sight)
     return Screen(obstacle, origin, planar, mismatch)
 
 
 def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: float, focus: bool,
-                 focus_range: float) -> tuple[NDArray[np.bool_], FloatArray, float]:
+                 focus_range: float, geometry: FeatureGeometry | None = None
+                 ) -> tuple[NDArray[np.bool_], FloatArray, float]:
     """The guarded returns, the share of each feature's distance the guard keeps, and the
-    ray spacing (radians; 0 for a planar scan, whose beams the guard's bins match)."""
-    returns = screen.obstacle & guard_candidates(features, features.evidence, robot, level)
+    ray spacing (radians; 0 for a planar scan, whose beams the guard's bins match)
+    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+    geometry = FeatureGeometry.of(features) if geometry is None else geometry
+    horizontal = geometry.horizontal
+    returns = screen.obstacle & guard_candidates(features, features.evidence, robot, level, horizontal=horizontal)
     if focus:
         # Only as far as the fit reaches: beyond it the model is an extrapolation anyway.
-        returns &= np.hypot(features.points[:, 0], features.points[:, 1]) <= focus_range + robot.radius
+        returns &= horizontal <= focus_range + robot.radius
     if screen.planar:
         # A planar scan has no mismatches of this kind: every return is guarded, as measured.
         return returns, np.ones(len(features)), 0.0
@@ -104,20 +110,20 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # part above it) is a surface.
     index = np.flatnonzero(returns)
     candidates = features.points[index]
-    distance = np.hypot(candidates[:, 0], candidates[:, 1])
+    distance = horizontal[index]
     # Support from returns near enough (in reach and height) to confirm a candidate.
-    x, y, z = features.points.T
+    z = features.points[:, 2]
     low, high = robot.body_band
-    near = (np.hypot(x, y) <= 1.2 * float(distance.max(initial=0.0)) + 0.1) & (
+    near = (horizontal <= 1.2 * float(distance.max(initial=0.0)) + 0.1) & (
         z >= low - SUPPORT_HEIGHT_REACH) & (z <= high + SUPPORT_HEIGHT_REACH)
-    support = features.points[near & screen.obstacle & ~strict & (features.evidence >= level)]
+    support = np.flatnonzero(near & screen.obstacle & ~strict & (features.evidence >= level))
     # Near the robot a surface spans a wide tilt range and many rays end on it, while
     # two mismatches there box the robot in: the count grows as 1 / distance, as the fit's.
     needed = support_count(len(features)) * np.maximum(1.0, NEAR_SUPPORT_DISTANCE / np.maximum(distance, 1e-9))
     # Only a guard bin's nearest confirmed return counts: test each bin's nearest
     # returns first, and farther ones only in bins where none was confirmed yet (a
     # million features: 0.9 s of the fit for the support test of every return).
-    bins = np.mod(np.floor((np.arctan2(candidates[:, 1], candidates[:, 0]) + math.pi)
+    bins = np.mod(np.floor((geometry.alpha[index] + math.pi)
                            * (GUARD_BINS / (2.0 * math.pi))).astype(np.int64), GUARD_BINS)
     order, bounds = order_within_bins(bins, distance, GUARD_BINS)
     starts = bounds[:-1]
@@ -125,9 +131,12 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     rank[order] = np.arange(order.size) - starts[bins[order]]
     confirmed = np.zeros(index.size, dtype=bool)
     settled = np.zeros(GUARD_BINS, dtype=bool)
-    confirming = Support(support, spacing)
+    confirming = Support.of_rows(features.points, support, spacing)
     # The neighbours each test found, for the seen-from-above test of the confirmed returns
-    # (one query for both where it can serve both).
+    # (one query for both where it can serve both). Only the first test shares its query:
+    # each bin's nearest returns are mostly kept (10k features: 3,079 of 3,261), farther ones
+    # seldom (a million: 499 of 132k), so those ask for no more neighbours than they need
+    # (the kept ones are then queried again, and the same neighbours found).
     found: list[tuple[NDArray[np.intp], Neighbours]] = []
     low_rank, chunk = 0, GUARD_TEST_CHUNK
     while low_rank < max(int(rank.max(initial=-1)) + 1, 0):
@@ -135,7 +144,8 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
         if not tested.any():
             break
         chosen = np.flatnonzero(tested)
-        confirmed[chosen], neighbours = confirming._confirmed(candidates[chosen], needed[chosen], steep=True)
+        confirmed[chosen], neighbours = confirming._confirmed(candidates[chosen], needed[chosen],
+                                                              steep=low_rank == 0)
         if neighbours is not None:
             found.append((chosen, neighbours))
         settled[bins[chosen[confirmed[chosen]]]] = True
@@ -146,43 +156,49 @@ def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: flo
     # its front (at 1k features the blanket shrink cost 0.07 IoU).
     scale = np.ones(len(features))
     kept = np.flatnonzero(returns)  # index[confirmed]: returns was index before the test
-    tops = confirming.seen_from_above(features.points[kept], _neighbours_of(np.flatnonzero(confirmed), found))
+    tops = confirming.seen_from_above(features.points[kept],
+                                      _neighbours_of(np.flatnonzero(confirmed), found, confirming, candidates))
     scale[kept[tops]] = max(0.0, 1.0 - guard_module.SPACING_FACTOR * spacing)
     return returns, scale, spacing
 
 
-def _neighbours_of(positions: NDArray[np.intp],
-                   found: list[tuple[NDArray[np.intp], Neighbours]]) -> Neighbours | None:
-    """The neighbours found for the candidates at ``positions``, in that order, if every
-    one of them has its neighbours among ``found`` (chunks of positions and their query)."""
+def _neighbours_of(positions: NDArray[np.intp], found: list[tuple[NDArray[np.intp], Neighbours]],
+                   support: Support, candidates: FloatArray) -> Neighbours | None:
+    """The neighbours :meth:`Support.seen_from_above` needs for the candidates at
+    ``positions`` (rows of ``candidates``), in that order: those ``found`` (chunks of
+    positions and their query) copied, the rest queried (none found: None)."""
     if not found:
         return None
-    total = sum(chosen.size for chosen, _ in found)
+    size = max(int(positions.max(initial=-1)) + 1, max(int(c.max(initial=-1)) + 1 for c, _ in found))
+    chunk_of = np.full(size, -1)
+    row_of = np.zeros(size, dtype=np.intp)
+    for number, (chosen, _) in enumerate(found):
+        chunk_of[chosen] = number
+        row_of[chosen] = np.arange(chosen.size)
+    chunks, rows = chunk_of[positions], row_of[positions]
     k = found[0][1][0].shape[1]
-    where = np.full(max(int(positions.max(initial=-1)) + 1, max(int(c.max(initial=-1)) + 1 for c, _ in found)), -1)
-    distance = np.empty((total, k))
-    index = np.empty((total, k), dtype=np.intp)
-    start = 0
-    for chosen, (chunk_distance, chunk_index) in found:
-        where[chosen] = np.arange(start, start + chosen.size)
-        distance[start:start + chosen.size] = chunk_distance
-        index[start:start + chosen.size] = chunk_index
-        start += chosen.size
-    rows = where[positions]
-    if (rows < 0).any():
-        return None
-    return distance[rows], index[rows]
+    distance = np.empty((positions.size, k))
+    index = np.empty((positions.size, k), dtype=np.intp)
+    for number, (_, (chunk_distance, chunk_index)) in enumerate(found):
+        mine = np.flatnonzero(chunks == number)
+        distance[mine] = chunk_distance[rows[mine]]
+        index[mine] = chunk_index[rows[mine]]
+    missing = np.flatnonzero(chunks < 0)
+    if missing.size:
+        distance[missing], index[missing] = support.steep_neighbours(candidates[positions[missing]])
+    return distance, index
 
 
 def profile_returns(features: Features, sensor: SensorModel, robot: Robot,
-                    origin: float) -> tuple[FloatArray, FloatArray]:
+                    origin: float, geometry: FeatureGeometry | None = None) -> tuple[FloatArray, FloatArray]:
     """Turned pan angle and horizontal distance of the returns the range profile is made of:
     the features that give hit samples, in the body band (from the floor up when the
-    floor is an obstacle)."""
+    floor is an obstacle) (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`,
+    if held)."""
+    geometry = FeatureGeometry.of(features) if geometry is None else geometry
     low, high = robot.body_band
     if sensor.floor == "obstacle":
         low = -np.inf
     z = features.points[:, 2]
-    chosen = sensor.is_obstacle(features, robot) & (z >= low) & (z <= high)
-    points = features.points[chosen]
-    return wrap_angle(np.arctan2(points[:, 1], points[:, 0]) - origin), np.hypot(points[:, 0], points[:, 1])
+    chosen = np.flatnonzero(sensor.is_obstacle(features, robot, geometry=geometry) & (z >= low) & (z <= high))
+    return geometry.turned(origin).take(chosen), geometry.horizontal.take(chosen)
