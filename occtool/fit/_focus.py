@@ -155,7 +155,7 @@ def focused_blocks(blocks: list[SampleBlock], robot: Robot, focus_range: float, 
             continue
         distance, bins, always = measures
         if id(bins) not in limits:
-            limits[id(bins)] = limit[bins]
+            limits[id(bins)] = limit.take(bins)
         keep = (block.h >= low) & (block.h <= high) & (distance <= limits[id(bins)])
         if not isinstance(always, bool):
             keep |= always

@@ -93,15 +93,15 @@ class SortedRays:
         bucket = self._buckets(queries)
         # Every key of a lower bucket lies below the query, every key of a higher one above
         # it: the answer lies among the keys of the query's own bucket.
-        index, end = self.first[bucket], self.first[bucket + 1]
+        index, end = self.first.take(bucket), self.first.take(bucket + 1)
         keys = self.keys
         open_ = np.flatnonzero(index < end)
         while open_.size:
-            at = index[open_]
-            below = keys[at] < queries[open_] if side == "left" else keys[at] <= queries[open_]
+            at, asked = index.take(open_), queries.take(open_)
+            below = keys.take(at) < asked if side == "left" else keys.take(at) <= asked
             open_ = open_[below]
             index[open_] += 1
-            open_ = open_[index[open_] < end[open_]]
+            open_ = open_[index.take(open_) < end.take(open_)]
         return index
 
     def pairs(self, low: NDArray[np.floating[Any]],
@@ -149,7 +149,7 @@ def sight_index(features: Features, origin: float = 0.0, *, geometry: FeatureGeo
     ray_bin = np.repeat(np.arange(SIGHT_BINS), n_rays)
     slot = np.arange(ray_bin.size) - np.repeat(np.cumsum(n_rays) - n_rays, n_rays)
     rays = order[starts[ray_bin] + slot * step[ray_bin]]
-    tested = np.flatnonzero(counts[bins] >= 3)
+    tested = np.flatnonzero(counts.take(bins) >= 3)
     # A ray passes a feature when it ends beyond it (d > D + window) and its height at the
     # feature's distance, z D / d, lies within `within` of the feature's: an interval of
     # the ray's elevation z / d. With the rays sorted by bin, then elevation (as an angle,
@@ -209,9 +209,10 @@ def contradicted_features(features: Features, origin: float = 0.0,
         D_safe = np.maximum(D, 1e-12)
         owner, pair_ray = by_elevation.pairs(4.0 * bins[block] + np.arctan((H - within) / D_safe) - 1e-9,
                                              4.0 * bins[block] + np.arctan((H + within) / D_safe) + 1e-9)
-        d, z, D_pair = by_elevation.distance[pair_ray], by_elevation.h[pair_ray], D[owner]
+        # (np.take: the same gathers, a fifth faster than fancy indexing on millions of pairs.)
+        d, z, D_pair = by_elevation.distance.take(pair_ray), by_elevation.h.take(pair_ray), D.take(owner)
         with np.errstate(divide="ignore", invalid="ignore"):
-            passes = (d > D_pair + window[owner]) & (np.abs(z * D_pair / d - H[owner]) < within[owner])
+            passes = (d > D_pair + window.take(owner)) & (np.abs(z * D_pair / d - H.take(owner)) < within.take(owner))
         beyond = np.bincount(owner, weights=passes, minlength=block.size)
         maybe = np.flatnonzero(beyond >= ratio)
         if maybe.size == 0:
@@ -219,8 +220,8 @@ def contradicted_features(features: Features, origin: float = 0.0,
         D, H, window, within, beyond = D[maybe], H[maybe], window[maybe], within[maybe], beyond[maybe]
         owner, pair_ray = by_distance.pairs(bins[block[maybe]] * lane + (D - window) - 1e-9,
                                             bins[block[maybe]] * lane + (D + window) + 1e-9)
-        ends_near = (np.abs(by_distance.distance[pair_ray] - D[owner]) <= window[owner]) & (
-            np.abs(by_distance.h[pair_ray] - H[owner]) < within[owner])
+        ends_near = (np.abs(by_distance.distance.take(pair_ray) - D.take(owner)) <= window.take(owner)) & (
+            np.abs(by_distance.h.take(pair_ray) - H.take(owner)) < within.take(owner))
         near = np.maximum(np.bincount(owner, weights=ends_near, minlength=maybe.size), 1)
         contradicted[block[maybe]] = beyond >= np.maximum(ratio, ratio * near)
     return contradicted
