@@ -95,6 +95,25 @@ def test_a_chair_leg_hit_by_one_beam_closes_the_map_around_it():
     assert unguarded.guard_ is None
 
 
+def test_pieces_placed_from_a_subsample_leave_the_guard_every_return(monkeypatch):
+    # Large positions place their pieces from an even subsample (FIT_FEATURES): here every 4th
+    # beam, which misses both beams on the chair leg; the guard still sees them.
+    import occtool.fit._regressor as regressor_module
+
+    features = laser_scan((-3.0, 3.0, -3.0, 3.0), [(0.8, 0.0, 0.015)], n_beams=180)
+    leg = np.flatnonzero(np.hypot(features.points[:, 0] - 0.8, features.points[:, 1]) < 0.05)
+    assert leg.size and not np.any(leg % 4 == 0)
+    monkeypatch.setattr(regressor_module, "FIT_FEATURES", 45)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        unguarded = OccupancyRegressor(robot=LASER_ROBOT, guard=False).fit(features).navigation_map()
+        nav = OccupancyRegressor(robot=LASER_ROBOT).fit(features).navigation_map()
+    leg_disc = shapely.Point(0.8, 0.0).buffer(LASER_ROBOT.radius * 0.99)
+    assert unguarded.polygon.intersects(leg_disc)  # the pieces alone never saw the leg
+    assert not nav.polygon.intersects(leg_disc)
+    assert returns_near_polygon(features, nav.polygon, LASER_ROBOT) == 0
+
+
 def test_a_planar_scan_is_recognised():
     assert is_planar_scan(np.zeros(10)) and is_planar_scan(np.full(3, 0.004) * np.arange(3))
     assert not is_planar_scan(np.array([-0.5, 0.0])) and not is_planar_scan(np.empty(0))
