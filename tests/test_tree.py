@@ -154,9 +154,9 @@ def test_the_inverse_of_a_single_piece_and_non_finite_inputs():
 
 @pytest.mark.parametrize("block", [1, 7, 64])
 def test_the_inverse_in_blocks_and_flattened(monkeypatch, block):
-    import occtool.tree
+    import occtool.tree._inverse
 
-    monkeypatch.setattr(occtool.tree, "INVERSE_BLOCK", block)
+    monkeypatch.setattr(occtool.tree._inverse, "INVERSE_BLOCK", block)
     inverse = shared_weight_tree(11).inverse()
     rng = np.random.default_rng(0)
     for alpha, h, m in [
@@ -202,10 +202,10 @@ def plain_horizontal_bound(inverse: InverseTree, lo, hi, h_edges, m) -> np.ndarr
 @pytest.mark.parametrize("block", [1, 300, 1000, None])  # 1, 3 and 10 angles a block, all
 @pytest.mark.parametrize("basis", ["trig", "linear"])
 def test_the_horizontal_lower_bound_in_blocks_is_every_piece_in_every_box(monkeypatch, block, basis):
-    import occtool.tree
+    import occtool.tree._inverse
 
     if block is not None:
-        monkeypatch.setattr(occtool.tree, "INVERSE_BLOCK", block)
+        monkeypatch.setattr(occtool.tree._inverse, "INVERSE_BLOCK", block)
     rng = np.random.default_rng(block or 0)
     for make in (random_tree, shared_weight_tree):
         model = make(3, basis)
@@ -247,7 +247,7 @@ TURN_EDGES = [0.0, -0.0, 2 * np.pi, -2 * np.pi, 4 * np.pi, np.pi, -np.pi, 3 * np
     shift=st.sampled_from([0.0, 2 * np.pi, -2 * np.pi, 1e-16, -1e-16]),
 )
 def test_an_angle_within_an_interval_is_what_np_mod_says(angles, starts, shift):
-    from occtool.tree import _within_turn
+    from occtool.tree._inverse import _within_turn
 
     angle = np.array(angles)[:, None]
     given_start, width = np.array(starts).T
