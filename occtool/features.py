@@ -61,6 +61,16 @@ def wrap_angle(alpha: ArrayLike) -> FloatArray:
     return wrapped
 
 
+def _pan_angle(points: FloatArray) -> FloatArray:
+    """``atan2(y, x)`` of ``(N, 3)`` points: one formula for Features and FeatureGeometry."""
+    return np.arctan2(points[:, 1], points[:, 0])
+
+
+def _distance(points: FloatArray) -> FloatArray:
+    """``|p|`` of ``(N, 3)`` points (the same bits wherever a fit or a map asks)."""
+    return np.sqrt(np.einsum("ij,ij->i", points, points))
+
+
 @dataclass(frozen=True, eq=False)
 class Features:
     """Range features registered from one robot position.
@@ -136,7 +146,7 @@ class Features:
     @property
     def alpha(self) -> FloatArray:
         """Pan angle ``atan2(y, x)`` in radians, in (-pi, pi]."""
-        return np.arctan2(self.points[:, 1], self.points[:, 0])
+        return _pan_angle(self.points)
 
     @property
     def height(self) -> FloatArray:
@@ -146,7 +156,7 @@ class Features:
     @property
     def range(self) -> FloatArray:
         """Distance ``|p|`` from the sensor, metres."""
-        return np.sqrt(np.einsum("ij,ij->i", self.points, self.points))
+        return _distance(self.points)
 
     def polar(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Return ``(alpha, h, r)``, the paper's robot-centred coordinates (:func:`polar`)."""
@@ -196,7 +206,7 @@ class FeatureGeometry:
     @cached_property
     def alpha(self) -> FloatArray:
         """Pan angle ``atan2(y, x)``, as :attr:`Features.alpha`."""
-        return np.arctan2(self.points[:, 1], self.points[:, 0])
+        return _pan_angle(self.points)
 
     @cached_property
     def h(self) -> FloatArray:
@@ -206,7 +216,7 @@ class FeatureGeometry:
     @cached_property
     def r(self) -> FloatArray:
         """Distance ``|p|`` from the sensor, as :attr:`Features.range`."""
-        return np.sqrt(np.einsum("ij,ij->i", self.points, self.points))
+        return _distance(self.points)
 
     @cached_property
     def horizontal(self) -> FloatArray:

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -60,6 +62,24 @@ class _Reduce:
     source: int
 
 
+
+def _compile_parts(steps: list[Any], op: str, level: int, parts: list[Any],
+                   compile_node: Callable[[Node, int], int], leaf: Callable[[Any, int], Any]) -> int:
+    """Append the steps of a node's ``parts`` (leaf runs and child nodes): the first into buffer
+    ``level``, each later one into ``level + 1`` and reduced into ``level`` by ``op``; returns
+    the deepest buffer used. ``leaf(part, target)`` makes a leaf run's step."""
+    deepest = level
+    for index, part in enumerate(parts):
+        target = level if index == 0 else level + 1
+        if isinstance(part, tuple):
+            steps.append(leaf(part, target))
+        else:
+            deepest = max(deepest, compile_node(part, target))
+        if index:
+            deepest = max(deepest, target)
+            steps.append(_Reduce(op, level, target))
+    return deepest
+
 class _Program:
     """An inverse tree compiled for inputs whose ``h``/``m`` part varies over ``columns``.
 
@@ -90,17 +110,8 @@ class _Program:
                 groups.setdefault(int(self.rest_of[child]), []).append(child)
         parts: list[Node | tuple[int, list[int]]] = [
             *groups.items(), *(c for c in node.children if not isinstance(c, int))]
-        deepest = level
-        for index, part in enumerate(parts):
-            target = level if index == 0 else level + 1
-            if isinstance(part, tuple):
-                self.steps.append(_Leaves(np.array(part[1]), node.op, part[0], target))
-            else:
-                deepest = max(deepest, self._compile(part, target))
-            if index:
-                deepest = max(deepest, target)
-                self.steps.append(_Reduce(node.op, level, target))
-        return deepest
+        return _compile_parts(self.steps, node.op, level, parts, self._compile,
+                              lambda part, target: _Leaves(np.array(part[1]), node.op, part[0], target))
 
 
 def _within_turn(angle: FloatArray, start: FloatArray, width: FloatArray) -> NDArray[np.bool_]:
@@ -187,17 +198,8 @@ class _RowProgram:
         parts: list[Node | tuple[int, int]] = [
             *_consecutive_runs([c for c in node.children if isinstance(c, int)]),
             *(c for c in node.children if not isinstance(c, int))]
-        deepest = level
-        for index, part in enumerate(parts):
-            target = level if index == 0 else level + 1
-            if isinstance(part, tuple):
-                self.steps.append(_Rows(node.op, part[0], part[1], target))
-            else:
-                deepest = max(deepest, self._compile(part, target))
-            if index:
-                deepest = max(deepest, target)
-                self.steps.append(_Reduce(node.op, level, target))
-        return deepest
+        return _compile_parts(self.steps, node.op, level, parts, self._compile,
+                              lambda part, target: _Rows(node.op, part[0], part[1], target))
 
     @staticmethod
     def _groups(node: Op, level: int) -> _Groups | None:
