@@ -8,15 +8,16 @@ import pytest
 import occtool.fit._focus as focus_module
 import occtool.fit._profile as profile_module
 import occtool.guard as guard_module
-from occtool.features import Features, wrap_angle
+from occtool.features import FeatureGeometry, Features, wrap_angle
 from occtool.fit import focus_samples, frontier_samples, join_samples, sorted_within_bins
 from occtool.fit._focus import focused_blocks, focused_with_frontier
 from occtool.fit._profile import first_obstacle_distance_in_bins, order_within_bins
-from occtool.fit._screen import _neighbours_of
+from occtool.fit._screen import _neighbours_of, screen_features
 from occtool.fit._sight import SortedRays
 from occtool.guard import Support
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
+from occtool.simulate import simulate_scene
 from occtool.tree import EVALUATION_CHUNK, MinMaxTree, Op
 
 ROBOT = Robot()
@@ -173,6 +174,19 @@ def test_one_support_query_serves_the_seen_from_above_test():
     np.testing.assert_array_equal(confirmed, support.confirmed(points[:500], 6))
     np.testing.assert_array_equal(support.seen_from_above(points[:500], neighbours),
                                   support.seen_from_above(points[:500]))
+
+
+def test_screening_some_features_gives_those_the_answer_of_screening_all():
+    features, _ = simulate_scene("office", n_features=6000, seed=3)
+    geometry = FeatureGeometry.of(features)
+    screened = np.random.default_rng(0).random(len(features)) < 0.3
+    options = dict(basis="trig", focus=True, focus_range=4.0, geometry=geometry)
+    every = screen_features(features, SensorModel(), ROBOT, **options)
+    some = screen_features(features, SensorModel(), ROBOT, screened=screened, **options)
+    assert every.mismatch[screened].any() and every.mismatch[~screened].any()
+    np.testing.assert_array_equal(some.mismatch, every.mismatch & screened)
+    np.testing.assert_array_equal(some.obstacle, every.obstacle)
+    assert some.origin == every.origin
 
 
 def test_support_of_rows_is_the_support_of_those_points(monkeypatch):

@@ -25,7 +25,7 @@ from occtool.features import FeatureGeometry, Features
 from occtool.fit._construction import ProgressCallback, _Fitter
 from occtool.fit._focus import focused_blocks
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
-from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard
+from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard, guard_candidates
 from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples, SensorModel
@@ -49,11 +49,12 @@ DEFAULT_FOCUS_RANGE = 4.0
 #: infinite corridor 0.915 -> 0.947; the mean polygon within 1.5 m about 3 % smaller (Intel
 #: 1.47 -> 1.42 m2), none less safe. (The fused map keeps 4 m: docs/map.md.)
 PLANAR_FOCUS_RANGE = 8.0
-#: Features the pieces are placed from, at most (an even subsample beyond; the screen and the
-#: return guard see every feature). Measured at 1M features, 7 scenes (seeds 0-2 for the
-#: office, 0-1 for the aisle): 250k instead of 1M changed IoU by -0.013..+0.013 and made
-#: the office safer (violation 0.60 % -> 0.01 % at seed 0, 0.36 % -> 0.03 % at seed 2), in
-#: about half the fit's time.
+#: Features the pieces are placed from, at most (every ``ceil(n / FIT_FEATURES)``-th
+#: beyond, less its mismatches; the return guard sees every feature). Measured at 1M
+#: features, 7 scenes (seeds 0-2 for the office, 0-1 for the aisle): 250k instead of 1M
+#: changed IoU by -0.013..+0.013 in about half the fit's time. (The office's collision
+#: then depended on which quarter was drawn, 0-0.56 %, until the guard's subsampled
+#: support was mended: docs/method.md, "Large positions".)
 FIT_FEATURES = 250_000
 
 
@@ -300,9 +301,18 @@ class OccupancyRegressor:
         # Pan angles and distances of the features, computed once for the screen, the guard,
         # the samples and the range profile.
         geometry = FeatureGeometry.of(features)
+        # A large position places its pieces from every `step`-th feature (FIT_FEATURES): only
+        # those, and the returns the guard may hold, need the mismatch test.
+        step = -(-len(features) // FIT_FEATURES)
+        screened = None
+        if step > 1:
+            screened = np.zeros(len(features), dtype=bool)
+            screened[::step] = True
+            if self.guard:
+                screened |= guard_candidates(features, features.evidence, robot, self.level,
+                                             horizontal=geometry.horizontal)
         screen = screen_features(features, sensor, robot, basis=self.basis, focus=self.focus,
-                                 focus_range=self.focus_range, geometry=geometry)
-        keep: NDArray[np.intp] | None = np.flatnonzero(~screen.mismatch) if screen.mismatch.any() else None
+                                 focus_range=self.focus_range, geometry=geometry, screened=screened)
         guard = None
         if self.guard:
             mask, scale, spacing = guarded_mask(features, screen, robot, level=self.level, focus=self.focus,
@@ -314,13 +324,15 @@ class OccupancyRegressor:
         # it (at 10M features it holds 250 MB).
         screen = replace(screen, sight=None)
         origin = screen.origin
-        usable_count = len(features) if keep is None else keep.size
-        if usable_count > FIT_FEATURES:
+        keep: NDArray[np.intp] | None = None
+        if step > 1:
             # The pieces are placed from an even subsample: a few dozen linear pieces need no
             # more, and the samples of every feature would not fit in memory (10M features:
-            # 50M samples, 5 GB). The screen and the return guard above saw every feature.
-            subsample = np.arange(0, usable_count, -(-usable_count // FIT_FEATURES))
-            keep = subsample if keep is None else keep[subsample]
+            # 50M samples, 5 GB). The return guard above saw every feature.
+            keep = np.arange(0, len(features), step)
+            keep = keep[~screen.mismatch.take(keep)]
+        elif screen.mismatch.any():
+            keep = np.flatnonzero(~screen.mismatch)
         if keep is None:
             usable = features
         else:

@@ -51,9 +51,14 @@ class Screen:
 
 
 def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, basis: str, focus: bool,
-                    focus_range: float, geometry: FeatureGeometry | None = None) -> Screen:
+                    focus_range: float, geometry: FeatureGeometry | None = None,
+                    screened: NDArray[np.bool_] | None = None) -> Screen:
     """Which features are obstacles, which are mismatches, and the fit's pan origin
-    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held).
+
+    ``screened``: the features whose mismatch is asked (default: all); the others are
+    not tested, and not reported as mismatches. A feature's answer does not depend on
+    which others are tested: every feature counts as a ray."""
     # Mismatches a few centimetres apart can pass for a small obstacle; where other
     # rays in nearly the same direction see through them, they are dropped. Floor
     # features are not obstacles, and grazing rays see "through" them all the time.
@@ -73,6 +78,8 @@ def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, ba
     if focus and not planar:
         # Only features the focus keeps can mislead the fit: test those alone.
         candidates = obstacle & (geometry.horizontal <= focus_range)
+        if screened is not None:
+            candidates &= screened
         sight = sight_index(features, origin, geometry=geometry)
         mismatch = contradicted_features(features, origin=origin, candidates=candidates, index=sight)
         return Screen(obstacle, origin, planar, mismatch, sight)
