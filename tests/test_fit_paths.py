@@ -176,6 +176,23 @@ def test_one_support_query_serves_the_seen_from_above_test():
                                   support.seen_from_above(points[:500]))
 
 
+@pytest.mark.parametrize("block", [1 << 16, 97])  # all at once, and in blocks
+def test_support_queries_asked_in_strips_count_each_points_neighbours_within_reach(monkeypatch, block):
+    # Queries are asked in strips of pan angle, not in the points' order: each point's count
+    # is still the brute-force count of support points within reach (embedded distance < 1).
+    monkeypatch.setattr(guard_module, "SUPPORT_QUERY_BLOCK", block)
+    rng = np.random.default_rng(12)
+    a = rng.uniform(-np.pi, np.pi, 2500)
+    points = np.column_stack([np.cos(a), np.sin(a), rng.uniform(-0.5, 0.5, 2500)]) * rng.uniform(0.5, 3.0, (2500, 1))
+    support = Support(points, spacing=0.03)
+    asked = points[rng.permutation(2500)[:600]]
+    needed = rng.integers(1, 9, 600)
+    embedded, asked_embedded = support._embedded(support.points), support._embedded(asked)
+    within = (np.linalg.norm(asked_embedded[:, None, :] - embedded[None, :, :], axis=2) < 1.0).sum(axis=1)
+    assert 0 < (within >= needed).sum() < 600
+    np.testing.assert_array_equal(support.confirmed(asked, needed), within >= needed)
+
+
 def test_screening_some_features_gives_those_the_answer_of_screening_all():
     features, _ = simulate_scene("office", n_features=6000, seed=3)
     geometry = FeatureGeometry.of(features)
