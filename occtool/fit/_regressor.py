@@ -301,6 +301,9 @@ class OccupancyRegressor:
         # Pan angles and distances of the features, computed once for the screen, the guard,
         # the samples and the range profile.
         geometry = FeatureGeometry.of(features)
+        # The returns the guard may hold (computed once for the screen and the guard).
+        may_hold = (guard_candidates(features, features.evidence, robot, self.level, horizontal=geometry.horizontal)
+                    if self.guard else None)
         # A large position places its pieces from every `step`-th feature (FIT_FEATURES): only
         # those, and the returns the guard may hold, need the mismatch test.
         step = -(-len(features) // FIT_FEATURES)
@@ -308,15 +311,15 @@ class OccupancyRegressor:
         if step > 1:
             screened = np.zeros(len(features), dtype=bool)
             screened[::step] = True
-            if self.guard:
-                screened |= guard_candidates(features, features.evidence, robot, self.level,
-                                             horizontal=geometry.horizontal)
+            if may_hold is not None:
+                screened |= may_hold
         screen = screen_features(features, sensor, robot, basis=self.basis, focus=self.focus,
                                  focus_range=self.focus_range, geometry=geometry, screened=screened)
         guard = None
         if self.guard:
             mask, scale, spacing = guarded_mask(features, screen, robot, level=self.level, focus=self.focus,
-                                                focus_range=self.focus_range, geometry=geometry)
+                                                focus_range=self.focus_range, geometry=geometry,
+                                                may_hold=may_hold)
             guarded = np.flatnonzero(mask)  # a few hundred of a million features
             guard = build_guard(geometry.alpha.take(guarded), geometry.horizontal.take(guarded) * scale.take(guarded),
                                 self.level, reach=SPREAD_SHARE * spacing)

@@ -87,14 +87,17 @@ def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, ba
 
 
 def guarded_mask(features: Features, screen: Screen, robot: Robot, *, level: float, focus: bool,
-                 focus_range: float, geometry: FeatureGeometry | None = None
-                 ) -> tuple[NDArray[np.bool_], FloatArray, float]:
+                 focus_range: float, geometry: FeatureGeometry | None = None,
+                 may_hold: NDArray[np.bool_] | None = None) -> tuple[NDArray[np.bool_], FloatArray, float]:
     """The guarded returns, the share of each feature's distance the guard keeps, and the
     ray spacing (radians; 0 for a planar scan, whose beams the guard's bins match)
-    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held)."""
+    (``geometry``: the features' :class:`~occtool.features.FeatureGeometry`, if held;
+    ``may_hold``: their :func:`~occtool.guard.guard_candidates` at ``level``, if held)."""
     geometry = FeatureGeometry.of(features) if geometry is None else geometry
     horizontal = geometry.horizontal
-    returns = screen.obstacle & guard_candidates(features, features.evidence, robot, level, horizontal=horizontal)
+    if may_hold is None:
+        may_hold = guard_candidates(features, features.evidence, robot, level, horizontal=horizontal)
+    returns = screen.obstacle & may_hold
     if focus:
         # Only as far as the fit reaches: beyond it the model is an extrapolation anyway.
         returns &= horizontal <= focus_range + robot.radius
