@@ -1,7 +1,9 @@
-"""The map of a run: a fused map, its raster, the navigation region, obstacles and frontiers.
+"""The map of a run: a fused map, its world map and raster, the navigation region, obstacles and frontiers.
 
-:func:`map_of_run` turns fitted local models and their poses into :class:`RunMap`; the
-writers put it where robots and people look: a Nav2 map (:mod:`occtool.io.nav2`), an
+:func:`map_of_run` turns fitted local models and their poses into :class:`RunMap`: the
+fused map refitted as one :class:`occtool.fuse.WorldMap` (saved as ``world.occmap``)
+and drawn as the Nav2 raster. The writers put it where robots and people look: the
+world map, a Nav2 map (:mod:`occtool.io.nav2`), an
 MCAP that Foxglove draws with its standard schemas (:mod:`occtool.io.foxglove_map`),
 GeoJSON layers with one geometry type each, and a JSON summary (:func:`write_run_map`).
 """
@@ -23,7 +25,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.fuse import FusedMap, Raster
+from occtool.fuse import FusedMap, Raster, WorldMap
 from occtool.io._atomic import atomic_write
 
 FloatArray = NDArray[np.float64]
@@ -47,6 +49,7 @@ class RunMap:
     """Everything ``occtool map`` writes, in the world (``map``) frame."""
 
     fused: FusedMap
+    world: WorldMap
     raster: Raster
     placed: list[PlacedMap]
     navigation: Any
@@ -62,6 +65,8 @@ class RunMap:
             "combination": self.fused.combination,
             "threshold": self.fused.threshold,
             "fused_map_bytes": self.fused.nbytes,
+            "world_map": {"bytes": self.world.nbytes, "segments": len(self.world),
+                          "one_byte_grid_bytes_0.1m": self.world.grid_bytes(0.1)},
             "grid_float32_bytes_same_extent": grid_bytes,
             "raster": {"resolution": self.raster.resolution, "origin": list(self.raster.origin),
                        "rows": self.raster.shape[0], "columns": self.raster.shape[1], "cells": counts},
@@ -124,9 +129,14 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
 
     if len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
+    from occtool.fuse import build_world_map
+
     seconds = {}
     started = time.perf_counter()
-    raster = fused.rasterise(resolution)
+    world = build_world_map(fused)
+    seconds["world_map"] = time.perf_counter() - started
+    started = time.perf_counter()
+    raster = world.rasterise(resolution)
     seconds["raster"] = time.perf_counter() - started
     started = time.perf_counter()
     placed = []
@@ -142,7 +152,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                                 for p in placed]) if placed else np.zeros((0, 2))
     frontiers = _frontiers(raster, placed, lookahead)
     seconds["union_frontiers"] = time.perf_counter() - started
-    return RunMap(fused, raster, placed, region, obstacles, frontiers, seconds)
+    return RunMap(fused, world, raster, placed, region, obstacles, frontiers, seconds)
 
 
 # ---------------------------------------------------------------------- GeoJSON
@@ -198,16 +208,17 @@ def layer_collections(run: RunMap, *, simplify: float | None = None, precision: 
 
 def output_paths(folder: str | os.PathLike[str]) -> list[Path]:
     folder = Path(folder)
-    return [folder / name for name in ("map.yaml", "map.pgm", "map.mcap", "navigation.geojson",
+    return [folder / name for name in ("world.occmap", "map.yaml", "map.pgm", "map.mcap", "navigation.geojson",
                                        "obstacles.geojson", "frontiers.geojson", "summary.json")]
 
 
 def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bool = True,
                   simplify: float | None = None, precision: int | None = None, mcap: bool = True,
                   georeference: Any | None = None, extra_summary: dict[str, Any] | None = None) -> list[Path]:
-    """Write the Nav2 map, the Foxglove MCAP, the GeoJSON layers and ``summary.json`` into
-    ``folder`` (created if missing). Every file is written completely or not at all, and
-    everything is computed before the first file is written."""
+    """Write the world map (``world.occmap``), the Nav2 map, the Foxglove MCAP, the GeoJSON
+    layers and ``summary.json`` into ``folder`` (created if missing). Every file is written
+    completely or not at all, and everything is computed before the first file is written."""
+    from occtool.fuse._occmap import encode
     from occtool.io.nav2 import write_nav2
 
     folder = Path(folder)
@@ -218,14 +229,19 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
             if path.exists():
                 raise FileExistsError(f"{path} exists already (pass overwrite=True to replace it)")
     layers = layer_collections(run, simplify=simplify, precision=precision, georeference=georeference)
+    world_bytes = encode(run.world)
     summary = {**run.summary(), **(extra_summary or {})}
+    summary["world_map"]["file_bytes"] = len(world_bytes)
     mcap_bytes = None
     if mcap:
         from occtool.io.foxglove_map import run_map_mcap_bytes
 
         mcap_bytes = run_map_mcap_bytes(run)
     folder.mkdir(parents=True, exist_ok=True)
-    written = list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, folder / "map.yaml",
+    with atomic_write(folder / "world.occmap", "wb", overwrite=overwrite) as handle:
+        handle.write(world_bytes)
+    written = [folder / "world.occmap"]
+    written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, folder / "map.yaml",
                               overwrite=overwrite))
     if mcap_bytes is not None:
         with atomic_write(folder / "map.mcap", "wb", overwrite=overwrite) as handle:

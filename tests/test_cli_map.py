@@ -33,7 +33,7 @@ def test_writes_every_output(mapped):
     _, out = mapped
     names = sorted(p.name for p in out.iterdir())
     assert names == ["frontiers.geojson", "map.mcap", "map.pgm", "map.yaml", "navigation.geojson",
-                     "obstacles.geojson", "summary.json"]
+                     "obstacles.geojson", "summary.json", "world.occmap"]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["positions"] >= 10 and summary["fused_map_bytes"] > 0 and summary["frame"] == "map"
 
@@ -47,7 +47,9 @@ def test_nav2_map_puts_walls_where_they_are(mapped):
     def cell(x, y):
         i = int(np.floor((x - loaded.origin[0]) / loaded.resolution))
         j = int(np.floor((y - loaded.origin[1]) / loaded.resolution))
-        return loaded.cells[j, i]
+        # map_server knows nothing outside the image: unknown.
+        inside = 0 <= j < loaded.cells.shape[0] and 0 <= i < loaded.cells.shape[1]
+        return loaded.cells[j, i] if inside else CELL_UNKNOWN
 
     _x0, _y0, _x1, y1 = ROOM
     # The wall's surface: its returns' cell, on one side of y1 or the other.

@@ -34,7 +34,15 @@ The parts, one concept a module (private; everything public is imported from her
 ``_map``      :class:`FusedMap`: storage, where each model speaks, queries, rasterising
 ``_raster``   :class:`Raster` and the Nav2 pixel values
 ``_build``    :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
+``_walls``    walls as linear pieces: the returns summarised into segments, and who saw through them
+``_world``    :class:`WorldMap`: the run refitted in the world frame, a few kilobytes; its raster
+``_occmap``   the ``.occmap`` file: :meth:`WorldMap.save`, :func:`load_map`
 ============  =========================================================================
+
+A :class:`FusedMap` is the run as its local models saw it (a megabyte and more for a
+building); :func:`build_world_map` refits it into a :class:`WorldMap` (walls as MIN nodes
+over linear pieces in world x, y under one MAX, over the region some position observed),
+the map ``occtool map`` writes as ``world.occmap`` and draws for Nav2 (docs/map.md).
 """
 
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set, fuse_models
@@ -48,6 +56,7 @@ from occtool.fuse._combine import (
     Evidence,
 )
 from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
+from occtool.fuse._occmap import load_map
 from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
 from occtool.fuse._reach import (
     NO_OBSTACLE,
@@ -59,6 +68,7 @@ from occtool.fuse._reach import (
     reach_from_guard,
     returns_from_guard,
 )
+from occtool.fuse._world import WorldMap, build_world_map
 from occtool.keyframes import select_keyframes
 
 __all__ = [
@@ -81,9 +91,12 @@ __all__ = [
     "FuseReport",
     "FusedMap",
     "Raster",
+    "WorldMap",
+    "build_world_map",
     "fuse_log",
     "fuse_model_set",
     "fuse_models",
+    "load_map",
     "nearest_returns",
     "observed_reach",
     "reach_from_guard",

@@ -1,0 +1,156 @@
+"""Walls as linear pieces: the run's returns summarised into short segments in the world frame.
+
+:func:`fit_segments` cuts the plane into square cells and fits each cell's returns with
+one line by their second moments (principal axis, its spread across the line); a cell
+whose returns do not lie on one line within ``max_thickness`` is split in four, down to
+``min_cell``. Each segment keeps its end points (the extreme projections of its returns
+on the axis), its thickness (the returns' spread across it) and how many positions
+returned from it. Everything is done on every cell at once: a few passes of
+``np.unique`` and ``np.bincount``, no loop over points.
+
+:func:`seen_through` counts, per segment, the positions whose beams passed its middle
+well before their own return: a wall many positions saw through was not there for long
+(people, doors), and the map trusts it less.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: The first (largest) cell side, metres.
+CELL = 0.64
+#: Cells are not split below this side, metres.
+MIN_CELL = 0.04
+#: Returns within this standard deviation of their cell's line lie on one segment, metres.
+MAX_THICKNESS = 0.03
+#: A cell needs at least this many returns for a line; fewer at the finest side are a dot.
+MIN_RETURNS = 3
+
+
+@dataclass
+class Segments:
+    """Line pieces in the world frame: ``start``, ``end`` ``(S, 2)`` metres, ``thickness``
+    ``(S,)`` (the returns' standard deviation across the line) and ``hits`` ``(S,)`` (the
+    positions whose returns lie on it)."""
+
+    start: FloatArray
+    end: FloatArray
+    thickness: FloatArray
+    hits: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.start.shape[0])
+
+    @property
+    def middle(self) -> FloatArray:
+        return 0.5 * (self.start + self.end)
+
+
+def _line_moments(points: FloatArray, cell: NDArray[np.intp], n_cells: int) -> tuple[FloatArray, ...]:
+    """Per cell: count, mean, principal direction (unit), spread along and across it."""
+    count = np.bincount(cell, minlength=n_cells).astype(np.float64)
+    safe = np.maximum(count, 1.0)
+    mx = np.bincount(cell, points[:, 0], n_cells) / safe
+    my = np.bincount(cell, points[:, 1], n_cells) / safe
+    dx, dy = points[:, 0] - mx[cell], points[:, 1] - my[cell]
+    sxx = np.bincount(cell, dx * dx, n_cells) / safe
+    sxy = np.bincount(cell, dx * dy, n_cells) / safe
+    syy = np.bincount(cell, dy * dy, n_cells) / safe
+    # The 2x2 covariance's eigen decomposition in closed form.
+    half_trace = 0.5 * (sxx + syy)
+    radius = np.hypot(0.5 * (sxx - syy), sxy)
+    minor = np.maximum(half_trace - radius, 0.0)
+    theta = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    return count, mx, my, np.cos(theta), np.sin(theta), np.sqrt(minor)
+
+
+def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, cell: float = CELL, min_cell: float = MIN_CELL,
+                 max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS) -> Segments:
+    """Segments through world returns ``(N, 2)`` of positions ``owner`` ``(N,)``.
+
+    A cell of side ``cell`` (then half, down to ``min_cell``) whose returns number at least
+    ``min_returns`` and lie within ``max_thickness`` (standard deviation) of their principal
+    axis becomes one segment; the returns of the other cells go on to the next, finer side.
+    At the finest side every cell left is a segment, however few or scattered its returns.
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    owner = np.asarray(owner, dtype=np.int64).reshape(-1)
+    starts, ends, thick, hits = [], [], [], []
+    if points.shape[0]:
+        origin = points.min(axis=0)
+        pending = np.arange(points.shape[0])
+        side = float(cell)
+        while pending.size:
+            last = side / 2.0 < min_cell - 1e-12
+            p = points[pending]
+            ij = np.floor((p - origin) / side).astype(np.int64)
+            key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+            keys, which = np.unique(key, return_inverse=True)
+            which = which.reshape(-1)
+            count, mx, my, ux, uy, spread = _line_moments(p, which, keys.size)
+            accept = last | ((count >= min_returns) & (spread <= max_thickness))
+            taken = accept[which]
+            if taken.any():
+                rows = np.flatnonzero(accept)
+                renumber = np.full(keys.size, -1, dtype=np.int64)
+                renumber[rows] = np.arange(rows.size)
+                c = renumber[which[taken]]
+                q, w = p[taken], which[taken]
+                along = (q[:, 0] - mx[w]) * ux[w] + (q[:, 1] - my[w]) * uy[w]
+                low = np.full(rows.size, np.inf)
+                high = np.full(rows.size, -np.inf)
+                np.minimum.at(low, c, along)
+                np.maximum.at(high, c, along)
+                centre = np.column_stack([mx[rows], my[rows]])
+                axis = np.column_stack([ux[rows], uy[rows]])
+                starts.append(centre + low[:, None] * axis)
+                ends.append(centre + high[:, None] * axis)
+                thick.append(spread[rows])
+                pairs = np.unique(c * (int(owner.max()) + 1) + owner[pending[taken]])
+                hits.append(np.bincount(pairs // (int(owner.max()) + 1), minlength=rows.size))
+            pending = pending[~taken]
+            side /= 2.0
+    if not starts:
+        empty = np.zeros((0, 2))
+        return Segments(empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64))
+    return Segments(np.concatenate(starts), np.concatenate(ends), np.concatenate(thick),
+                    np.concatenate(hits).astype(np.int64))
+
+
+def seen_through(middle: FloatArray, poses: FloatArray, distances: FloatArray, *, margin: float,
+                 reach: float) -> NDArray[np.int64]:
+    """How many positions saw through each of the world points ``middle`` ``(S, 2)``.
+
+    ``poses`` ``(P, 4)`` are x, y, z, yaw; ``distances`` ``(P, bins)`` each position's range
+    per pan bin (its nearest return, or how far it saw where it had none; 0 where it saw
+    nothing). A point is seen through by a position when it lies in the position's pan bin
+    more than ``margin`` in front of that bin's range, and no farther than ``reach``.
+    """
+    from scipy.spatial import cKDTree
+
+    counts = np.zeros(middle.shape[0], dtype=np.int64)
+    if middle.shape[0] == 0:
+        return counts
+    index = cKDTree(middle)
+    bins = distances.shape[1]
+    for k in range(poses.shape[0]):  # a loop over positions, each vectorised over its points
+        x, y, _, yaw = poses[k]
+        far = float(min(reach, distances[k].max()))
+        if far <= margin:
+            continue
+        near = np.asarray(index.query_ball_point((x, y), far), dtype=np.intp)
+        if near.size == 0:
+            continue
+        dx, dy = middle[near, 0] - x, middle[near, 1] - y
+        c, s = math.cos(yaw), math.sin(yaw)
+        alpha = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
+        b = np.clip(np.floor((alpha + math.pi) / (2.0 * math.pi) * bins).astype(np.intp), 0, bins - 1)
+        through = np.hypot(dx, dy) < np.minimum(distances[k, b], reach) - margin
+        counts[near[through]] += 1
+    return counts

@@ -1,0 +1,369 @@
+"""The map of a run in the world frame: walls as min/max pieces, the observed region, unknown elsewhere.
+
+A :class:`FusedMap` keeps every keyframe's tree, reach and returns: a megabyte and more
+for a building, more than a grid of it. :func:`build_world_map` refits what those local
+models observed into one world-frame function of a few kilobytes:
+
+* **walls**: the positions' returns summarised into short segments
+  (:func:`occtool.fuse._walls.fit_segments`); segment ``s`` is the ridge
+  ``MIN(p_s, p_s - k_s (u - t_s), p_s + k_s (u + t_s), p_s - k_s (v - l_s), p_s + k_s (v + l_s))``
+  with ``u``, ``v`` the point's offsets across and along the segment from its middle
+  (each linear in world x, y), ``t_s`` its thickness, ``l_s`` its half-length,
+  ``k_s = p_s / WIDTH`` and ``p_s`` the share of positions that returned from it among
+  those that returned from it or saw through it (:func:`occtool.fuse._walls.seen_through`),
+  lifted to ``[0.5, 1]``: a MIN node over five linear pieces, the paper's form in world
+  coordinates;
+* **the observed region**: the union of what each local model saw (its rays up to its
+  nearest return per degree, or its reach where it had none), one shapely geometry;
+* ``F = MAX(base, MAX over segments)``, ``base`` :data:`FREE_LEVEL` inside the observed
+  region and 0.5 (unknown) outside it; 0.5 at heights outside the robot's body band.
+
+Only the segments (end points, thickness, trust) and the region's vertices are stored:
+:attr:`WorldMap.nbytes` counts them at the precision :mod:`occtool.fuse._occmap` writes
+them (a unit of :data:`UNIT` metres, 5 mm by default), which is everything
+:meth:`WorldMap.predict` needs. The map is 2D: the occupancy of the robot's body band,
+the map a planar robot drives by.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import InputError
+from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
+
+FloatArray = NDArray[np.float64]
+
+#: Occupancy falls from a wall's trust to 0 over this distance from it (metres, past its thickness).
+WIDTH = 0.2
+#: Occupancy of the observed region away from walls.
+FREE_LEVEL = 0.2
+#: Occupancy where no position observed.
+UNKNOWN_LEVEL = 0.5
+#: A beam passing a segment's middle more than this in front of its own return saw through it (metres).
+THROUGH_MARGIN = 0.1
+#: The Nav2 raster's occupied cells: their centres within this of a trusted wall (metres, past its thickness).
+WALL_HALF_WIDTH = 0.075
+#: Returns no farther than this from their position place walls, and rays clear the
+#: observed region and see through walls up to it (metres).
+WALL_REACH = 8.0
+#: A wall is drawn in the raster when at least this share of the positions that returned
+#: from it or saw through it returned from it (as :data:`occtool.fuse.RETURN_SHARE`).
+WALL_SHARE = 0.5
+#: Coordinates are stored in this unit (metres): 5 mm.
+UNIT = 0.005
+#: Segment middles searched around a query point (the ridges of more never overlap there).
+NEIGHBOURS = 12
+
+
+class WorldMap:
+    """A run's occupancy in the world frame: wall ridges over an observed region.
+
+    Parameters
+    ----------
+    start, end
+        ``(S, 2)`` world end points of the wall segments, metres.
+    thickness
+        ``(S,)`` each segment's spread across its line, metres.
+    trust
+        ``(S,)`` the share of positions that returned from the segment among those that
+        returned from it or saw through it, in [0, 1].
+    region
+        A shapely (multi)polygon: where some position observed.
+    band
+        World heights ``(low, high)`` the map speaks for (the robot's body band).
+    width, free_level, unknown_level
+        See :data:`WIDTH`, :data:`FREE_LEVEL`, :data:`UNKNOWN_LEVEL`.
+    wall_half_width, wall_share
+        The Nav2 raster's walls (:meth:`rasterise`).
+    """
+
+    def __init__(self, start: ArrayLike, end: ArrayLike, thickness: ArrayLike, trust: ArrayLike, region: Any, *,
+                 band: tuple[float, float], width: float = WIDTH, free_level: float = FREE_LEVEL,
+                 unknown_level: float = UNKNOWN_LEVEL, wall_half_width: float = WALL_HALF_WIDTH,
+                 wall_share: float = WALL_SHARE) -> None:
+        import shapely
+
+        self.start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
+        self.end = np.asarray(end, dtype=np.float64).reshape(-1, 2)
+        self.thickness = np.asarray(thickness, dtype=np.float64).reshape(-1)
+        self.trust = np.asarray(trust, dtype=np.float64).reshape(-1)
+        n = self.start.shape[0]
+        if not (self.end.shape[0] == self.thickness.size == self.trust.size == n):
+            raise InputError(f"{n} segment starts need as many ends, thicknesses and trusts")
+        for name, value in (("width", width), ("wall_half_width", wall_half_width)):
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"{name} must be a positive number of metres, got {value}")
+        for name, value in (("free_level", free_level), ("unknown_level", unknown_level), ("wall_share", wall_share)):
+            if not 0.0 <= value <= 1.0:
+                raise InputError(f"{name} must lie in [0, 1], got {value}")
+        if not (len(band) == 2 and band[0] <= band[1]):
+            raise InputError(f"band must be (low, high) with low <= high, got {band}")
+        self.region = region if region is not None else shapely.MultiPolygon()
+        shapely.prepare(self.region)
+        self.band = (float(band[0]), float(band[1]))
+        self.width = float(width)
+        self.free_level = float(free_level)
+        self.unknown_level = float(unknown_level)
+        self.wall_half_width = float(wall_half_width)
+        self.wall_share = float(wall_share)
+        #: The file's grid (:func:`occtool.fuse._occmap.quantise` sets them): unit, metres, and origin.
+        self.unit: float | None = None
+        self.origin: FloatArray | None = None
+        self._index: Any = None
+
+    def __len__(self) -> int:
+        return int(self.start.shape[0])
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def peak(self) -> FloatArray:
+        """Each segment's ridge height: its trust lifted to [0.5, 1] (a wall never reads free)."""
+        return 0.5 + 0.5 * self.trust
+
+    @property
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """World ``(x, y)`` lower and upper corners of the walls and the observed region."""
+        import shapely
+
+        boxes = [np.concatenate([self.start, self.end])] if len(self) else []
+        if not self.region.is_empty:
+            x0, y0, x1, y1 = shapely.bounds(self.region)
+            boxes.append(np.array([[x0, y0], [x1, y1]]))
+        if not boxes:
+            return np.zeros(2), np.zeros(2)
+        both = np.concatenate(boxes)
+        return both.min(axis=0), both.max(axis=0)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of what :meth:`predict` needs, as the file stores it: per segment four
+        coordinates (uint16 units), thickness and trust (a byte each); per vertex of the
+        region two coordinates (uint16) and its rings' and parts' offsets (uint32)."""
+        import shapely
+
+        if self.region.is_empty:
+            vertices, offsets = 0, 0
+        else:
+            _, coords, parts = shapely.to_ragged_array([self.region])
+            vertices, offsets = coords.shape[0], sum(p.size for p in parts)
+        return int(len(self) * (4 * 2 + 2) + vertices * 2 * 2 + offsets * 4)
+
+    def grid_bytes(self, resolution: float) -> int:
+        """Bytes of a one-byte-a-cell grid of the map's bounding box at ``resolution`` metres:
+        what the map is compared with."""
+        lower, upper = self.bounds
+        cells = np.ceil((upper - lower) / resolution).astype(np.int64)
+        return int(np.prod(np.maximum(cells, 1)))
+
+    def _segment_frames(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        middle = 0.5 * (self.start + self.end)
+        span = self.end - self.start
+        length = np.hypot(span[:, 0], span[:, 1])
+        axis = np.where(length[:, None] > 1e-12, span / np.maximum(length, 1e-12)[:, None], [1.0, 0.0])
+        return middle, axis, np.column_stack([-axis[:, 1], axis[:, 0]]), 0.5 * length
+
+    def _neighbours(self, xy: FloatArray, reach: float) -> tuple[FloatArray, NDArray[np.intp]]:
+        from scipy.spatial import cKDTree
+
+        if self._index is None:
+            self._frames = self._segment_frames()
+            self._index = cKDTree(self._frames[0])
+        k = min(NEIGHBOURS, len(self))
+        distance, index = self._index.query(xy, k=k, distance_upper_bound=reach)
+        return np.asarray(distance).reshape(len(xy), k), np.asarray(index).reshape(len(xy), k)
+
+    def _reach(self, beyond: float) -> float:
+        """Farthest a segment's middle can lie from a point its ridge (or wall) touches."""
+        half = self._frames[3] if self._index is not None else self._segment_frames()[3]
+        return float(half.max() + self.thickness.max() + beyond) if len(self) else 0.0
+
+    def wall_value(self, xy: ArrayLike) -> FloatArray:
+        """MAX over the segments' ridges at world ``(K, 2)`` points (``-inf`` where none reaches)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        best = np.full(xy.shape[0], -np.inf)
+        if not len(self) or not xy.shape[0]:
+            return best
+        reach = self._reach(self.width)
+        distance, index = self._neighbours(xy, reach)
+        middle, axis, normal, half = self._frames
+        peak = self.peak
+        for j in range(index.shape[1]):  # the few nearest segments of every point at once
+            ok = np.isfinite(distance[:, j])
+            s = index[ok, j]
+            rel = xy[ok] - middle[s]
+            across = np.abs(rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1])
+            along = np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1])
+            slope = peak[s] / self.width
+            value = np.minimum(peak[s], np.minimum(peak[s] - slope * (across - self.thickness[s]),
+                                                   peak[s] - slope * (along - half[s])))
+            best[ok] = np.maximum(best[ok], value)
+        return best
+
+    def wall_distance(self, xy: ArrayLike, *, trusted: bool = True) -> FloatArray:
+        """Distance from world ``(K, 2)`` points to the nearest segment's band (its line widened by
+        its thickness; ``trusted``: only segments of trust >= ``wall_share``); ``inf`` beyond reach."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        best = np.full(xy.shape[0], np.inf)
+        if not len(self) or not xy.shape[0]:
+            return best
+        distance, index = self._neighbours(xy, self._reach(self.wall_half_width + 1e-9))
+        middle, axis, normal, half = self._frames
+        keep = self.trust >= self.wall_share if trusted else np.ones(len(self), dtype=bool)
+        for j in range(index.shape[1]):
+            ok = np.isfinite(distance[:, j])
+            ok[ok] = keep[index[ok, j]]
+            s = index[ok, j]
+            rel = xy[ok] - middle[s]
+            across = np.maximum(np.abs(rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]) - self.thickness[s], 0.0)
+            along = np.maximum(np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1]) - half[s], 0.0)
+            best[ok] = np.minimum(best[ok], np.hypot(across, along))
+        return best
+
+    def observed(self, xy: ArrayLike) -> NDArray[np.bool_]:
+        """Whether world ``(K, 2)`` points lie in the observed region."""
+        import shapely
+
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if self.region.is_empty:
+            return np.zeros(xy.shape[0], dtype=bool)
+        return np.asarray(shapely.contains_xy(self.region, xy[:, 0], xy[:, 1]), dtype=bool)
+
+    # ------------------------------------------------------------------ queries
+    def predict(self, points_world: ArrayLike) -> FloatArray:
+        """Occupancy in [0, 1] at world points ``(K, 3)`` (x, y, z; z in the poses' datum, so a
+        2D laser's plane is the poses' z): 0.5 where no position observed or outside the band."""
+        points = np.asarray(points_world, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"query points must be (K, 3) x, y, z, got shape {points.shape}")
+        if not np.isfinite(points).all():
+            raise InputError("query points must be finite numbers")
+        out = np.full(points.shape[0], self.unknown_level)
+        band = (points[:, 2] >= self.band[0] - 1e-9) & (points[:, 2] <= self.band[1] + 1e-9)
+        xy = points[band, :2]
+        base = np.where(self.observed(xy), self.free_level, self.unknown_level)
+        out[band] = np.clip(np.maximum(base, self.wall_value(xy)), 0.0, 1.0)
+        return out
+
+    def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000) -> Raster:
+        """Free / occupied / unknown cells, as Nav2 loads them: occupied within
+        :attr:`wall_half_width` of a trusted wall's band, free elsewhere in the observed
+        region, unknown elsewhere. Row 0 is the bottom; ``probability`` is :meth:`predict`
+        at the cell centres."""
+        if not (math.isfinite(resolution) and resolution > 0):
+            raise InputError(f"resolution must be a positive number of metres, got {resolution}")
+        lower, upper = self.bounds
+        origin = np.floor(lower / resolution) * resolution
+        nx, ny = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
+        if nx * ny > max_cells:
+            raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
+        jj, ii = np.mgrid[0:ny, 0:nx]
+        centres = np.column_stack([origin[0] + (ii.ravel() + 0.5) * resolution,
+                                   origin[1] + (jj.ravel() + 0.5) * resolution])
+        observed = self.observed(centres)
+        wall = self.wall_distance(centres) <= self.wall_half_width
+        base = np.where(observed, self.free_level, self.unknown_level)
+        probability = np.maximum(base, self.wall_value(centres))
+        cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
+        cells[observed] = FREE
+        cells[wall] = OCCUPIED
+        return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
+                      probability.reshape(ny, nx).astype(np.float32), np.zeros((ny, nx), dtype=bool))
+
+    def params(self) -> dict[str, Any]:
+        """The map's scalar settings (what the file's header holds besides the arrays)."""
+        return {"band": list(self.band), "width": self.width, "free_level": self.free_level,
+                "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
+                "wall_share": self.wall_share}
+
+    def save(self, path: Any, *, overwrite: bool = True) -> int:
+        """Write the map to ``path`` (:mod:`occtool.fuse._occmap`, atomically); returns its bytes."""
+        from occtool.fuse._occmap import save_map
+
+        return save_map(self, path, overwrite=overwrite)
+
+
+def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
+    """Union of what each position (``poses`` ``(P, 4)`` x, y, z, yaw) saw: rays up to
+    ``distances`` (``(P, bins)``, at most ``reach``) at the bins' centres."""
+    import shapely
+
+    bins = distances.shape[1]
+    angles = -math.pi + (np.arange(bins) + 0.5) * (2.0 * math.pi / bins)
+    rings = []
+    for k in range(poses.shape[0]):
+        r = np.minimum(distances[k], reach)
+        if not (r > 0).any():
+            continue
+        a = angles + poses[k, 3]
+        rings.append(np.column_stack([poses[k, 0] + r * np.cos(a), poses[k, 1] + r * np.sin(a)]))
+    if not rings:
+        return shapely.MultiPolygon()
+    polygons = shapely.make_valid(shapely.polygons(np.stack(rings)))
+    return shapely.union_all(polygons)
+
+
+def position_ranges(fused: Any) -> FloatArray:
+    """``(P, bins)`` each position's range per return bin: its nearest return, or where it had
+    none its reach in that direction (0 where it saw nothing), metres."""
+    from occtool.fuse._reach import NO_OBSTACLE, REACH_UNIT
+
+    if fused.returns is None:
+        raise InputError("this fused map keeps no returns: a world map needs them")
+    returns = fused.returns
+    bins = returns.shape[1]
+    reach = fused.reaches[:, 0].astype(np.float64) * REACH_UNIT
+    # Each return bin takes the reach of the coarser bin its centre lies in.
+    centre = (np.arange(bins) + 0.5) / bins
+    coarse = np.minimum((centre * reach.shape[1]).astype(np.intp), reach.shape[1] - 1)
+    return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
+
+
+def build_world_map(fused: Any, *, cell: float = CELL, max_thickness: float = MAX_THICKNESS,
+                    min_returns: int = MIN_RETURNS, reach: float = WALL_REACH, simplify: float = 0.03,
+                    **params: Any) -> WorldMap:
+    """Refit a :class:`FusedMap` (with returns) into a :class:`WorldMap`, rounded to the
+    precision of its file (:func:`occtool.fuse._occmap.quantise`).
+
+    The walls are fitted to every position's returns within its ``return_reach``
+    (:func:`occtool.fuse._walls.fit_segments` with ``cell``, ``max_thickness`` and
+    ``min_returns``) from every position's returns no farther than ``reach``, which also
+    bounds the rays that clear the observed region and see through walls; the
+    observed region is simplified by ``simplify`` metres (Douglas-Peucker, topology kept).
+    ``params`` go to :class:`WorldMap` (``width``, ``free_level``...).
+    """
+    import shapely
+
+    from occtool.fuse._walls import fit_segments as _fit
+
+    if not reach > 0:
+        raise InputError(f"reach must be a positive number of metres, got {reach}")
+    ranges = position_ranges(fused)
+    points, owner = [], []
+    for k in range(len(fused)):
+        world = fused.return_points(k, within=reach)
+        points.append(world)
+        owner.append(np.full(world.shape[0], k, dtype=np.int64))
+    segments: Segments = _fit(np.concatenate(points), np.concatenate(owner), cell=cell, max_thickness=max_thickness,
+                              min_returns=min_returns)
+    through = seen_through(segments.middle, fused._pose_array, ranges, margin=THROUGH_MARGIN, reach=reach)
+    trust = segments.hits / np.maximum(segments.hits + through, 1)
+    region = _observed_region(ranges, fused._pose_array, reach)
+    if simplify > 0 and not region.is_empty:
+        region = shapely.simplify(region, simplify, preserve_topology=True)
+    from occtool.fuse._occmap import quantise
+
+    low, high = fused.robot.body_band
+    z0 = float(np.median(fused._pose_array[:, 2]))
+    world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
+                     **params)
+    # Rounded to the file's precision now, so that the map written is the map used.
+    return quantise(world)
+
+
+__all__ = ["WorldMap", "build_world_map", "fit_segments", "position_ranges"]

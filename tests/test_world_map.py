@@ -1,0 +1,236 @@
+"""The world map of a run: wall segments, the observed region, the .occmap file, `occtool query`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+from _room_log import ROOM, write_room_log
+from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from occtool.cli.main import cli
+from occtool.errors import InputError
+from occtool.fit import OccupancyRegressor
+from occtool.fuse import FREE, OCCUPIED, UNKNOWN, WorldMap, build_world_map, fuse_log, load_map
+from occtool.fuse._occmap import decode, encode, quantise
+from occtool.fuse._walls import fit_segments, seen_through
+from occtool.io import read_log
+from occtool.robot import Robot
+
+LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
+BAND = (-0.25, 0.2)
+
+
+def test_returns_on_a_line_make_one_segment_end_to_end():
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0.02, 0.6, 200)
+    points = np.column_stack([x, 0.5 * x + 0.1 + rng.normal(0, 0.003, x.size)])
+    seg = fit_segments(points, np.zeros(x.size, dtype=np.int64), cell=2.0)
+    assert len(seg) == 1
+    ends = np.sort(np.array([seg.start[0, 0], seg.end[0, 0]]))
+    assert np.allclose(ends, [x.min(), x.max()], atol=0.01)
+    assert seg.thickness[0] == pytest.approx(0.003 * math.cos(math.atan(0.5)), rel=0.3)
+    direction = (seg.end - seg.start)[0]
+    assert abs(direction[1] / direction[0] - 0.5) < 0.02
+    assert seg.hits[0] == 1
+
+
+def test_a_corner_is_split_until_each_cell_holds_one_line():
+    t = np.linspace(0.0, 1.0, 101)
+    corner = np.vstack([np.column_stack([t, np.zeros_like(t)]), np.column_stack([np.zeros_like(t), t])])
+    owner = np.repeat([0, 1], t.size)
+    seg = fit_segments(corner, owner, cell=1.28, max_thickness=0.005)
+    # Each segment's returns lie within the thickness bound of its line, but for the one
+    # finest cell (4 cm) over the corner itself.
+    lengths = np.hypot(*(seg.end - seg.start).T)
+    assert ((seg.thickness <= 0.005 + 1e-9) | (lengths <= 0.04 * math.sqrt(2))).all()
+    assert (seg.thickness > 0.005).sum() == 1
+    assert lengths.sum() == pytest.approx(2.0, abs=0.15)
+    # Cells over the corner's two legs hold returns of both positions only near the corner.
+    assert seg.hits.max() == 2 and (seg.hits == 1).sum() > (seg.hits == 2).sum()
+
+
+def test_seen_through_counts_positions_whose_beams_passed_in_front_of_their_return():
+    poses = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, math.pi]])
+    ranges = np.full((2, 360), 3.0)  # both see 3 m all round
+    middle = np.array([[1.0, 0.0], [2.95, 0.0], [-2.0, 0.0], [5.0, 0.0]])
+    counts = seen_through(middle, poses, ranges, margin=0.1, reach=8.0)
+    # 1 m in front of both walls: both saw through; 5 cm in front of the 3 m return: neither;
+    # 5 m away: past both returns.
+    assert counts.tolist() == [2, 0, 2, 0]
+    assert seen_through(middle, poses, ranges, margin=0.1, reach=0.5).tolist() == [0, 0, 0, 0]
+
+
+def _square_map(**kwargs):
+    """A 2 m x 2 m observed square with one trusted wall along its right side."""
+    region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 2.0, 2.0)])
+    return WorldMap([[2.0, 0.0]], [[2.0, 2.0]], [0.01], [1.0], region, band=BAND, **kwargs)
+
+
+def test_a_wall_is_a_min_of_linear_pieces_over_the_free_level():
+    world = _square_map(width=0.2, free_level=0.2)
+    z = 0.0
+    across = np.array([0.0, 0.01, 0.06, 0.11, 0.5])
+    points = np.column_stack([2.0 - across, np.full(across.size, 1.0), np.full(across.size, z)])
+    p = world.predict(points)
+    expected = np.maximum(0.2, np.minimum(1.0, 1.0 - (across - 0.01) / 0.2))
+    assert np.allclose(p, expected)
+    # Past the end of the wall the ridge falls along it too.
+    assert world.predict([[2.0, 2.1, z]])[0] == pytest.approx(0.5, abs=1e-9)  # outside the region: unknown
+    assert world.predict([[1.99, 2.05, z]])[0] == pytest.approx(0.75, abs=1e-9)
+
+
+def test_unknown_outside_the_region_and_the_band():
+    world = _square_map()
+    far = world.predict([[-3.0, -3.0, 0.0], [1.0, 1.0, 0.5], [1.0, 1.0, -0.3]])
+    assert np.allclose(far, 0.5)
+    assert world.predict([[1.0, 1.0, 0.0]])[0] == pytest.approx(world.free_level)
+
+
+def test_walls_few_positions_saw_through_read_less_occupied():
+    region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 4.0, 2.0)])
+    world = WorldMap([[1.0, 0.0], [3.0, 0.0]], [[1.0, 2.0], [3.0, 2.0]], [0.0, 0.0], [1.0, 0.25], region, band=BAND)
+    solid, passing = world.predict([[1.0, 1.0, 0.0], [3.0, 1.0, 0.0]])
+    assert solid == pytest.approx(1.0) and passing == pytest.approx(0.625)
+    raster = world.rasterise(0.05)
+    row, col, _ = raster.cell_of([[1.0, 1.0], [3.0, 1.0], [2.0, 1.0], [5.0, 1.0]])
+    # The wall most positions saw through is not drawn for Nav2 (share below 0.5).
+    assert raster.cells[row, col].tolist() == [OCCUPIED, FREE, FREE, UNKNOWN]
+
+
+def test_quantised_map_round_trips_bit_for_bit(tmp_path):
+    rng = np.random.default_rng(3)
+    start = rng.uniform(-5, 5, (50, 2))
+    end = start + rng.normal(0, 0.2, (50, 2))
+    region = shapely.MultiPolygon([shapely.box(-4, -4, 0, 0), shapely.Point(2, 2).buffer(1.5)])
+    world = quantise(WorldMap(start, end, rng.uniform(0, 0.03, 50), rng.uniform(0, 1, 50), region, band=BAND))
+    path = tmp_path / "world.occmap"
+    size = world.save(path)
+    assert size == path.stat().st_size
+    loaded = load_map(path)
+    points = np.column_stack([rng.uniform(-6, 6, 5000), rng.uniform(-6, 6, 5000), np.zeros(5000)])
+    assert np.array_equal(world.predict(points), loaded.predict(points))
+    assert np.array_equal(loaded.start, world.start) and loaded.params() == world.params()
+    # The header and checksum are all the file adds to what predict needs.
+    assert size - world.nbytes < 1000
+    assert encode(loaded) == path.read_bytes()
+
+
+@pytest.fixture(scope="module")
+def room_map(tmp_path_factory):
+    path = tmp_path_factory.mktemp("room") / "room.log"
+    write_room_log(path, scans=40)
+    fused, _, _ = fuse_log(read_log(path), OccupancyRegressor(robot=LASER_ROBOT))
+    return fused, build_world_map(fused)
+
+
+def test_the_room_log_walls_free_inside_unknown_behind(room_map):
+    fused, world = room_map
+    x0, y0, x1, y1 = ROOM
+    walls = np.array([[x1, 0.3, 0.0], [1.0, y1, 0.0], [1.0, y0, 0.0], [x0, 0.0, 0.0]])
+    inside = np.array([[1.0, 0.25, 0.0], [0.0, 0.0, 0.0], [3.0, 1.0, 0.0]])
+    behind = np.array([[x1 + 1.5, 0.3, 0.0], [1.0, y1 + 1.5, 0.0]])
+    p = world.predict(np.vstack([walls, inside, behind]))
+    assert (p[:4] > 0.9).all()
+    assert np.allclose(p[4:7], world.free_level)
+    assert np.allclose(p[7:], 0.5)
+    # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.
+    assert world.nbytes < fused.nbytes / 10 and world.nbytes < world.grid_bytes(0.1)
+    raster = world.rasterise(0.05)
+    row, col, inside_raster = raster.cell_of(np.vstack([walls, inside, behind])[:, :2])
+    cells = np.where(inside_raster, raster.cells[row, col], UNKNOWN)
+    assert (cells[:4] == OCCUPIED).all() and (cells[4:7] == FREE).all() and (cells[7:] == UNKNOWN).all()
+
+
+def test_damaged_files_are_one_line_errors(room_map, tmp_path):
+    _, world = room_map
+    data = encode(world)
+    for bad, why in ((data[:-10], "checksum"), (data[:20], "checksum"), (b"", "signature"),
+                     (b"PK\x03\x04" + data[4:], "signature")):
+        with pytest.raises(InputError, match=why) as caught:
+            decode(bad, "world.occmap")
+        assert "\n" not in str(caught.value)
+    flipped = bytearray(data)
+    flipped[len(data) // 2] ^= 0x10
+    with pytest.raises(InputError, match="damaged"):
+        decode(bytes(flipped))
+    with pytest.raises(InputError, match="cannot read"):
+        load_map(tmp_path / "absent.occmap")
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_fuzzed_files_never_escape_as_another_error(room_map, data):
+    """Any cut or byte change is an InputError or, if it keeps the checksum, a valid map."""
+    _, world = room_map
+    raw = bytearray(encode(world))
+    cut = data.draw(st.integers(min_value=0, max_value=len(raw)))
+    edits = data.draw(st.lists(st.tuples(st.integers(0, len(raw) - 1), st.integers(0, 255)), max_size=4))
+    for at, value in edits:
+        raw[at] = value
+    try:
+        decoded = decode(bytes(raw[:cut]) if cut < len(raw) else bytes(raw))
+    except InputError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert isinstance(decoded, WorldMap)
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+def test_map_writes_world_occmap_and_query_answers_as_the_library(tmp_path):
+    log = tmp_path / "room.log"
+    write_room_log(log, scans=30)
+    out = tmp_path / "map"
+    result = run("-q", "map", log, "-o", out, "--no-mcap", "--sensor-height", "0.3", "--body-height", "0.5")
+    assert result.exit_code == 0, result.output
+    world = load_map(out / "world.occmap")
+    rng = np.random.default_rng(1)
+    xyz = np.column_stack([rng.uniform(-4, 6, 300), rng.uniform(-3, 3.5, 300), np.zeros(300)])
+    points = tmp_path / "points.csv"
+    points.write_text("# query\nid,x,y,z\n" + "".join(f"{k},{x:.6f},{y:.6f},{z:.1f}\n" for k, (x, y, z)
+                                                      in enumerate(xyz)))
+    answer = tmp_path / "answer.csv"
+    result = run("-q", "query", out / "world.occmap", points, "-o", answer)
+    assert result.exit_code == 0, result.output
+    lines = answer.read_text().splitlines()
+    assert lines[0] == "id,x,y,z,occupancy" and len(lines) == 301
+    got = np.array([float(line.split(",")[-1]) for line in lines[1:]])
+    expected = world.predict(np.array([[float(v) for v in line.split(",")[1:4]] for line in lines[1:]]))
+    assert np.allclose(got, expected, atol=5e-5)
+    assert lines[1].split(",")[0] == "0"
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("a,b\n1,2\n", "needs columns x, y and z"),
+    ("x,y,z\n1,2,oops\n", "row 2 has no number"),
+    ("x,y,z\n1,2,3\n1,2\n", "row 3 has no number"),
+    ("x,y,z\n1,2,nan\n", "not finite"),
+    ("", "empty file"),
+])
+def test_query_bad_points_are_one_line_and_write_nothing(room_map, tmp_path, text, message):
+    _, world = room_map
+    world.save(tmp_path / "w.occmap")
+    points = tmp_path / "p.csv"
+    points.write_text(text)
+    result = CliRunner().invoke(cli, ["-q", "query", str(tmp_path / "w.occmap"), str(points), "-o",
+                                      str(tmp_path / "out.csv")])
+    assert result.exit_code == 1
+    assert message in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out.csv").exists()
+
+
+def test_query_a_damaged_map_is_one_line(tmp_path):
+    bad = tmp_path / "bad.occmap"
+    bad.write_bytes(b"\x89OCCMAP\n" + b"\0" * 40)
+    points = tmp_path / "p.csv"
+    points.write_text("x,y,z\n0,0,0\n")
+    result = CliRunner().invoke(cli, ["-q", "query", str(bad), str(points), "-o", str(tmp_path / "o.csv")])
+    assert result.exit_code == 1 and "not a readable occtool map" in result.output
+    assert len(result.output.strip().splitlines()) == 1
