@@ -116,8 +116,9 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
     written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
                             georeference=georeference, extra_summary=extra)
     summary = run.summary()
-    logger.info("fused map: %d positions, %.1f KB; raster %dx%d: %s", summary["positions"],
-                summary["fused_map_bytes"] / 1e3, summary["raster"]["columns"], summary["raster"]["rows"],
-                summary["raster"]["cells"])
+    logger.info("fused map: %d positions, %.1f KB; world map %s: %d wall segments, %.1f KB; raster %dx%d: %s",
+                summary["positions"], summary["fused_map_bytes"] / 1e3, Path(output) / "world.occmap",
+                summary["world_map"]["segments"], summary["world_map"]["bytes"] / 1e3, summary["raster"]["columns"],
+                summary["raster"]["rows"], summary["raster"]["cells"])
     for path in written:
         logger.debug("wrote %s", path)

@@ -197,14 +197,17 @@ def compare(report: str, bench: str | None, output: str, overwrite: bool, dpi: f
 @click.argument("folder", type=click.Path(exists=True, file_okay=False))
 @click.option("--path/--no-path", "draw_path", default=True, show_default=True, help="Draw the run's path.")
 @click.option("--frontiers/--no-frontiers", default=True, show_default=True, help="Draw the frontier points.")
+@click.option("--walls/--no-walls", default=False, show_default=True,
+              help="Draw the world map's wall segments (FOLDER/world.occmap) over the cells.")
 @_figure_options
-def map_picture(folder: str, draw_path: bool, frontiers: bool, output: str, overwrite: bool, dpi: float,
+def map_picture(folder: str, draw_path: bool, frontiers: bool, walls: bool, output: str, overwrite: bool, dpi: float,
                 size: str | None, title: str | None) -> None:
     """The map FOLDER written by `occtool map`: free, occupied and unknown cells as Nav2
-    reads them, the robot's path and the frontier points."""
+    reads them, the robot's path and the frontier points; with --walls, the wall segments
+    of the world map (world.occmap) coloured by how many positions trusted them."""
     figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.plot import DEFAULT_MAP_SIZE, map_figure
 
     figure = map_figure(folder, size=figure_size or DEFAULT_MAP_SIZE, dpi=dpi, title=title, path=draw_path,
-                        frontiers=frontiers)
+                        frontiers=frontiers, walls=walls)
     _write(figure, output)

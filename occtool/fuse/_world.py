@@ -28,6 +28,7 @@ the map a planar robot drives by.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -49,9 +50,11 @@ UNKNOWN_LEVEL = 0.5
 THROUGH_MARGIN = 0.1
 #: The Nav2 raster's occupied cells: their centres within this of a trusted wall (metres, past its thickness).
 WALL_HALF_WIDTH = 0.075
-#: Returns no farther than this from their position place walls, and rays clear the
-#: observed region and see through walls up to it (metres).
-WALL_REACH = 8.0
+#: Returns no farther than this from their position place walls (metres).
+WALL_REACH = 16.0
+#: Beams sweep the observed region and see through walls no farther than this from their
+#: position (metres): a far beam's angle and its pose's error place it less surely.
+REGION_REACH = 8.0
 #: A wall is drawn in the raster when at least this share of the positions that returned
 #: from it or saw through it returned from it (as :data:`occtool.fuse.RETURN_SHARE`).
 WALL_SHARE = 0.5
@@ -288,6 +291,48 @@ class WorldMap:
         return save_map(self, path, overwrite=overwrite)
 
 
+@dataclass
+class RunReturns:
+    """What every position of a run saw, per pan bin: the world frame's input to :func:`build_world_map`.
+
+    ``poses`` ``(P, 4)`` x, y, z, yaw; ``ranges`` ``(P, bins)`` the horizontal distance to
+    each bin's nearest return, or where the bin has none how far the position saw (its
+    farthest free ray, or a model's reach; 0 where it saw nothing); ``returned`` ``(P, bins)``
+    whether the bin holds a return; ``offsets`` ``(P, bins)`` uint8 its pan angle within the
+    bin in :data:`occtool.fuse.OFFSET_STEPS` steps (the centre where unknown).
+    """
+
+    poses: FloatArray
+    ranges: FloatArray
+    returned: NDArray[np.bool_]
+    offsets: NDArray[np.uint8]
+
+    def __len__(self) -> int:
+        return int(self.poses.shape[0])
+
+    def return_points(self, within: float) -> tuple[FloatArray, NDArray[np.int64]]:
+        """World ``(N, 2)`` returns no farther than ``within`` from their position, and the position of each."""
+        from occtool.fuse._reach import OFFSET_STEPS
+
+        bins = self.ranges.shape[1]
+        k, b = np.nonzero(self.returned & (self.ranges <= within))
+        alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
+        r = self.ranges[k, b]
+        return (np.column_stack([self.poses[k, 0] + r * np.cos(alpha), self.poses[k, 1] + r * np.sin(alpha)]),
+                k.astype(np.int64))
+
+
+def returns_of_fused(fused: Any) -> RunReturns:
+    """:class:`RunReturns` of a :class:`FusedMap`'s own positions: its returns, and where a
+    bin has none the model's reach there (:func:`position_ranges`)."""
+    from occtool.fuse._reach import BIN_CENTRE, NO_OBSTACLE
+
+    ranges = position_ranges(fused)
+    offsets = (fused.return_offsets if fused.return_offsets is not None
+               else np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8))
+    return RunReturns(fused._pose_array.copy(), ranges, fused.returns != NO_OBSTACLE, np.asarray(offsets))
+
+
 def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
     """Union of what each position (``poses`` ``(P, 4)`` x, y, z, yaw) saw: rays up to
     ``distances`` (``(P, bins)``, at most ``reach``) at the bins' centres."""
@@ -295,17 +340,13 @@ def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> 
 
     bins = distances.shape[1]
     angles = -math.pi + (np.arange(bins) + 0.5) * (2.0 * math.pi / bins)
-    rings = []
-    for k in range(poses.shape[0]):
-        r = np.minimum(distances[k], reach)
-        if not (r > 0).any():
-            continue
-        a = angles + poses[k, 3]
-        rings.append(np.column_stack([poses[k, 0] + r * np.cos(a), poses[k, 1] + r * np.sin(a)]))
-    if not rings:
+    r = np.minimum(distances, reach)
+    seen = (r > 0).any(axis=1)
+    if not seen.any():
         return shapely.MultiPolygon()
-    polygons = shapely.make_valid(shapely.polygons(np.stack(rings)))
-    return shapely.union_all(polygons)
+    a = angles[None, :] + poses[seen, 3:4]
+    rings = np.stack([poses[seen, 0:1] + r[seen] * np.cos(a), poses[seen, 1:2] + r[seen] * np.sin(a)], axis=-1)
+    return shapely.union_all(shapely.make_valid(shapely.polygons(rings)))
 
 
 def position_ranges(fused: Any) -> FloatArray:
@@ -324,40 +365,37 @@ def position_ranges(fused: Any) -> FloatArray:
     return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
 
 
-def build_world_map(fused: Any, *, cell: float = CELL, max_thickness: float = MAX_THICKNESS,
-                    min_returns: int = MIN_RETURNS, reach: float = WALL_REACH, simplify: float = 0.03,
-                    **params: Any) -> WorldMap:
-    """Refit a :class:`FusedMap` (with returns) into a :class:`WorldMap`, rounded to the
-    precision of its file (:func:`occtool.fuse._occmap.quantise`).
+def build_world_map(fused: Any, *, run: RunReturns | None = None, cell: float = CELL,
+                    max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS, reach: float = WALL_REACH,
+                    region_reach: float = REGION_REACH, simplify: float = 0.03, **params: Any) -> WorldMap:
+    """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
+    (:func:`occtool.fuse._occmap.quantise`).
 
-    The walls are fitted to every position's returns within its ``return_reach``
-    (:func:`occtool.fuse._walls.fit_segments` with ``cell``, ``max_thickness`` and
-    ``min_returns``) from every position's returns no farther than ``reach``, which also
-    bounds the rays that clear the observed region and see through walls; the
-    observed region is simplified by ``simplify`` metres (Douglas-Peucker, topology kept).
-    ``params`` go to :class:`WorldMap` (``width``, ``free_level``...).
+    ``run`` is what the positions saw (default: the positions of ``fused``, a
+    :class:`FusedMap`, :func:`returns_of_fused`). The walls are fitted to the returns no
+    farther than ``reach`` from their position (:func:`occtool.fuse._walls.fit_segments`
+    with ``cell``, ``max_thickness`` and ``min_returns``); the beams up to ``region_reach``
+    see through them and sweep the observed region, which is
+    simplified by ``simplify`` metres (Douglas-Peucker, topology kept). The map speaks for
+    ``fused``'s robot's body band. ``params`` go to :class:`WorldMap` (``width``,
+    ``free_level``...). The defaults were chosen on inner splits of the training scans of
+    four CARMEN logs (docs/map.md).
     """
     import shapely
 
-    from occtool.fuse._walls import fit_segments as _fit
-
-    if not reach > 0:
-        raise InputError(f"reach must be a positive number of metres, got {reach}")
-    ranges = position_ranges(fused)
-    points, owner = [], []
-    for k in range(len(fused)):
-        world = fused.return_points(k, within=reach)
-        points.append(world)
-        owner.append(np.full(world.shape[0], k, dtype=np.int64))
-    segments: Segments = _fit(np.concatenate(points), np.concatenate(owner), cell=cell, max_thickness=max_thickness,
-                              min_returns=min_returns)
-    through = seen_through(segments.middle, fused._pose_array, ranges, margin=THROUGH_MARGIN, reach=reach)
-    trust = segments.hits / np.maximum(segments.hits + through, 1)
-    region = _observed_region(ranges, fused._pose_array, reach)
-    if simplify > 0 and not region.is_empty:
-        region = shapely.simplify(region, simplify, preserve_topology=True)
     from occtool.fuse._occmap import quantise
 
+    for name, value in (("reach", reach), ("region_reach", region_reach)):
+        if not value > 0:
+            raise InputError(f"{name} must be a positive number of metres, got {value}")
+    run = returns_of_fused(fused) if run is None else run
+    points, owner = run.return_points(reach)
+    segments: Segments = fit_segments(points, owner, cell=cell, max_thickness=max_thickness, min_returns=min_returns)
+    through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
+    trust = segments.hits / np.maximum(segments.hits + through, 1)
+    region = _observed_region(run.ranges, run.poses, region_reach)
+    if simplify > 0 and not region.is_empty:
+        region = shapely.simplify(region, simplify, preserve_topology=True)
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
     world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
@@ -366,4 +404,4 @@ def build_world_map(fused: Any, *, cell: float = CELL, max_thickness: float = MA
     return quantise(world)
 
 
-__all__ = ["WorldMap", "build_world_map", "fit_segments", "position_ranges"]
+__all__ = ["RunReturns", "WorldMap", "build_world_map", "position_ranges", "returns_of_fused"]

@@ -1,7 +1,8 @@
-"""The picture of a run's map (``occtool plot map``): the fused raster, the path, frontiers.
+"""The picture of a run's map (``occtool plot map``): the fused raster, the path, frontiers, walls.
 
 Reads a folder written by ``occtool map`` (``map.yaml`` by map_server's rules,
-``summary.json`` for the path, ``frontiers.geojson``); drawing needs the ``plot`` extra.
+``summary.json`` for the path, ``frontiers.geojson``, ``world.occmap`` for the walls);
+drawing needs the ``plot`` extra.
 """
 
 from __future__ import annotations
@@ -41,9 +42,11 @@ def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndar
 
 
 def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SIZE, dpi: float = 100.0,
-               title: str | None = None, path: bool = True, frontiers: bool = True) -> Any:
+               title: str | None = None, path: bool = True, frontiers: bool = True, walls: bool = False) -> Any:
     """Free (white), occupied (black) and unknown (grey) cells in the map frame, the run's
-    path (blue) and the frontier points (green)."""
+    path (blue), the frontier points (green) and (``walls``) the world map's wall
+    segments, from ``world.occmap``, red where every position that saw them returned from
+    them and paler as more saw through them."""
     from matplotlib.colors import ListedColormap
 
     from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED
@@ -63,6 +66,18 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     if path and run_path:
         xy = np.asarray(run_path, dtype=np.float64).reshape(-1, 2)
         axes.plot(xy[:, 0], xy[:, 1], color="tab:blue", linewidth=0.8, label="path")
+    if walls:
+        from matplotlib.collections import LineCollection
+
+        from occtool.fuse import load_map
+
+        if not (Path(folder) / "world.occmap").is_file():
+            raise InputError(f"{folder}: no world.occmap to draw walls from (written by `occtool map`)")
+        world = load_map(Path(folder) / "world.occmap")
+        lines = list(np.stack([world.start, world.end], axis=1))
+        colours = np.column_stack([np.ones(len(world)), 1.0 - world.trust, 1.0 - world.trust, np.ones(len(world))])
+        axes.add_collection(LineCollection(lines, colors=colours * [0.85, 0.6, 0.6, 1.0], linewidths=0.6,
+                                           label="walls (world.occmap)"))
     if frontiers and len(frontier_points):
         axes.scatter(frontier_points[:, 0], frontier_points[:, 1], s=6, color="tab:green", label="frontiers")
     axes.set_aspect("equal")
