@@ -1,0 +1,225 @@
+"""Issue 23: depth images to features (back-projection, frames, noise, budget) and the
+TUM RGB-D and 3DMatch / 7-Scenes folders, checked against known answers and the truth."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from occtool.errors import InputError
+from occtool.io import detect_format, read_log
+from occtool.io.depth import (
+    OPTICAL_TO_BODY,
+    DepthCounts,
+    PinholeCamera,
+    back_project,
+    camera_scan,
+    noise_evidence,
+)
+from occtool.simulate._depth import DEFAULT_CAMERA, camera_rotation, render_depth_frames, write_depth_folder
+
+FIXTURES = Path(__file__).resolve().parent.parent / "fixtures"
+CAMERA = PinholeCamera(64, 48, 50.0, 50.0, 31.5, 23.5)
+
+
+def test_the_cli_defaults_are_the_readers() -> None:
+    from occtool.cli import options
+    from occtool.io import read_options
+
+    for name in ("DEFAULT_DEPTH_FEATURES", "DEFAULT_DEPTH_NOISE", "DEFAULT_DEPTH_MAX_RANGE"):
+        assert getattr(options, name) == getattr(read_options, name)
+
+
+def test_a_wall_at_known_depth_back_projects_into_rep103() -> None:
+    depth = np.full((48, 64), 2000, dtype=np.uint16)  # 2 m, millimetres
+    points, evidence = back_project(depth, CAMERA, scale=1e-3, budget=None)
+    assert points.shape == (48 * 64, 3)
+    np.testing.assert_allclose(points[:, 0], 2.0)  # forward = optical z
+    # Pixel (u=0, v=0) is left of and above the centre: y > 0 (left), z > 0 (up).
+    first = points[0]
+    np.testing.assert_allclose(first, [2.0, 31.5 / 50.0 * 2.0, 23.5 / 50.0 * 2.0])
+    last = points[-1]  # bottom right
+    np.testing.assert_allclose(last, [2.0, -31.5 / 50.0 * 2.0, -23.5 / 50.0 * 2.0])
+    np.testing.assert_allclose(evidence, noise_evidence(2.0))
+    assert np.allclose(OPTICAL_TO_BODY @ [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    assert np.allclose(OPTICAL_TO_BODY @ [1.0, 0.0, 0.0], [0.0, -1.0, 0.0])
+    assert np.allclose(OPTICAL_TO_BODY @ [0.0, 1.0, 0.0], [0.0, 0.0, -1.0])
+
+
+def test_invalid_and_no_return_depths() -> None:
+    depth = np.full((48, 64), 3.0, dtype=np.float32)
+    depth[0, :10] = 0.0          # no measurement
+    depth[1, :10] = np.nan       # no measurement
+    depth[2, :10] = np.inf       # too far: no return
+    depth[3, :10] = 20.0         # beyond the max range: no return
+    depth[4, :10] = 0.05         # nearer than the minimum range
+    counts = DepthCounts()
+    points, evidence = back_project(depth, CAMERA, budget=None, max_range=8.0, counts=counts)
+    assert counts.invalid == 30 and counts.no_return == 20 and counts.returns == 48 * 64 - 50
+    assert len(points) == 48 * 64 - 50 and (evidence > 0).all()
+    points, evidence = back_project(depth, CAMERA, budget=None, max_range=8.0, no_return_range=5.0)
+    free = evidence == 0.0
+    assert free.sum() == 20
+    np.testing.assert_allclose(points[free, 0], 5.0)  # free rays end at depth min(R, max range)
+    points, evidence = back_project(depth, CAMERA, budget=None, max_range=4.0, no_return_range=5.0)
+    np.testing.assert_allclose(points[evidence == 0.0, 0], 4.0)
+
+
+def test_the_noise_evidence_is_quadratic_in_depth() -> None:
+    z = np.array([0.5, 1.0, 2.0, 4.0, 8.0])
+    m = noise_evidence(z, noise=0.01)
+    assert (np.diff(m) < 0).all() and m[0] > 0.99 and m[-1] >= 0.05
+    # m depends on k z only: doubling the noise is halving the range.
+    np.testing.assert_allclose(noise_evidence(z, noise=0.02), noise_evidence(2 * z, noise=0.01))
+    assert (noise_evidence(z, noise=0.0) == 1.0).all()
+
+
+def test_the_budget_keeps_the_geometry() -> None:
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.5, 5.0, (480, 640))
+    depth[:, :320] = 1.0  # left half a wall at 1 m
+    points, _ = back_project(depth, PinholeCamera(640, 480, 525, 525, 319.5, 239.5), budget=5000)
+    assert 2500 < len(points) <= 5000
+    # The wall keeps its share of the view (half the pixels) within a few percent.
+    share = np.mean(np.isclose(points[:, 0], 1.0))
+    assert abs(share - 0.5) < 0.03
+
+
+def test_640x480_frames_back_project_at_30_per_second() -> None:
+    import time
+
+    rng = np.random.default_rng(1)
+    frame = (rng.uniform(0.4, 6.0, (480, 640)) * 1000).astype(np.uint16)
+    frame[rng.random((480, 640)) < 0.1] = 0
+    camera = PinholeCamera(640, 480, 525, 525, 319.5, 239.5)
+    back_project(frame, camera, scale=1e-3)
+    start = time.process_time()
+    for i in range(30):
+        back_project(frame, camera, scale=1e-3, phase=i)
+    assert time.process_time() - start < 1.0
+
+
+def test_shapes_and_intrinsics_are_checked() -> None:
+    with pytest.raises(InputError, match="does not match the camera's 48x64"):
+        back_project(np.zeros((10, 10)), CAMERA)
+    with pytest.raises(InputError, match="fx must be finite and > 0"):
+        PinholeCamera(64, 48, 0.0, 50.0, 31.5, 23.5)
+    with pytest.raises(InputError, match="not a pinhole matrix"):
+        PinholeCamera.from_matrix(64, 48, [[50, 0, 31.5], [0, 50, 23.5], [0, 1, 1]])
+    with pytest.raises(InputError, match="width"):
+        PinholeCamera(0, 48, 50.0, 50.0, 31.5, 23.5)
+
+
+def test_a_tilted_camera_pose_levels_its_points() -> None:
+    tilt, yaw = math.radians(-30.0), math.radians(40.0)
+    pose = np.eye(4)
+    pose[:3, :3] = camera_rotation(yaw, tilt)
+    pose[:3, 3] = (1.0, 2.0, 1.2)
+    # A point 2 m straight ahead of the camera, in the camera's body frame.
+    levelled, found = camera_scan(np.array([[2.0, 0.0, 0.0]]), pose)
+    assert math.isclose(found.yaw, yaw) and (found.x, found.y, found.z) == (1.0, 2.0, 1.2)
+    np.testing.assert_allclose(levelled[0], [2.0 * math.cos(tilt), 0.0, 2.0 * math.sin(tilt)], atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def office_frames():
+    return render_depth_frames("office")
+
+
+def _score(features, scene):
+    from occtool.evaluate import evaluate_navigation
+    from occtool.fit import OccupancyRegressor
+    from occtool.navigation import NavigationWarning
+
+    model = OccupancyRegressor(seed=0).fit(features)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        nav = model.navigation_map(max_range=1.5)
+    return evaluate_navigation(nav.polygon, scene, robot_radius=nav.robot_radius, max_range=nav.max_range)
+
+
+@pytest.mark.parametrize("layout", ["tum", "3dmatch"])
+def test_a_rendered_folder_maps_the_office_as_well_as_its_point_cloud(tmp_path, office_frames, layout) -> None:
+    frames, scene = office_frames
+    # 3DMatch's world is its first camera's (not level): the reader must find the floor.
+    world = np.linalg.inv(frames[0].camera_to_world) if layout == "3dmatch" else None
+    folder = write_depth_folder(frames, tmp_path / layout, layout=layout, world=world)
+    path = folder / ("depth.txt" if layout == "tum" else "camera-intrinsics.txt")
+    assert detect_format(path) == detect_format(folder) == layout
+    log = read_log(path, position_tolerance=(0.25, 3.2), depth_features=1250)
+    assert len(log.positions) == 1
+    position = log.positions[0]
+    assert abs(position.pose.z - scene.robot.sensor_height) < 0.02  # the camera's height above the floor
+    assert any("floor plane" in note for note in log.notes)
+    result = _score(position.features, scene)
+    from occtool.simulate import simulate_scene
+
+    points, _ = simulate_scene("office", n_features=len(position.features), seed=0)
+    reference = _score(points, scene)
+    assert result.iou >= reference.iou - 0.02
+    assert result.violation <= 0.005
+
+
+def test_the_fixture_reads_with_its_readme_command() -> None:
+    log = read_log(FIXTURES / "depth-office" / "depth.txt", position_tolerance=(0.25, 3.2))
+    assert len(log.positions) == 1 and len(log.positions[0].features) > 5000
+    assert detect_format(FIXTURES / "depth-office") == "tum"
+
+
+def test_frames_turning_in_place_split_by_heading_by_default(tmp_path, office_frames) -> None:
+    frames, _ = office_frames
+    folder = write_depth_folder(frames, tmp_path / "tum", layout="tum")
+    log = read_log(folder, depth_features=500)
+    assert len(log.positions) == 8  # 45 degrees apart, more than the default 0.26 rad
+    assert [round(math.degrees(p.pose.yaw)) % 360 for p in log.positions] == [0, 45, 90, 135, 180, 225, 270, 315]
+
+
+def test_bad_folders_are_one_line_errors(tmp_path, office_frames) -> None:
+    frames, _ = office_frames
+    folder = write_depth_folder(frames[:2], tmp_path / "tum", layout="tum")
+    png = sorted((folder / "depth").iterdir())[0]
+    data = png.read_bytes()
+    png.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="not a readable depth image"):
+        read_log(folder)
+    log = read_log(folder, skip_invalid=True)
+    assert any("skipped 1 depth frame" in note for note in log.notes)
+    png.write_bytes(data)
+    (folder / "camera-intrinsics.txt").write_text("525 0 319.5\n0 525\n")
+    with pytest.raises(InputError, match="camera intrinsics"):
+        read_log(folder)
+    match = write_depth_folder(frames[:2], tmp_path / "m", layout="3dmatch")
+    (match / "seq-01" / "frame-000001.pose.txt").write_text("1 0 0\n")
+    with pytest.raises(InputError, match="4x4"):
+        read_log(match)
+    (match / "seq-01" / "frame-000001.pose.txt").unlink()
+    with pytest.raises(InputError, match="pose file frame-000001.pose.txt is missing"):
+        read_log(match)
+    small = write_depth_folder(frames[:1], tmp_path / "small", layout="3dmatch")
+    from PIL import Image
+
+    Image.fromarray(np.zeros((10, 10), dtype=np.uint16)).save(small / "seq-01" / "frame-000001.depth.png")
+    np.savetxt(small / "seq-01" / "frame-000001.pose.txt", np.eye(4))
+    with pytest.raises(InputError, match="where the folder's first is 160x120"):
+        read_log(small)
+
+
+def test_the_cli_maps_a_depth_folder(tmp_path, office_frames) -> None:
+    from click.testing import CliRunner
+
+    from occtool.cli.main import cli
+
+    frames, _ = office_frames
+    folder = write_depth_folder(frames, tmp_path / "tum", layout="tum")
+    result = CliRunner().invoke(cli, ["info", str(folder / "depth.txt")])
+    assert result.exit_code == 0, result.output
+    assert "tum" in result.output
+    out = tmp_path / "model.json"
+    result = CliRunner().invoke(cli, ["fit", str(folder / "depth.txt"), "-o", str(out), "--depth-features", "500",
+                                      "--position-tolerance", "0.25,3.2", "--depth-noise", "0.005"])
+    assert result.exit_code == 0, result.output
+    assert out.is_file() and DEFAULT_CAMERA.width == 160
