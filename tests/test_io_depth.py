@@ -223,3 +223,121 @@ def test_the_cli_maps_a_depth_folder(tmp_path, office_frames) -> None:
                                       "--position-tolerance", "0.25,3.2", "--depth-noise", "0.005"])
     assert result.exit_code == 0, result.output
     assert out.is_file() and DEFAULT_CAMERA.width == 160
+
+
+# --- depth images in MCAP and ROS bags ------------------------------------------------------
+
+
+def _same(first, second) -> None:
+    assert len(first.positions) == len(second.positions)
+    for a, b in zip(first.positions, second.positions):
+        np.testing.assert_allclose(a.features.points, b.features.points, atol=1e-9)
+        np.testing.assert_allclose(a.features.evidence, b.features.evidence, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def depth_mcap(tmp_path_factory, office_frames):
+    from occtool.simulate._depth import write_depth_mcap
+
+    frames, _ = office_frames
+    return write_depth_mcap(frames, tmp_path_factory.mktemp("mcap") / "office.mcap")
+
+
+def test_a_depth_mcap_maps_the_office_as_well_as_its_point_cloud(depth_mcap, office_frames) -> None:
+    _, scene = office_frames
+    log = read_log(depth_mcap, depth_features=1250)
+    position = log.single()
+    assert position.pose.z == pytest.approx(scene.robot.sensor_height)  # the cameras' mounting height, from tf
+    result = _score(position.features, scene)
+    from occtool.simulate import simulate_scene
+
+    points, _ = simulate_scene("office", n_features=len(position.features), seed=0)
+    assert result.iou >= _score(points, scene).iou - 0.02
+    assert result.violation <= 0.005
+
+
+@pytest.mark.parametrize("encoding", ["32FC1", "compressedDepth", "bag"])
+def test_encodings_and_containers_give_the_same_features(tmp_path, depth_mcap, office_frames, encoding) -> None:
+    from occtool.simulate._depth import write_depth_bag, write_depth_mcap
+
+    frames, _ = office_frames
+    if encoding == "bag":
+        pytest.importorskip("rosbags")
+        other = write_depth_bag(frames, tmp_path / "office.bag")
+    else:
+        other = write_depth_mcap(frames, tmp_path / "office.mcap", encoding=encoding)
+    reference = read_log(depth_mcap, depth_features=800)
+    found = read_log(other, depth_features=800)
+    if encoding == "32FC1":  # metres, not rounded to millimetres: the same pixels within 0.5 mm
+        assert len(found.single().features) == len(reference.single().features)
+        np.testing.assert_allclose(found.single().features.points, reference.single().features.points, atol=1e-3)
+    else:
+        _same(found, reference)
+
+
+def test_the_mcap_and_the_folder_of_the_same_frames_agree(tmp_path, depth_mcap, office_frames) -> None:
+    frames, _ = office_frames
+    folder = write_depth_folder(frames, tmp_path / "tum", layout="3dmatch")  # millimetres, as 16UC1
+    from_folder = read_log(folder, position_tolerance=(0.25, 3.2), depth_features=800).single().features
+    from_mcap = read_log(depth_mcap, depth_features=800).single().features
+    assert len(from_folder) == len(from_mcap)
+    # The folder's frames are placed by the floor found in them: within a few mm of the truth.
+    np.testing.assert_allclose(from_folder.points, from_mcap.points, atol=0.01)
+
+
+def _raw_image(depth_mm: np.ndarray, frame: str, encoding: str = "16UC1") -> dict:
+    import base64
+
+    return {"timestamp": {"sec": 1, "nsec": 0}, "frame_id": frame, "width": depth_mm.shape[1],
+            "height": depth_mm.shape[0], "encoding": encoding, "step": depth_mm.shape[1] * 2,
+            "data": base64.b64encode(depth_mm.astype("<u2").tobytes()).decode()}
+
+
+def _write_json(path: Path, channels: dict[str, tuple[str, list[dict]]]) -> Path:
+    import json
+
+    from mcap.writer import Writer
+
+    with open(path, "wb") as handle:
+        writer = Writer(handle)
+        writer.start()
+        k = 0
+        for topic, (schema, messages) in channels.items():
+            schema_id = writer.register_schema(name=schema, encoding="jsonschema", data=b"{}")
+            channel_id = writer.register_channel(topic=topic, message_encoding="json", schema_id=schema_id)
+            for message in messages:
+                writer.add_message(channel_id, log_time=k, publish_time=k, data=json.dumps(message).encode(),
+                                   sequence=k)
+                k += 1
+        writer.finish()
+    return path
+
+
+def test_a_foxglove_raw_image_without_a_mounting_is_a_level_camera(tmp_path) -> None:
+    calibration = {"timestamp": {"sec": 0, "nsec": 0}, "frame_id": "cam", "width": 64, "height": 48,
+                   "distortion_model": "plumb_bob", "D": [0.1, 0, 0, 0, 0], "K": CAMERA.matrix.reshape(-1).tolist()}
+    depth = np.full((48, 64), 2500, dtype=np.uint16)
+    path = _write_json(tmp_path / "raw.mcap", {
+        "/cam/calibration": ("foxglove.CameraCalibration", [calibration]),
+        "/cam/depth": ("foxglove.RawImage", [_raw_image(depth, "cam")]),
+        "/cam/color": ("foxglove.RawImage", [_raw_image(depth, "cam", "rgb8")]),
+    })
+    log = read_log(path, depth_features=100_000)
+    np.testing.assert_allclose(log.single().features.points[:, 0], 2.5)  # ahead, in REP-103
+    assert any("taken as level" in note for note in log.notes)
+    assert any("distortion coefficients of cam ignored" in note for note in log.notes)
+    with pytest.raises(InputError, match="'rgb8', not depth"):
+        read_log(path, topics=["/cam/color"])
+    no_info = _write_json(tmp_path / "noinfo.mcap", {"/cam/depth": ("foxglove.RawImage", [_raw_image(depth, "cam")])})
+    with pytest.raises(InputError, match="no sensor_msgs/msg/CameraInfo"):
+        read_log(no_info)
+    other = _write_json(tmp_path / "other.mcap", {
+        "/cam/calibration": ("foxglove.CameraCalibration", [{**calibration, "frame_id": "elsewhere"}]),
+        "/cam/depth": ("foxglove.RawImage", [_raw_image(depth, "cam")])})
+    with pytest.raises(InputError, match="no camera info for the image's frame 'cam'"):
+        read_log(other)
+    wrong = _write_json(tmp_path / "wrong.mcap", {
+        "/cam/calibration": ("foxglove.CameraCalibration", [calibration]),
+        "/cam/depth": ("foxglove.RawImage", [_raw_image(np.zeros((10, 10), np.uint16), "cam")])})
+    with pytest.raises(InputError, match="a 10x10 depth image where the camera info of 'cam' says 64x48"):
+        read_log(wrong)

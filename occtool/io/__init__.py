@@ -369,7 +369,8 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
         return read_mcap(
             path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
             sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid, no_return_range=no_return_range,
+            skip_invalid=skip_invalid, no_return_range=no_return_range, depth_features=options["depth_features"],
+            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
         )
     if fmt == "rosbag":
         from occtool.io.rosbag import read_rosbag
@@ -377,7 +378,8 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
         return read_rosbag(
             path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
             sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid, no_return_range=no_return_range,
+            skip_invalid=skip_invalid, no_return_range=no_return_range, depth_features=options["depth_features"],
+            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
         )
     if fmt == "carmen":
         from occtool.io.carmen import read_carmen

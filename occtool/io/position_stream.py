@@ -72,7 +72,8 @@ class PositionStream:
         return McapScans(self.path, topics=o["topics"], evidence_field=o["evidence_field"], evidence=o["evidence"],
                          use_intensities=o["use_intensities"], sensor_frame=o["sensor_frame"],
                          base_frame=o["base_frame"], skip_invalid=o["skip_invalid"],
-                         no_return_range=o["no_return_range"], opener=opener)
+                         no_return_range=o["no_return_range"], depth_features=o["depth_features"],
+                         depth_noise=o["depth_noise"], depth_max_range=o["depth_max_range"], opener=opener)
 
     def __iter__(self) -> Iterator[Position]:
         from occtool.io import _read_errors

@@ -17,6 +17,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -168,4 +169,171 @@ def write_depth_folder(frames: Sequence[DepthFrame], folder: str | os.PathLike[s
     return target
 
 
-__all__ = ["DEFAULT_CAMERA", "DepthFrame", "camera_rotation", "render_depth_frames", "write_depth_folder"]
+
+
+_SEP = "=" * 80 + "\n"
+_HEADER_DEF = (_SEP + "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+               + _SEP + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+_IMAGE_DEF = ("std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n"
+              "uint32 step\nuint8[] data\n" + _HEADER_DEF)
+_COMPRESSED_DEF = "std_msgs/Header header\nstring format\nuint8[] data\n" + _HEADER_DEF
+_CAMERA_INFO_DEF = (
+    "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\nfloat64[9] k\n"
+    "float64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\nsensor_msgs/RegionOfInterest roi\n"
+    + _HEADER_DEF + _SEP + "MSG: sensor_msgs/RegionOfInterest\nuint32 x_offset\nuint32 y_offset\nuint32 height\n"
+    "uint32 width\nbool do_rectify\n")
+_TF_DEF = (
+    "geometry_msgs/TransformStamped[] transforms\n"
+    + _SEP + "MSG: geometry_msgs/TransformStamped\nstd_msgs/Header header\nstring child_frame_id\n"
+    "geometry_msgs/Transform transform\n"
+    + _SEP + "MSG: geometry_msgs/Transform\ngeometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n"
+    + _SEP + "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+    + _SEP + "MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n" + _HEADER_DEF)
+#: Depth image topic of the logs :func:`depth_log_messages` makes.
+DEPTH_TOPIC = "/camera/depth/image_rect_raw"
+
+
+def _frame_name(index: int) -> str:
+    return f"camera_{index}_depth_optical_frame"
+
+
+def compressed_depth_png(depth_mm: NDArray[np.uint16]) -> bytes:
+    """image_transport's ``compressedDepth`` payload of a 16UC1 image: a 12-byte header, then a PNG."""
+    import io
+    import struct
+
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(depth_mm).save(buffer, format="PNG")
+    return struct.pack("<iff", 0, 0.0, 0.0) + buffer.getvalue()
+
+
+def depth_log_messages(frames: Sequence[DepthFrame], *, camera: PinholeCamera = DEFAULT_CAMERA,
+                       encoding: str = "16UC1") -> list[tuple[str, str, dict[str, Any], float]]:
+    """``(topic, type, message, seconds)`` of a ROS 2 log of the frames: a ring of depth cameras
+    (one optical frame a frame) on a robot standing at the world's origin.
+
+    ``/tf_static`` mounts each camera on ``base_link`` (the floor below the sensor), ``/tf``
+    gives ``odom -> base_link`` at every image, each camera has a ``CameraInfo``, and the
+    images are on :data:`DEPTH_TOPIC` in ``encoding``: ``16UC1`` (millimetres), ``32FC1``
+    (metres) or ``compressedDepth`` (16UC1 in image_transport's PNG form).
+    """
+
+    def header(t: float, frame: str) -> dict[str, Any]:
+        return {"stamp": {"sec": int(t), "nanosec": int(round((t - int(t)) * 1e9)) % 10**9}, "frame_id": frame}
+
+    def transform(t: float, parent: str, child: str, pose: FloatArray) -> dict[str, Any]:
+        qx, qy, qz, qw = _quaternion(pose[:3, :3])
+        x, y, z = (float(v) for v in pose[:3, 3])
+        return {"header": header(t, parent), "child_frame_id": child,
+                "transform": {"translation": {"x": x, "y": y, "z": z},
+                              "rotation": {"x": qx, "y": qy, "z": qz, "w": qw}}}
+
+    start = frames[0].stamp if frames else 0.0
+    messages: list[tuple[str, str, dict[str, Any], float]] = [
+        ("/tf_static", "tf2_msgs/msg/TFMessage",
+         {"transforms": [transform(start, "base_link", _frame_name(i), f.camera_to_world)
+                         for i, f in enumerate(frames)]},
+         start)]
+    k = camera.matrix.reshape(-1).tolist()
+    for i in range(len(frames)):
+        messages.append(("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo", {
+            "header": header(start, _frame_name(i)), "height": camera.height, "width": camera.width,
+            "distortion_model": "plumb_bob", "d": [0.0] * 5, "k": k, "r": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
+            "p": [k[0], 0.0, k[2], 0.0, 0.0, k[4], k[5], 0.0, 0.0, 0.0, 1.0, 0.0], "binning_x": 0, "binning_y": 0,
+            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}, start))
+    for i, frame in enumerate(frames):
+        t = frame.stamp
+        messages.append(("/tf", "tf2_msgs/msg/TFMessage",
+                         {"transforms": [transform(t, "odom", "base_link", np.eye(4))]}, t))
+        if encoding == "32FC1":
+            data, step = frame.depth.astype("<f4").tobytes(), camera.width * 4
+        else:
+            mm = np.round(frame.depth.astype(np.float64) * 1000.0).clip(0, 65534).astype("<u2")
+            data, step = mm.tobytes(), camera.width * 2
+        if encoding == "compressedDepth":
+            messages.append((DEPTH_TOPIC.replace("image_rect_raw", "image_rect_raw/compressedDepth"),
+                             "sensor_msgs/msg/CompressedImage",
+                             {"header": header(t, _frame_name(i)), "format": "16UC1; compressedDepth png",
+                              "data": compressed_depth_png(mm)}, t))
+            continue
+        if encoding not in ("16UC1", "32FC1"):
+            raise InputError(f"encoding must be 16UC1, 32FC1 or compressedDepth, got {encoding!r}")
+        messages.append((DEPTH_TOPIC, "sensor_msgs/msg/Image", {
+            "header": header(t, _frame_name(i)), "height": camera.height, "width": camera.width,
+            "encoding": encoding, "is_bigendian": 0, "step": step, "data": data}, t))
+    return messages
+
+
+def write_depth_mcap(frames: Sequence[DepthFrame], path: str | os.PathLike[str], *,
+                     camera: PinholeCamera = DEFAULT_CAMERA, encoding: str = "16UC1") -> Path:
+    """The frames as a ROS 2 MCAP (:func:`depth_log_messages`), with mcap_ros2's writer."""
+    from mcap_ros2.writer import Writer
+
+    definitions = {"sensor_msgs/msg/Image": _IMAGE_DEF, "sensor_msgs/msg/CompressedImage": _COMPRESSED_DEF,
+                   "sensor_msgs/msg/CameraInfo": _CAMERA_INFO_DEF, "tf2_msgs/msg/TFMessage": _TF_DEF}
+    target = Path(path)
+    with open(target, "wb") as handle:
+        writer = Writer(handle)
+        schemas: dict[str, Any] = {}
+        for topic, kind, message, t in depth_log_messages(frames, camera=camera, encoding=encoding):
+            if kind not in schemas:
+                schemas[kind] = writer.register_msgdef(kind, definitions[kind])
+            stamp = int(round(t * 1e9))
+            writer.write_message(topic, schemas[kind], message, log_time=stamp, publish_time=stamp)
+        writer.finish()
+    return target
+
+
+def write_depth_bag(frames: Sequence[DepthFrame], path: str | os.PathLike[str], *,
+                    camera: PinholeCamera = DEFAULT_CAMERA, encoding: str = "16UC1") -> Path:
+    """The frames as a ROS 1 bag (``*.bag``, rosbags' writer: the ``bags`` extra), as :func:`write_depth_mcap`."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    types = store.types
+    Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+
+    def header(h: dict[str, Any]) -> Any:
+        stamp = h["stamp"]
+        assert isinstance(stamp, dict)
+        return Header(0, Time(stamp["sec"], stamp["nanosec"]), h["frame_id"])
+
+    def build(kind: str, m: dict[str, Any]) -> Any:
+        if kind == "tf2_msgs/msg/TFMessage":
+            items = []
+            for tr in m["transforms"]:
+                t, q = tr["transform"]["translation"], tr["transform"]["rotation"]
+                items.append(types["geometry_msgs/msg/TransformStamped"](
+                    header(tr["header"]), tr["child_frame_id"], types["geometry_msgs/msg/Transform"](
+                        types["geometry_msgs/msg/Vector3"](t["x"], t["y"], t["z"]),
+                        types["geometry_msgs/msg/Quaternion"](q["x"], q["y"], q["z"], q["w"]))))
+            return types[kind](items)
+        if kind == "sensor_msgs/msg/CameraInfo":
+            roi = types["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
+            return types[kind](header(m["header"]), m["height"], m["width"], m["distortion_model"],
+                               np.array(m["d"]), np.array(m["k"]), np.array(m["r"]), np.array(m["p"]), 0, 0, roi)
+        if kind == "sensor_msgs/msg/CompressedImage":
+            return types[kind](header(m["header"]), m["format"],
+                               np.frombuffer(m["data"], dtype=np.uint8))
+        return types[kind](header(m["header"]), m["height"], m["width"], m["encoding"], m["is_bigendian"],
+                           m["step"], np.frombuffer(m["data"], dtype=np.uint8))
+
+    target = Path(path)
+    if target.exists():
+        target.unlink()
+    with Writer(target) as writer:
+        connections: dict[str, Any] = {}
+        for topic, kind, message, t in depth_log_messages(frames, camera=camera, encoding=encoding):
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, kind, typestore=store)
+            writer.write(connections[topic], int(round(t * 1e9)),
+                         store.serialize_ros1(build(kind, message), kind))
+    return target
+
+
+__all__ = ["DEFAULT_CAMERA", "DEPTH_TOPIC", "DepthFrame", "camera_rotation", "compressed_depth_png",
+           "depth_log_messages", "render_depth_frames", "write_depth_bag", "write_depth_folder", "write_depth_mcap"]
