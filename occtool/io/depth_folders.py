@@ -148,9 +148,18 @@ def read_depth_png(path: Path) -> NDArray[np.generic]:
     return data
 
 
+def _numbers(path: Path) -> FloatArray:
+    """A small text matrix (numpy's loadtxt; an empty file is a (0, ...) array, not a warning)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return np.loadtxt(path, dtype=np.float64, ndmin=2)
+
+
 def _read_k(path: Path) -> FloatArray:
     try:
-        values = np.loadtxt(path, dtype=np.float64, ndmin=2)
+        values = _numbers(path)
     except (ValueError, OSError) as exc:
         raise InputError(f"{path}: camera intrinsics must be a 3x3 matrix of numbers ({exc})") from None
     if values.shape != (3, 3):
@@ -268,7 +277,7 @@ def _match_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[f
         if not pose_file.is_file():
             raise InputError(f"{image}: its pose file {pose_file.name} is missing")
         try:
-            values = np.loadtxt(pose_file, dtype=np.float64, ndmin=2)
+            values = _numbers(pose_file)
         except (ValueError, OSError) as exc:
             raise InputError(f"{where}: a pose must be a 4x4 matrix of numbers ({exc})") from None
         if values.shape != (4, 4):
