@@ -341,3 +341,33 @@ def test_a_foxglove_raw_image_without_a_mounting_is_a_level_camera(tmp_path) -> 
         "/cam/depth": ("foxglove.RawImage", [_raw_image(np.zeros((10, 10), np.uint16), "cam")])})
     with pytest.raises(InputError, match="a 10x10 depth image where the camera info of 'cam' says 64x48"):
         read_log(wrong)
+
+
+def test_a_hand_held_walk_maps_and_is_scored_on_frames_held_out_in_blocks(tmp_path) -> None:
+    import json
+
+    from click.testing import CliRunner
+
+    from occtool.cli.main import cli
+    from occtool.simulate._depth import walk
+
+    small = PinholeCamera(80, 60, 69.28, 69.28, 39.5, 29.5)
+    yaws, positions = walk(24)
+    frames, _ = render_depth_frames("office", camera=small, yaws=yaws, positions=positions)
+    folder = write_depth_folder(frames, tmp_path / "walk", layout="tum", camera=small)
+    log = read_log(folder, depth_features=500)
+    assert len(log.positions) > 4 and all(p.pose is not None for p in log.positions)
+    first = log.positions[0].pose
+    assert (first.x, first.y) == pytest.approx(positions[0], abs=1e-6)
+    assert first.yaw == pytest.approx(yaws[0], abs=1e-6)
+    runner = CliRunner()
+    result = runner.invoke(cli, ["map", str(folder / "depth.txt"), "-o", str(tmp_path / "map"),
+                                 "--depth-features", "500"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "map" / "map.pgm").is_file()
+    result = runner.invoke(cli, ["evaluate-log", str(folder / "depth.txt"), "--block", "4", "--holdout", "0.2",
+                                 "--depth-features", "500", "--json"])
+    assert result.exit_code == 0, result.output
+    figures = json.loads(result.output[result.output.index("{"):])
+    assert figures["scans"] == 24 and figures["held_out_scans"] == 4
+    assert 0.5 < figures["auc"]["fused_log_odds"] <= 1.0

@@ -63,10 +63,13 @@ def render_depth_frames(
     noise: float = 0.0015,
     max_range: float = 6.0,
     seed: int = 0,
+    positions: Sequence[tuple[float, float]] | None = None,
 ) -> tuple[list[DepthFrame], Scene]:
     """Depth frames of ``scene`` from a camera turning in place at the sensor.
 
-    ``yaws`` defaults to 8 frames 45 degrees apart (a full turn). Returns the frames and the scene.
+    ``yaws`` defaults to 8 frames 45 degrees apart (a full turn). ``positions`` moves the
+    camera of each frame to ``(x, y)`` (scene frame, at the sensor's height): a hand-held
+    or driving camera. Returns the frames and the scene.
 
     Examples
     --------
@@ -85,20 +88,42 @@ def render_depth_frames(
     optical = optical.reshape(-1, 3)
     frames: list[DepthFrame] = []
     height = scene.robot.sensor_height
+    if positions is not None and len(positions) != len(yaws):
+        raise InputError(f"{len(positions)} camera positions for {len(yaws)} yaws")
     for index, yaw in enumerate(yaws):
         rotation = camera_rotation(float(yaw), tilt)
         directions = optical @ rotation.T  # not unit: z_optical = 1
-        ranges, surface = cast_rays(scene, directions, max_range=max_range)
+        x, y = (0.0, 0.0) if positions is None else (float(positions[index][0]), float(positions[index][1]))
+        seen = scene if (x, y) == (0.0, 0.0) else _shifted(scene, x, y)
+        ranges, surface = cast_rays(seen, directions, max_range=max_range)
         depth = ranges / np.linalg.norm(optical, axis=1)
         with np.errstate(invalid="ignore"):  # inf * 0 where nothing is hit
             depth = depth + rng.standard_normal(depth.shape[0]) * noise * depth**2
         depth[(surface == NOTHING) | ~np.isfinite(depth) | (depth <= 0.0)] = 0.0
         pose = np.eye(4)
         pose[:3, :3] = rotation
-        pose[:3, 3] = (0.0, 0.0, height)
+        pose[:3, 3] = (x, y, height)
         frames.append(DepthFrame(depth.reshape(camera.height, camera.width).astype(np.float32), pose,
                                  1000.0 + index / 30.0))
     return frames, scene
+
+
+def _shifted(scene: Scene, x: float, y: float) -> Scene:
+    """The scene seen from ``(x, y)``: every obstacle moved by ``(-x, -y)``."""
+    from dataclasses import replace
+
+    return replace(scene, obstacles=tuple(
+        replace(o, footprint=tuple((px - x, py - y) for px, py in o.footprint)) for o in scene.obstacles))
+
+
+def walk(n: int = 120, *, radius: float = 0.6, centre: tuple[float, float] = (0.9, -0.9)
+         ) -> tuple[list[float], list[tuple[float, float]]]:
+    """Yaws and positions of a camera carried once round a circle, looking ahead and outward
+    (a hand-held sweep of a room): ``render_depth_frames(..., yaws=, positions=)``."""
+    angles = [2.0 * math.pi * i / n for i in range(n)]
+    positions = [(centre[0] + radius * math.cos(a), centre[1] + radius * math.sin(a)) for a in angles]
+    yaws = [a + math.pi / 4.0 for a in angles]  # between the path's heading and the outward normal
+    return yaws, positions
 
 
 def _write_png(path: Path, values: NDArray[np.uint16]) -> None:
@@ -336,4 +361,5 @@ def write_depth_bag(frames: Sequence[DepthFrame], path: str | os.PathLike[str], 
 
 
 __all__ = ["DEFAULT_CAMERA", "DEPTH_TOPIC", "DepthFrame", "camera_rotation", "compressed_depth_png",
-           "depth_log_messages", "render_depth_frames", "write_depth_bag", "write_depth_folder", "write_depth_mcap"]
+           "depth_log_messages", "render_depth_frames", "walk", "write_depth_bag", "write_depth_folder",
+           "write_depth_mcap"]
