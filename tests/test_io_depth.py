@@ -371,3 +371,28 @@ def test_a_hand_held_walk_maps_and_is_scored_on_frames_held_out_in_blocks(tmp_pa
     figures = json.loads(result.output[result.output.index("{"):])
     assert figures["scans"] == 24 and figures["held_out_scans"] == 4
     assert 0.5 < figures["auc"]["fused_log_odds"] <= 1.0
+
+
+def test_a_camera_without_a_mounting_gets_its_tilt_and_height_from_the_floor(tmp_path, office_frames) -> None:
+    from mcap_ros2.writer import Writer
+
+    import occtool.simulate._depth as rendering
+
+    frames, _ = office_frames
+    definitions = {"sensor_msgs/msg/Image": rendering._IMAGE_DEF, "sensor_msgs/msg/CameraInfo":
+                   rendering._CAMERA_INFO_DEF, "tf2_msgs/msg/TFMessage": rendering._TF_DEF}
+    path = tmp_path / "unmounted.mcap"
+    with open(path, "wb") as handle:
+        writer, schemas = Writer(handle), {}
+        for topic, kind, message, t in rendering.depth_log_messages(frames[:1]):
+            if topic == "/tf_static":
+                continue
+            if kind not in schemas:
+                schemas[kind] = writer.register_msgdef(kind, definitions[kind])
+            writer.write_message(topic, schemas[kind], message, log_time=int(t * 1e9), publish_time=int(t * 1e9))
+        writer.finish()
+    log = read_log(path, depth_features=100_000)
+    assert any("tilt (-25.0 degrees) and height (1.00 m) estimated from the floor plane" in n for n in log.notes)
+    mounted = read_log(rendering.write_depth_mcap(frames[:1], tmp_path / "mounted.mcap"), depth_features=100_000)
+    np.testing.assert_allclose(log.single().features.points, mounted.single().features.points, atol=0.01)
+    assert log.single().pose.z == pytest.approx(1.0, abs=0.01)

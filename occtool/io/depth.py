@@ -382,6 +382,34 @@ def level_rotation(up: ArrayLike) -> FloatArray:
     return np.eye(3) + s * kx + (1 - c) * (kx @ kx)
 
 
+def floor_mounting(points_optical: FloatArray) -> tuple[FloatArray, float, float] | None:
+    """A camera's tilt, roll and height from the floor plane in its own points.
+
+    ``points_optical`` are returns in the optical frame of a camera looking roughly
+    level (its -y roughly up). Returns ``(rotation, height, tilt)``: the rotation taking
+    optical coordinates into a frame with z up (the floor's normal) and x along the
+    camera's heading, the camera's height above the floor plane in metres and its tilt in
+    degrees (negative: looking down); ``None`` when no floor plane is found
+    (:func:`occtool.io.depth_folders.estimate_floor`).
+    """
+    from occtool.io.depth_folders import estimate_floor
+
+    found = estimate_floor(points_optical, np.array([0.0, -1.0, 0.0]))
+    if found is None:
+        return None
+    normal, offset, _ = found
+    height = -offset  # the camera is at the origin, the floor below it
+    if height <= 0.0:
+        return None
+    level = level_rotation(normal)
+    forward = level @ np.array([0.0, 0.0, 1.0])
+    yaw = math.atan2(forward[1], forward[0])
+    c, s = math.cos(yaw), math.sin(yaw)
+    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ level
+    tilt = math.degrees(math.asin(max(-1.0, min(1.0, float((rotation @ np.array([0.0, 0.0, 1.0]))[2])))))
+    return rotation, float(height), tilt
+
+
 def camera_scan(points_body: FloatArray, camera_to_world: FloatArray) -> tuple[FloatArray, Pose]:
     """Camera-body points (REP-103 axes at the camera) and the camera's pose in a z-up world.
 
@@ -418,6 +446,7 @@ __all__ = [
     "check_depth_max_range",
     "check_depth_noise",
     "check_rigid",
+    "floor_mounting",
     "level_rotation",
     "noise_evidence",
     "rotation_from_quaternion",

@@ -52,6 +52,8 @@ class DepthSettings:
     distorted: set[str] = field(default_factory=set)
     counts: DepthCounts = field(default_factory=DepthCounts)
     level_frames: set[str] = field(default_factory=set)
+    #: Per image frame without a mounting: (rotation, height, tilt) from the floor in its first image.
+    from_floor: dict[str, tuple[NDArray[np.float64], float, float] | None] = field(default_factory=dict)
 
 
 def add_camera_info(settings: DepthSettings, message: Any, where: str) -> None:
@@ -184,9 +186,16 @@ def depth_notes(settings: DepthSettings, no_return_range: float | None) -> list[
     if settings.distorted & set(settings.cameras):
         notes.append(f"distortion coefficients of {', '.join(sorted(settings.distorted))} ignored "
                      "(a rectified image_rect topic has none)")
-    if settings.level_frames:
-        notes.append(f"warning: no /tf_static transform from {', '.join(sorted(settings.level_frames))} to the base "
-                     "frame: the depth camera taken as level, looking along the base's x axis (optical z)")
+    for frame, found in sorted(settings.from_floor.items()):
+        if found is not None:
+            notes.append(f"warning: no /tf_static transform from {frame} to the base frame: the camera's tilt "
+                         f"({found[2]:.1f} degrees) and height ({found[1]:.2f} m) estimated from the floor plane "
+                         "in its first image")
+    level = settings.level_frames - {f for f, found in settings.from_floor.items() if found is not None}
+    if level:
+        notes.append(f"warning: no /tf_static transform from {', '.join(sorted(level))} to the base "
+                     "frame and no floor plane in its first image: the depth camera taken as level, looking "
+                     "along the base's x axis (optical z)")
     return notes
 
 

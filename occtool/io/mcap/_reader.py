@@ -287,9 +287,15 @@ class _Scans:
         points, evidence, frame, stamp = decode_depth(kind, message, settings, self.options.no_return_range, where)
         decoded = _Decoded(points, evidence, frame, stamp, _IDENTITY)
         if self._mounting(frame) is None:
-            from occtool.io.depth import OPTICAL_TO_BODY
+            from occtool.io.depth import OPTICAL_TO_BODY, floor_mounting
 
-            decoded.origin = _Rigid(OPTICAL_TO_BODY, np.zeros(3))
+            if frame not in settings.from_floor:
+                settings.from_floor[frame] = floor_mounting(points[evidence > 0.0])
+            found = settings.from_floor[frame]
+            if found is None:
+                decoded.origin = _Rigid(OPTICAL_TO_BODY, np.zeros(3))
+            else:
+                decoded.origin = _Rigid(found[0], np.array([0.0, 0.0, found[1]]))
             self.unmounted.discard(frame)
             settings.level_frames.add(frame)
         return decoded
