@@ -110,3 +110,54 @@ def test_the_command_line_says_so_in_one_line(tmp_path, two_frames):
     errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
     assert len(errors) == 1 and "not a readable depth image" in errors[0], result.output
     assert "--skip-invalid" in errors[0]
+
+
+def test_a_32fc1_compressed_depth_image_decodes_image_transports_inverse_depth() -> None:
+    import io
+    import struct
+    from types import SimpleNamespace
+
+    from PIL import Image
+
+    from occtool.io.mcap._depth import _compressed_depth
+
+    z0, depth_max = 100.0, 10.0  # compressed_depth_image_transport's defaults
+    quant_a = z0 * (z0 + 1.0)
+    quant_b = 1.0 - quant_a / depth_max
+    depth = np.linspace(0.5, 6.0, 48 * 64).reshape(48, 64)
+    depth[0, :5] = np.nan
+    inverse = np.where(np.isfinite(depth), quant_a / depth + quant_b, 0.0).round().astype(np.uint16)
+    buffer = io.BytesIO()
+    Image.fromarray(inverse).save(buffer, format="PNG")
+    message = SimpleNamespace(format="32FC1; compressedDepth png",
+                              data=struct.pack("<iff", 0, quant_a, quant_b) + buffer.getvalue())
+    decoded, scale = _compressed_depth(message, "test")
+    assert scale == 1.0 and np.isnan(decoded[0, :5]).all()
+    np.testing.assert_allclose(decoded[1:], depth[1:], rtol=0.02)
+    with pytest.raises(InputError, match="not compressedDepth"):
+        _compressed_depth(SimpleNamespace(format="jpeg", data=b""), "test")
+    with pytest.raises(InputError, match="cannot be decoded"):
+        _compressed_depth(SimpleNamespace(format="16UC1; compressedDepth png", data=b"\0" * 40), "test")
+
+
+@settings(max_examples=60, deadline=None)
+@given(width=st.integers(-2, 40), height=st.integers(-2, 40), step=st.integers(0, 100),
+       size=st.integers(0, 4000), encoding=st.sampled_from(["16UC1", "mono16", "32FC1", "rgb8", "", "8UC1"]),
+       big=st.booleans())
+def test_any_image_message_layout_is_read_or_refused_as_input(width, height, step, size, encoding, big):
+    from types import SimpleNamespace
+
+    from occtool.io.mcap._channels import DEPTH_IMAGE
+    from occtool.io.mcap._depth import DepthSettings, decode_depth
+
+    settings_ = DepthSettings()
+    settings_.cameras["cam"] = PinholeCamera(8, 6, 10.0, 10.0, 4.0, 3.0)
+    message = SimpleNamespace(header=SimpleNamespace(frame_id="cam", stamp=None), width=width, height=height,
+                              step=step, encoding=encoding, is_bigendian=big,
+                              data=bytes(np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)))
+    try:
+        points, evidence, frame, _ = decode_depth(DEPTH_IMAGE, message, settings_, None, "test")
+    except InputError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert frame == "cam" and np.isfinite(points).all() and ((evidence > 0) & (evidence <= 1)).all()
