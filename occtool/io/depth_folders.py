@@ -416,18 +416,34 @@ def read_depth_folder(
         notes += floor_notes
     scans: list[Scan] = []
     heights: list[float] = []
+    unposed_mounting: tuple[FloatArray | None, tuple[FloatArray, float, float] | None] | None = None
     for points, evidence, frame in body:
         if frame.pose is None:
-            # No pose: the camera taken to be level (its optical axis horizontal).
-            scans.append(Scan(points, evidence, None, frame.stamp, frame.source))
+            # No pose: tilt, roll and height from the floor in the first such frame, else level.
+            if unposed_mounting is None:
+                from occtool.io.depth import OPTICAL_TO_BODY, floor_mounting
+
+                found = floor_mounting((points @ OPTICAL_TO_BODY)[evidence > 0.0])
+                unposed_mounting = (None if found is None else found[0] @ OPTICAL_TO_BODY.T,
+                                    None if found is None else found)
+            rotation, found_floor = unposed_mounting
+            moved = points if rotation is None else points @ rotation.T
+            scans.append(Scan(moved, evidence, None, frame.stamp, frame.source))
             continue
         world = level @ frame.pose
         world[2, 3] -= floor_offset
         moved, pose = camera_scan(points, world)
         heights.append(pose.z)
         scans.append(Scan(moved, evidence, pose, frame.stamp, frame.source))
-    if any(f.pose is None for _, _, f in body):
-        notes.append("frames without a pose are taken as from a level camera (optical axis horizontal)")
+    if unposed_mounting is not None:
+        found_floor = unposed_mounting[1]
+        if found_floor is None:
+            notes.append("warning: frames without a pose, and no floor plane in the first: the camera taken as "
+                         "level (optical axis horizontal)")
+        else:
+            notes.append(f"warning: frames without a pose: the camera's tilt ({found_floor[2]:.1f} degrees) and "
+                         f"height ({found_floor[1]:.2f} m) estimated from the floor plane in the first; give the fit "
+                         f"--sensor-height {found_floor[1]:.2f}")
     if heights and floor_offset != 0.0:
         notes.append(f"camera heights above the floor: median {np.median(heights):.2f} m "
                      f"({min(heights):.2f} to {max(heights):.2f} m); give the fit --sensor-height "
