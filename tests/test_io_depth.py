@@ -407,3 +407,20 @@ def test_frames_without_poses_get_the_cameras_tilt_from_the_floor(tmp_path, offi
     assert any("tilt (-25.0 degrees) and height (1.00 m) estimated from the floor plane" in n for n in log.notes)
     posed = read_log(write_depth_folder(frames[:1], tmp_path / "posed", layout="tum"), depth_features=100_000)
     np.testing.assert_allclose(log.single().features.points, posed.single().features.points, atol=0.01)
+
+
+def test_a_folder_streams_the_positions_read_log_returns(tmp_path, office_frames) -> None:
+    from occtool.io import iter_positions
+
+    frames, _ = office_frames
+    world = np.linalg.inv(frames[0].camera_to_world)
+    folder = write_depth_folder(frames, tmp_path / "m", layout="3dmatch", world=world)
+    whole = read_log(folder, depth_features=300)
+    stream = iter_positions(folder, depth_features=300)
+    for _ in range(2):  # each iteration reads the folder again
+        streamed = list(stream)
+        assert len(streamed) == len(whole.positions) == 8
+        for a, b in zip(streamed, whole.positions):
+            np.testing.assert_array_equal(a.features.points, b.features.points)
+            assert a.pose == b.pose
+    assert stream.notes == whole.notes

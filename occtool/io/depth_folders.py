@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -350,6 +350,146 @@ def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0,
     return refined, float(refined @ centre), int(inlier_points.shape[0])
 
 
+class DepthFolderScans:
+    """The frames of a TUM RGB-D or 3DMatch / 7-Scenes folder as scans, read one frame at a
+    time (an iterable of :class:`~occtool.io.positions.Scan`, for
+    :func:`occtool.io.iter_positions`; :func:`read_depth_folder` gathers them).
+
+    :meth:`prepare` lists the frames and their poses, reads the intrinsics and the first
+    frame (the image size), and levels the world from the floor in up to 40 frames; each
+    iteration then reads every frame's PNG again, holding one frame at a time. ``notes``
+    is complete after a full iteration. Parameters are those of :func:`read_depth_folder`.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, format: str | None = None, skip_invalid: bool = False,
+                 no_return_range: float | None = None, depth_features: int = DEFAULT_DEPTH_FEATURES,
+                 depth_noise: float = DEFAULT_DEPTH_NOISE,
+                 depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE) -> None:
+        self.target = Path(path)
+        self.name = str(path)
+        self.folder = self.target if self.target.is_dir() else self.target.parent
+        self.layout = format or depth_layout(self.target)
+        if self.layout not in DEPTH_FORMATS:
+            raise InputError(f"{self.target} is neither a TUM RGB-D folder (depth.txt) nor a 3DMatch / 7-Scenes "
+                             "folder (frame-NNNNNN.depth.png with .pose.txt)")
+        self.skip_invalid = skip_invalid
+        self.no_return_range = no_return_range
+        self.features, self.noise, self.max_range = depth_features, depth_noise, depth_max_range
+        self.notes: list[str] = []
+        self._prepared = False
+
+    def _image(self, frame: _Frame) -> NDArray[np.generic] | None:
+        """The frame's depth image, checked against the camera; ``None`` for an unreadable one with skip_invalid."""
+        try:
+            image = read_depth_png(frame.image)
+        except InputError as exc:
+            if not self.skip_invalid:
+                raise InputError(f"{exc} (pass skip_invalid=True to drop such frames)") from None
+            return None
+        if image.dtype == np.uint16:
+            image = np.where(image == np.iinfo(np.uint16).max, np.uint16(0), image)  # 7-Scenes' invalid
+        camera = getattr(self, "camera", None)
+        if camera is not None and image.shape != (camera.height, camera.width):
+            raise InputError(f"{frame.image}: depth image of {image.shape[1] if image.ndim > 1 else '?'}x"
+                             f"{image.shape[0]} pixels, where the folder's first is {camera.width}x{camera.height}")
+        return image
+
+    def _project(self, image: NDArray[np.generic], index: int, budget: int, counts: DepthCounts | None
+                 ) -> tuple[FloatArray, FloatArray]:
+        return back_project(image, self.camera, scale=self.scale, min_range=DEFAULT_DEPTH_MIN_RANGE,
+                            max_range=self.max_range, no_return_range=self.no_return_range, noise=self.noise,
+                            budget=budget, phase=index, counts=counts)
+
+    def prepare(self) -> None:
+        """Frames, poses, intrinsics, image size and the levelled world (see the class)."""
+        if self._prepared:
+            return
+        notes: list[str] = []
+        if self.layout == "tum":
+            self.frames, intrinsics, z_up = _tum_frames(self.folder, notes)
+            self.scale = 1.0 / TUM_DEPTH_FACTOR
+        else:
+            self.frames, intrinsics, z_up = _match_frames(self.folder, notes)
+            self.scale = 1e-3
+        first = None
+        for frame in self.frames:
+            first = self._image(frame)
+            if first is not None:
+                break
+        if first is None:
+            raise InputError(f"{self.target} holds no readable depth frame")
+        height, width = first.shape[:2] if first.ndim >= 2 else (0, 0)
+        self.camera = PinholeCamera(width, height, *intrinsics)
+        if first.ndim != 2:
+            raise InputError(f"{self.target}: a depth image must be one channel, got shape {first.shape}")
+        self.level, self.floor_offset = np.eye(4), 0.0
+        posed = [(i, f) for i, f in enumerate(self.frames) if f.pose is not None]
+        if posed:
+            picks = np.linspace(0, len(posed) - 1, min(40, len(posed))).astype(int)
+            sample = []
+            for k in picks:
+                index, frame = posed[k]
+                image = self._image(frame)
+                if image is not None:
+                    points, evidence = self._project(image, index, 2000, None)
+                    sample.append((points, evidence, frame))
+            if sample:
+                self.level, self.floor_offset, floor_notes = _level_world(sample, z_up)
+                notes += floor_notes
+        self.unposed: tuple[FloatArray | None, tuple[FloatArray, float, float] | None] | None = None
+        unposed = next((f for f in self.frames if f.pose is None), None)
+        if unposed is not None:
+            from occtool.io.depth import OPTICAL_TO_BODY, floor_mounting
+
+            image = self._image(unposed)
+            found = None
+            if image is not None:
+                points, evidence = self._project(image, 0, 100_000, None)
+                found = floor_mounting((points @ OPTICAL_TO_BODY)[evidence > 0.0])
+            self.unposed = (None if found is None else found[0] @ OPTICAL_TO_BODY.T, found)
+            if found is None:
+                notes.append("warning: frames without a pose, and no floor plane in the first: the camera taken as "
+                             "level (optical axis horizontal)")
+            else:
+                notes.append(f"warning: frames without a pose: the camera's tilt ({found[2]:.1f} degrees) and "
+                             f"height ({found[1]:.2f} m) estimated from the floor plane in the first; give the fit "
+                             f"--sensor-height {found[1]:.2f}")
+        self._notes = notes
+        self._prepared = True
+
+    def __iter__(self) -> Iterator[Scan]:
+        self.prepare()
+        self.notes.clear()
+        counts = DepthCounts()
+        heights: list[float] = []
+        unreadable = 0
+        for index, frame in enumerate(self.frames):
+            image = self._image(frame)
+            if image is None:
+                unreadable += 1
+                continue
+            points, evidence = self._project(image, index, self.features, counts)
+            if frame.pose is None:
+                rotation = self.unposed[0] if self.unposed is not None else None
+                yield Scan(points if rotation is None else points @ rotation.T, evidence, None, frame.stamp,
+                           frame.source)
+                continue
+            world = self.level @ frame.pose
+            world[2, 3] -= self.floor_offset
+            moved, pose = camera_scan(points, world)
+            heights.append(pose.z)
+            yield Scan(moved, evidence, pose, frame.stamp, frame.source)
+        notes = list(self._notes)
+        if unreadable:
+            notes.append(f"skipped {unreadable} depth frame(s) whose image could not be read")
+        if heights and self.floor_offset != 0.0:
+            notes.append(f"camera heights above the floor: median {np.median(heights):.2f} m "
+                         f"({min(heights):.2f} to {max(heights):.2f} m); give the fit --sensor-height "
+                         f"{np.median(heights):.2f}")
+        notes += counts.notes(self.no_return_range, self.max_range)
+        self.notes.extend(notes)
+
+
 def read_depth_folder(
     path: str | os.PathLike[str],
     *,
@@ -367,89 +507,10 @@ def read_depth_folder(
     Parameters are those of :func:`occtool.io.read_log`. ``skip_invalid`` drops frames
     whose image cannot be read (counted in a note) instead of failing.
     """
-    target = Path(path)
-    folder = target if target.is_dir() else target.parent
-    layout = format or depth_layout(target)
-    if layout not in DEPTH_FORMATS:
-        raise InputError(f"{target} is neither a TUM RGB-D folder (depth.txt) nor a 3DMatch / 7-Scenes folder "
-                         "(frame-NNNNNN.depth.png with .pose.txt)")
-    notes: list[str] = []
-    if layout == "tum":
-        frames, intrinsics, z_up = _tum_frames(folder, notes)
-        scale = 1.0 / TUM_DEPTH_FACTOR
-    else:
-        frames, intrinsics, z_up = _match_frames(folder, notes)
-        scale = 1e-3
-    counts = DepthCounts()
-    camera: PinholeCamera | None = None
-    body: list[tuple[FloatArray, FloatArray, _Frame]] = []
-    unreadable = 0
-    for index, frame in enumerate(frames):
-        try:
-            image = read_depth_png(frame.image)
-        except InputError as exc:
-            if not skip_invalid:
-                raise InputError(f"{exc} (pass skip_invalid=True to drop such frames)") from None
-            unreadable += 1
-            continue
-        if image.dtype == np.uint16:
-            image = np.where(image == np.iinfo(np.uint16).max, np.uint16(0), image)  # 7-Scenes' invalid
-        if camera is None:
-            height, width = image.shape[:2] if image.ndim >= 2 else (0, 0)
-            camera = PinholeCamera(width, height, *intrinsics)
-        if image.shape != (camera.height, camera.width):
-            raise InputError(f"{frame.image}: depth image of {image.shape[1] if image.ndim > 1 else '?'}x"
-                             f"{image.shape[0]} pixels, where the folder's first is {camera.width}x{camera.height}")
-        points, evidence = back_project(
-            image, camera, scale=scale, min_range=DEFAULT_DEPTH_MIN_RANGE, max_range=depth_max_range,
-            no_return_range=no_return_range, noise=depth_noise, budget=depth_features, phase=index, counts=counts)
-        body.append((points, evidence, frame))
-    if unreadable:
-        notes.append(f"skipped {unreadable} depth frame(s) whose image could not be read")
-    if not body:
-        raise InputError(f"{target} holds no readable depth frame")
-    level = np.eye(4)
-    floor_offset = 0.0
-    posed = [item for item in body if item[2].pose is not None]
-    if posed:
-        level, floor_offset, floor_notes = _level_world(posed, z_up)
-        notes += floor_notes
-    scans: list[Scan] = []
-    heights: list[float] = []
-    unposed_mounting: tuple[FloatArray | None, tuple[FloatArray, float, float] | None] | None = None
-    for points, evidence, frame in body:
-        if frame.pose is None:
-            # No pose: tilt, roll and height from the floor in the first such frame, else level.
-            if unposed_mounting is None:
-                from occtool.io.depth import OPTICAL_TO_BODY, floor_mounting
-
-                found = floor_mounting((points @ OPTICAL_TO_BODY)[evidence > 0.0])
-                unposed_mounting = (None if found is None else found[0] @ OPTICAL_TO_BODY.T,
-                                    None if found is None else found)
-            rotation, found_floor = unposed_mounting
-            moved = points if rotation is None else points @ rotation.T
-            scans.append(Scan(moved, evidence, None, frame.stamp, frame.source))
-            continue
-        world = level @ frame.pose
-        world[2, 3] -= floor_offset
-        moved, pose = camera_scan(points, world)
-        heights.append(pose.z)
-        scans.append(Scan(moved, evidence, pose, frame.stamp, frame.source))
-    if unposed_mounting is not None:
-        found_floor = unposed_mounting[1]
-        if found_floor is None:
-            notes.append("warning: frames without a pose, and no floor plane in the first: the camera taken as "
-                         "level (optical axis horizontal)")
-        else:
-            notes.append(f"warning: frames without a pose: the camera's tilt ({found_floor[2]:.1f} degrees) and "
-                         f"height ({found_floor[1]:.2f} m) estimated from the floor plane in the first; give the fit "
-                         f"--sensor-height {found_floor[1]:.2f}")
-    if heights and floor_offset != 0.0:
-        notes.append(f"camera heights above the floor: median {np.median(heights):.2f} m "
-                     f"({min(heights):.2f} to {max(heights):.2f} m); give the fit --sensor-height "
-                     f"{np.median(heights):.2f}")
-    notes += counts.notes(no_return_range, depth_max_range)
-    return build_log(scans, source=str(target), tolerance=position_tolerance, group_by=group_by, notes=notes)
+    scans = DepthFolderScans(path, format=format, skip_invalid=skip_invalid, no_return_range=no_return_range,
+                             depth_features=depth_features, depth_noise=depth_noise, depth_max_range=depth_max_range)
+    listed = list(scans)
+    return build_log(listed, source=scans.name, tolerance=position_tolerance, group_by=group_by, notes=scans.notes)
 
 
 def _level_world(posed: list[tuple[FloatArray, FloatArray, _Frame]], z_up: bool
@@ -500,5 +561,5 @@ def _level_world(posed: list[tuple[FloatArray, FloatArray, _Frame]], z_up: bool
     return level, offset, notes
 
 
-__all__ = ["DEPTH_FORMATS", "TUM_DEPTH_FACTOR", "depth_layout", "estimate_floor", "read_depth_folder",
+__all__ = ["DEPTH_FORMATS", "DepthFolderScans", "TUM_DEPTH_FACTOR", "depth_layout", "estimate_floor", "read_depth_folder",
            "read_depth_png"]
