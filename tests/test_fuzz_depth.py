@@ -161,3 +161,13 @@ def test_any_image_message_layout_is_read_or_refused_as_input(width, height, ste
         assert "\n" not in str(exc)
         return
     assert frame == "cam" and np.isfinite(points).all() and ((evidence > 0) & (evidence <= 1)).all()
+
+
+def test_without_pillow_the_error_names_the_extra(monkeypatch, two_frames) -> None:
+    import sys
+
+    from occtool.errors import MissingDependencyError
+
+    monkeypatch.setitem(sys.modules, "PIL", None)
+    with pytest.raises(MissingDependencyError, match=r"occtool\[depth\]"):
+        read_log(two_frames)
