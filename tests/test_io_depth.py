@@ -424,3 +424,18 @@ def test_a_folder_streams_the_positions_read_log_returns(tmp_path, office_frames
             np.testing.assert_array_equal(a.features.points, b.features.points)
             assert a.pose == b.pose
     assert stream.notes == whole.notes
+
+
+def test_the_fixture_is_what_its_readme_command_makes(tmp_path) -> None:
+    from click.testing import CliRunner
+
+    from occtool.cli.main import cli
+
+    result = CliRunner().invoke(cli, ["simulate", "office", "-o", str(tmp_path), "--depth-frames", "tum"])
+    assert result.exit_code == 0, result.output
+    made = sorted(p.relative_to(tmp_path / "depth-tum") for p in (tmp_path / "depth-tum").rglob("*") if p.is_file())
+    kept = sorted(p.relative_to(FIXTURES / "depth-office") for p in (FIXTURES / "depth-office").rglob("*")
+                  if p.is_file())
+    assert made == kept
+    for name in made:
+        assert (tmp_path / "depth-tum" / name).read_bytes() == (FIXTURES / "depth-office" / name).read_bytes(), name
