@@ -47,6 +47,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from depth import depth_section  # noqa: E402
 from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
@@ -604,6 +605,8 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines += [results["log_map_markdown"], ""]
     if results.get("fleet_markdown"):
         lines += ["## Fleets of logs: one call, local processes and Dask", "", results["fleet_markdown"], ""]
+    if results.get("depth_markdown"):
+        lines += [results["depth_markdown"], ""]
     return lines
 
 
@@ -834,6 +837,8 @@ def main(argv: list[str] | None = None) -> int:
     if data.is_dir() and not args.quick:
         results["log_map_markdown"], results["log_map"] = log_map_section(data)
         results["fleet_markdown"], results["fleet"] = fleet_section(data)
+    # Issue 23: depth cameras (the scenes rendered as depth images; about 75 s).
+    results["depth_markdown"], results["depth"] = depth_section()
     results["notes"] = notes
     results["targets"] = targets(results["feature_sweep"], results["scale_sweep"], results["scenes"], results["speed"])
     office = reports.get(10_000)

@@ -24,6 +24,7 @@ from occtool.limits import (
     MAX_ANGLES,
     MAX_BODY_SAMPLES,
     MAX_DISTANCE,
+    MAX_FEATURES,
     MAX_PIECES,
     MAX_ROBOT_SIZE,
     MAX_SWEEPS,
@@ -152,9 +153,16 @@ jobs_options = _compose(
 
 # --- range-log reading (owner: readers) ------------------------------------------------
 
+# occtool.io.read_options' depth defaults, spelled here so that --help imports no numpy
+# (tests/test_io_depth.py holds them equal).
+DEFAULT_DEPTH_FEATURES = 10_000
+DEFAULT_DEPTH_NOISE = 0.0015
+DEFAULT_DEPTH_MAX_RANGE = 8.0
+
 LOG_OPTION_NAMES = (
     "format", "topics", "evidence_field", "evidence", "use_intensities", "sensor_frame", "base_frame",
-    "position_tolerance", "group_by", "skip_invalid", "no_return_range",
+    "position_tolerance", "group_by", "skip_invalid", "no_return_range", "depth_features", "depth_noise",
+    "depth_max_range",
 )
 
 
@@ -186,7 +194,7 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
 
 log_options = _compose(
     click.option(
-        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag"], case_sensitive=False),
+        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "tum", "3dmatch"], case_sensitive=False),
         default=None, help="Log format (default: from the content and extension).",
     ),
     click.option(
@@ -225,6 +233,22 @@ log_options = _compose(
              "free ray, a feature with evidence 0 at min(METRES, the beam's max range), saying its ray is "
              "free and nothing about an obstacle (default: such beams are dropped; ignored for point clouds "
              "and CSV).",
+    ),
+    click.option(
+        "--depth-features", type=click.IntRange(min=1, max=MAX_FEATURES), default=DEFAULT_DEPTH_FEATURES,
+        show_default=True, metavar="N",
+        help="Depth images: most features kept of each frame, on a regular pixel grid (keeps each surface's share).",
+    ),
+    click.option(
+        "--depth-noise", type=click.FloatRange(min=0.0, max=1.0), default=DEFAULT_DEPTH_NOISE, show_default=True,
+        metavar="K",
+        help="Depth images: depth noise sigma = K z^2 metres that gives each pixel its evidence "
+             "(0.0015 structured light, about 0.005-0.01 stereo).",
+    ),
+    click.option(
+        "--depth-max-range", type=click.FloatRange(min=0.1, max=MAX_DISTANCE, min_open=True), default=DEFAULT_DEPTH_MAX_RANGE,
+        show_default=True, metavar="METRES",
+        help="Depth images: farther depths are no returns (dropped, or free rays with --no-return-range).",
     ),
 )
 

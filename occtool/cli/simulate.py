@@ -41,11 +41,14 @@ def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
               default=0.05, show_default=True, help="Obstacles lower than this are driven over, metres.")
 @click.option("--sensor-range", type=click.FloatRange(min=0.0, max=MAX_DISTANCE, min_open=True),
               default=6.0, show_default=True, help="Farthest range at which the camera registers features, metres.")
+@click.option("--depth-frames", type=click.Choice(["tum", "3dmatch"]), default=None,
+              help="Also render the scene as depth images (a 160x120 pinhole camera at the sensor, 8 frames "
+                   "45 degrees apart, tilted 25 degrees down) into DIR/depth-tum/ or DIR/depth-3dmatch/.")
 @overwrite_option
 @config_option
 def simulate(scene: str, output: str, features: int, seed: int, noise: float, outlier_rate: float,
              yaw: float, sensor_height: float, body_height: float, radius: float, ground_clearance: float,
-             sensor_range: float, overwrite: bool) -> None:
+             sensor_range: float, depth_frames: str | None, overwrite: bool) -> None:
     """Simulate a pan-tilt stereo camera in SCENE and write DIR/features.csv and DIR/truth.json.
 
     Scenes: office, corridor, clutter, open (see docs/scenes.md). Features are in the
@@ -75,3 +78,9 @@ def simulate(scene: str, output: str, features: int, seed: int, noise: float, ou
     truth.save_truth(truth_path)
     save_features_csv(registered, features_path, comments)
     logging.getLogger("occtool.simulate").info("wrote %s and %s", features_path, truth_path)
+    if depth_frames:
+        from occtool.simulate import render_depth_frames, write_depth_folder
+
+        frames, _ = render_depth_frames(truth, max_range=sensor_range, seed=seed)
+        target = write_depth_folder(frames, folder / f"depth-{depth_frames}", layout=depth_frames)
+        logging.getLogger("occtool.simulate").info("wrote %d depth frames into %s", len(frames), target)

@@ -13,6 +13,9 @@ import re
 
 #: Library keyword -> command-line flag.
 KEYWORD_FLAGS = {
+    "depth_features": "--depth-features",
+    "depth_max_range": "--depth-max-range",
+    "depth_noise": "--depth-noise",
     "evidence": "--evidence",
     "features": "--features",
     "format": "--format",

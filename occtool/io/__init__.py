@@ -20,6 +20,9 @@ a time, for fitting a long log in bounded memory. Supported formats (docs/format
 ``rosbag``
     ROS 1 ``.bag`` and ROS 2 ``.db3`` bags (with their ``metadata.yaml``), through
     ``rosbags``: the same messages and ``--topic`` as MCAP.
+``tum``, ``3dmatch``
+    folders of depth PNGs with camera poses: TUM RGB-D (``depth.txt``) and 3DMatch /
+    7-Scenes (``frame-NNNNNN.depth.png``), :mod:`occtool.io.depth_folders`.
 
 The readers are imported only when used, and nothing here imports the model or
 GeoJSON writers.
@@ -38,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
+from occtool.io.read_options import DEFAULT_DEPTH_FEATURES, DEFAULT_DEPTH_MAX_RANGE, DEFAULT_DEPTH_NOISE
 from occtool.limits import MAX_DISTANCE
 
 if TYPE_CHECKING:
@@ -48,7 +52,7 @@ if TYPE_CHECKING:
 __all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "iter_positions", "read_log",
            "write_csv", "write_mcap"]
 
-FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag")
+FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "tum", "3dmatch")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 DEFAULT_CONSTANT_EVIDENCE = 0.9
 CARMEN_RECORDS = (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"NEFF", b"SYNC", b"TRUEPOS")
@@ -82,7 +86,12 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     FileNotFoundError
         If the file does not exist.
     """
+    from occtool.io.depth_folders import depth_layout
+
     target = Path(path)
+    layout = depth_layout(target)  # a folder of depth frames, or its depth.txt / camera-intrinsics.txt
+    if layout is not None:
+        return layout
     if target.is_dir():
         raise InputError(f"{target} is a folder, not a range log")
     head = _head(target)
@@ -167,6 +176,9 @@ def read_log(
     group_by: str = "position",
     skip_invalid: bool = False,
     no_return_range: float | None = None,
+    depth_features: int = DEFAULT_DEPTH_FEATURES,
+    depth_noise: float = DEFAULT_DEPTH_NOISE,
+    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
 ) -> RangeLog:
     """Read a range log into positions of features.
 
@@ -203,7 +215,15 @@ def read_log(
         a number R of metres > 0 keeps each as a *free ray*, a feature along its beam
         at ``min(R, the beam's max range)`` with evidence 0 (free up to there, nothing
         about an obstacle). Other data (point clouds, CSV) has no such beams and
-        ignores it.
+        ignores it. Depth images: pixels with no return (+inf, beyond
+        ``depth_max_range``) become free rays at ``min(R, depth_max_range)``.
+    depth_features
+        Depth images: most features kept of each frame, sampled on a regular pixel grid.
+    depth_noise
+        Depth images: ``k`` of the depth noise ``sigma = k z**2`` metres that gives each
+        pixel its evidence (:func:`occtool.io.depth.noise_evidence`).
+    depth_max_range
+        Depth images: farther depths are no returns, metres.
 
     Returns
     -------
@@ -224,7 +244,8 @@ def read_log(
         path, format=format, topics=topics, evidence_field=evidence_field, evidence=evidence,
         use_intensities=use_intensities, sensor_frame=sensor_frame, base_frame=base_frame,
         position_tolerance=position_tolerance, group_by=group_by, skip_invalid=skip_invalid,
-        no_return_range=no_return_range,
+        no_return_range=no_return_range, depth_features=depth_features, depth_noise=depth_noise,
+        depth_max_range=depth_max_range,
     )
     with _read_errors(path):
         return _read_format(path, fmt, options)
@@ -266,6 +287,9 @@ def _checked_options(
     group_by: str = "position",
     skip_invalid: bool = False,
     no_return_range: float | None = None,
+    depth_features: int = DEFAULT_DEPTH_FEATURES,
+    depth_noise: float = DEFAULT_DEPTH_NOISE,
+    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
 ) -> tuple[str, ReadOptions]:
     """The log's format and the reading options, checked (see :func:`read_log`)."""
     from occtool.io.positions import GROUP_BY_CHOICES, check_tolerance
@@ -285,10 +309,14 @@ def _checked_options(
     if topics and fmt not in ("mcap", "rosbag"):
         raise InputError(f"topics= applies to MCAP logs only, and {path} is {fmt}")
     no_return_range = check_no_return_range(no_return_range)
+    from occtool.io.depth import check_depth_features, check_depth_max_range, check_depth_noise
+
     options: ReadOptions = dict(
         topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
         sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
         skip_invalid=skip_invalid, no_return_range=no_return_range,
+        depth_features=check_depth_features(depth_features), depth_noise=check_depth_noise(depth_noise),
+        depth_max_range=check_depth_max_range(depth_max_range),
     )
     return fmt, options
 
@@ -320,6 +348,14 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
     skip_invalid = options["skip_invalid"]
     no_return_range = options["no_return_range"]
     constant = DEFAULT_CONSTANT_EVIDENCE if evidence is None else float(evidence)
+    if fmt in ("tum", "3dmatch"):
+        from occtool.io.depth_folders import read_depth_folder
+
+        return read_depth_folder(
+            path, format=fmt, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid,
+            no_return_range=no_return_range, depth_features=options["depth_features"],
+            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
+        )
     if fmt == "csv":
         from occtool.io.csv import read_csv
 
@@ -333,7 +369,8 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
         return read_mcap(
             path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
             sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid, no_return_range=no_return_range,
+            skip_invalid=skip_invalid, no_return_range=no_return_range, depth_features=options["depth_features"],
+            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
         )
     if fmt == "rosbag":
         from occtool.io.rosbag import read_rosbag
@@ -341,7 +378,8 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
         return read_rosbag(
             path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
             sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid, no_return_range=no_return_range,
+            skip_invalid=skip_invalid, no_return_range=no_return_range, depth_features=options["depth_features"],
+            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
         )
     if fmt == "carmen":
         from occtool.io.carmen import read_carmen

@@ -19,6 +19,10 @@ iteration. What is held at a time depends on the format:
     iteration decodes every message once first, keeping counts only, and raises any
     error before the first position). occtool's own feature channel is read whole (its
     messages are sorted by position).
+``tum``, ``3dmatch``
+    one depth frame, and the scans of the position being gathered
+    (:class:`~occtool.io.depth_folders.DepthFolderScans`: the first iteration reads up to 40
+    frames first, for the floor that levels the world).
 ``xyz``, ``pcd``, ``ply``
     the whole file (one position in practice): read by :func:`occtool.io.read_log`.
 
@@ -59,6 +63,7 @@ class PositionStream:
         self.notes: list[str] = []
         self._carmen: Any = None
         self._mcap: Any = None
+        self._depth: Any = None
 
     def _mcap_scans(self) -> Any:
         from occtool.io.mcap._reader import McapScans
@@ -72,7 +77,8 @@ class PositionStream:
         return McapScans(self.path, topics=o["topics"], evidence_field=o["evidence_field"], evidence=o["evidence"],
                          use_intensities=o["use_intensities"], sensor_frame=o["sensor_frame"],
                          base_frame=o["base_frame"], skip_invalid=o["skip_invalid"],
-                         no_return_range=o["no_return_range"], opener=opener)
+                         no_return_range=o["no_return_range"], depth_features=o["depth_features"],
+                         depth_noise=o["depth_noise"], depth_max_range=o["depth_max_range"], opener=opener)
 
     def __iter__(self) -> Iterator[Position]:
         from occtool.io import _read_errors
@@ -106,6 +112,18 @@ class PositionStream:
             yield from iter_csv(self.path, evidence_field=options["evidence_field"], evidence=options["evidence"],
                                 position_tolerance=tolerance, group_by=group_by, skip_invalid=options["skip_invalid"],
                                 notes=self.notes)
+            return
+        if self.format in ("tum", "3dmatch"):
+            from occtool.io.depth_folders import DepthFolderScans
+
+            if self._depth is None:
+                self._depth = DepthFolderScans(
+                    self.path, format=self.format, skip_invalid=options["skip_invalid"],
+                    no_return_range=options["no_return_range"], depth_features=options["depth_features"],
+                    depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"])
+            scans = self._depth
+            self.notes = scans.notes
+            yield from group_scans(scans, source=scans.name, tolerance=tolerance, group_by=group_by, notes=scans.notes)
             return
         if self.format in ("mcap", "rosbag"):
             if self._mcap is None:

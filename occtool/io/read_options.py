@@ -13,6 +13,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TypedDict
 
+#: Depth images (:mod:`occtool.io.depth`): features kept of one frame, the noise coefficient
+#: k of ``sigma = k z**2`` (a Kinect-class structured-light camera) and the farthest depth
+#: taken as a return, metres. Here, in a light module, for the command line's defaults.
+DEFAULT_DEPTH_FEATURES = 10_000
+DEFAULT_DEPTH_NOISE = 0.0015
+DEFAULT_DEPTH_MAX_RANGE = 8.0
+
 
 class ReadOptions(TypedDict, total=False):
     """Keyword arguments of :func:`occtool.io.read_log` (see there for their meaning)."""
@@ -28,6 +35,9 @@ class ReadOptions(TypedDict, total=False):
     group_by: str
     skip_invalid: bool
     no_return_range: float | None
+    depth_features: int
+    depth_noise: float
+    depth_max_range: float
 
 
-__all__ = ["ReadOptions"]
+__all__ = ["DEFAULT_DEPTH_FEATURES", "DEFAULT_DEPTH_MAX_RANGE", "DEFAULT_DEPTH_NOISE", "ReadOptions"]

@@ -19,6 +19,7 @@ The parts, one concept a module (private; everything public is imported from her
 ``_catalogue``  the built-in scenes: :data:`SCENES`, :func:`build_scene`
 ``_rays``       :func:`cast_rays`: rays against the prisms and the floor
 ``_camera``     the pan-tilt stereo camera: :func:`simulate_scene`, its CSV output
+``_depth``      a pinhole depth camera: :func:`render_depth_frames`, TUM / 3DMatch folders
 ==============  =========================================================================
 """
 
@@ -33,6 +34,7 @@ from occtool.simulate._camera import (
     simulate_scene,
 )
 from occtool.simulate._catalogue import SCENES, WALL_HEIGHT, WALL_THICKNESS, build_scene
+from occtool.simulate._depth import DepthFrame, render_depth_frames, write_depth_folder
 from occtool.simulate._rays import FLOOR, NOTHING, cast_rays
 from occtool.simulate._scene import TRUTH_FORMAT, TRUTH_VERSION, Obstacle, Scene, box, load_truth
 
@@ -42,6 +44,7 @@ __all__ = [
     "FLOOR",
     "MIN_SENSOR_RANGE",
     "NOTHING",
+    "DepthFrame",
     "SCENES",
     "TILT_RANGE",
     "TRUTH_FORMAT",
@@ -56,6 +59,8 @@ __all__ = [
     "cast_rays",
     "load_truth",
     "match_evidence",
+    "render_depth_frames",
     "save_features_csv",
     "simulate_scene",
+    "write_depth_folder",
 ]

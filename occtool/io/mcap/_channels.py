@@ -52,9 +52,15 @@ LASERSCAN = "LaserScan"
 FOXGLOVE_POINTCLOUD = "foxglove PointCloud"
 FOXGLOVE_LASERSCAN = "foxglove LaserScan"
 OCCTOOL = "occtool features"
-RANGE_KINDS = (POINTCLOUD2, LASERSCAN, FOXGLOVE_POINTCLOUD, FOXGLOVE_LASERSCAN, OCCTOOL)
+DEPTH_IMAGE = "depth Image"
+COMPRESSED_DEPTH = "compressedDepth"
+FOXGLOVE_RAWIMAGE = "foxglove RawImage"
+#: Depth images: back-projected with their camera's intrinsics (:mod:`occtool.io.depth`).
+DEPTH_KINDS = (DEPTH_IMAGE, COMPRESSED_DEPTH, FOXGLOVE_RAWIMAGE)
+RANGE_KINDS = (POINTCLOUD2, LASERSCAN, FOXGLOVE_POINTCLOUD, FOXGLOVE_LASERSCAN, OCCTOOL, *DEPTH_KINDS)
 TF = "transforms"
 ODOMETRY = "odometry"
+CAMERA_INFO = "camera info"
 
 _SCHEMA_KINDS = {
     ("sensor_msgs/msg/PointCloud2", "cdr"): POINTCLOUD2,
@@ -70,6 +76,13 @@ _SCHEMA_KINDS = {
     ("foxglove.FrameTransforms", "json"): TF,
     ("foxglove.FrameTransforms", "protobuf"): TF,
     ("nav_msgs/msg/Odometry", "cdr"): ODOMETRY,
+    ("sensor_msgs/msg/Image", "cdr"): DEPTH_IMAGE,
+    ("sensor_msgs/msg/CompressedImage", "cdr"): COMPRESSED_DEPTH,
+    ("foxglove.RawImage", "json"): FOXGLOVE_RAWIMAGE,
+    ("foxglove.RawImage", "protobuf"): FOXGLOVE_RAWIMAGE,
+    ("sensor_msgs/msg/CameraInfo", "cdr"): CAMERA_INFO,
+    ("foxglove.CameraCalibration", "json"): CAMERA_INFO,
+    ("foxglove.CameraCalibration", "protobuf"): CAMERA_INFO,
 }
 
 

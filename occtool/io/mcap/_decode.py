@@ -64,6 +64,7 @@ class _Options:
         self.no_return = 0
         self.invalid_beams = 0
         self.free_reach: set[float] = set()
+        self.depth: Any = None  # DepthSettings for a log with depth images (occtool.io.mcap._depth)
 
 
 def _structured_points(

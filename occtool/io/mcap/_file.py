@@ -9,7 +9,16 @@ from dataclasses import dataclass
 from typing import Any
 
 from occtool.errors import InputError
-from occtool.io.mcap._channels import ODOMETRY, RANGE_KINDS, TF, _decoder_factories, _protobuf_available, channel_kind
+from occtool.io.mcap._channels import (
+    CAMERA_INFO,
+    DEPTH_KINDS,
+    ODOMETRY,
+    RANGE_KINDS,
+    TF,
+    _decoder_factories,
+    _protobuf_available,
+    channel_kind,
+)
 
 
 @dataclass
@@ -130,8 +139,12 @@ def describe_channels(path: str | os.PathLike[str]) -> tuple[list[ChannelRow], d
     with _Reader(path) as reader:
         for _, topic, schema, encoding, count in reader.channels():
             kind = channel_kind(schema, encoding)
-            if kind in RANGE_KINDS:
+            if kind in DEPTH_KINDS:
+                support = "yes: depth images (depth encodings only)"
+            elif kind in RANGE_KINDS:
                 support = "yes: range data"
+            elif kind == CAMERA_INFO:
+                support = "yes: depth intrinsics"
             elif kind == TF:
                 support = "yes: static frames" if topic.endswith("tf_static") else "yes: poses"
             elif kind == ODOMETRY:

@@ -10,8 +10,19 @@ import numpy as np
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
-from occtool.io.mcap._channels import OCCTOOL, ODOMETRY, RANGE_KINDS, TF, _get, _protobuf_available, channel_kind
-from occtool.io.mcap._decode import _DECODERS, DEFAULT_CONSTANT_EVIDENCE, _decode_occtool, _Options
+from occtool.io.mcap._channels import (
+    CAMERA_INFO,
+    DEPTH_KINDS,
+    OCCTOOL,
+    ODOMETRY,
+    RANGE_KINDS,
+    TF,
+    _get,
+    _protobuf_available,
+    channel_kind,
+)
+from occtool.io.mcap._decode import _DECODERS, DEFAULT_CONSTANT_EVIDENCE, _decode_occtool, _Decoded, _Options
+from occtool.io.mcap._depth import DepthSettings, add_camera_info, decode_depth, depth_notes
 from occtool.io.mcap._file import ChannelRow, _Reader
 from occtool.io.mcap._transforms import (
     _IDENTITY,
@@ -24,6 +35,7 @@ from occtool.io.mcap._transforms import (
     _transforms_of,
 )
 from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.read_options import DEFAULT_DEPTH_FEATURES, DEFAULT_DEPTH_MAX_RANGE, DEFAULT_DEPTH_NOISE
 
 
 def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path: str) -> list[ChannelRow]:
@@ -46,13 +58,19 @@ def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path:
                 raise InputError(
                     f"{path}: topic '{topic}' has schema '{row.schema}' ({row.encoding}), which occtool cannot read "
                     "as range data (it reads sensor_msgs/msg/PointCloud2, sensor_msgs/msg/LaserScan, "
-                    "foxglove.PointCloud, foxglove.LaserScan and occtool.RangeFeatures)"
+                    "foxglove.PointCloud, foxglove.LaserScan, occtool.RangeFeatures and depth images: "
+                    "sensor_msgs/msg/Image, sensor_msgs/msg/CompressedImage (compressedDepth), foxglove.RawImage)"
                 )
             chosen.append(row)
         return chosen
     candidates = [r for r in rows if r.kind in RANGE_KINDS]
     if not candidates:
         raise InputError(f"{path} holds no range data occtool can read; its channels: {listing(rows) or 'none'}")
+    if len(candidates) > 1 and all(r.kind in DEPTH_KINDS for r in candidates):
+        # Image channels hold colour as well as depth: a camera's one "depth" topic is the one.
+        named = [r for r in candidates if "depth" in r.topic.lower()]
+        if len(named) == 1:
+            return named
     if len(candidates) > 1:
         raise InputError(f"{path} has several range channels, pick one or more (topics=): {listing(candidates)}")
     return candidates
@@ -71,6 +89,9 @@ def read_mcap(
     group_by: str = "position",
     skip_invalid: bool = False,
     no_return_range: float | None = None,
+    depth_features: int = DEFAULT_DEPTH_FEATURES,
+    depth_noise: float = DEFAULT_DEPTH_NOISE,
+    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
     opener: Callable[[str | os.PathLike[str]], Any] | None = None,
 ) -> RangeLog:
     """Read the range channels of an MCAP file into positions of features.
@@ -107,6 +128,7 @@ def read_mcap(
             raise InputError(f"{name}: base frame '{base}' appears in no transform of the log")
 
         options = _Options(evidence_field, evidence, use_intensities, skip_invalid, no_return_range)
+        options.depth = _depth_settings(reader, rows, kinds, name, depth_features, depth_noise, depth_max_range)
         scans = _Scans(name, base or "base_link", sensor_frame, frames, options)
         for schema, channel, record, message in reader.messages([r.topic for r in chosen] + tf_topics + odom_topics):
             if channel.topic in tf_topics:
@@ -146,6 +168,23 @@ def _channel_rows(reader: Any, topics: Sequence[str] | None) -> list[ChannelRow]
             kind = None
         rows.append(ChannelRow(topic, schema, encoding, count, kind, ""))
     return rows
+
+
+def _depth_settings(reader: Any, rows: list[ChannelRow], kinds: dict[str, str | None], name: str, features: int,
+                    noise: float, max_range: float) -> DepthSettings | None:
+    """For depth channels: the settings, with every camera's intrinsics read first."""
+    if not any(k in DEPTH_KINDS for k in kinds.values()):
+        return None
+    from occtool.io.depth import check_depth_features, check_depth_max_range, check_depth_noise
+
+    settings = DepthSettings(check_depth_features(features), check_depth_noise(noise), check_depth_max_range(max_range))
+    info_topics = [r.topic for r in rows if r.kind == CAMERA_INFO]
+    if not info_topics:
+        raise InputError(f"{name}: depth images need their camera's intrinsics, and the log has no "
+                         "sensor_msgs/msg/CameraInfo or foxglove.CameraCalibration channel")
+    for k, (_, channel, _, message) in enumerate(reader.messages(info_topics)):
+        add_camera_info(settings, message, f"{name}, topic {channel.topic}, message {k}")
+    return settings
 
 
 def _static_frames(reader: Any, static_topics: list[str], name: str) -> _FrameTree:
@@ -205,7 +244,10 @@ class _Scans:
         """A range message: decoded, its evidence checked, mounted; with its /tf and odometry poses."""
         where = f"{self.name}, topic {topic}, message {record.sequence or self.count}"
         try:
-            decoded = _DECODERS[kind](message, self.options, where)
+            if kind in DEPTH_KINDS:
+                decoded = self._depth(kind, message, where)
+            else:
+                decoded = _DECODERS[kind](message, self.options, where)
         except (AttributeError, TypeError, KeyError, ValueError) as exc:
             if isinstance(exc, InputError):
                 raise
@@ -237,6 +279,26 @@ class _Scans:
             self.tf_poses.append(tf_pose)
             self.odom_poses.append(odom_pose)
         return scan, tf_pose, odom_pose
+
+    def _depth(self, kind: str, message: Any, where: str) -> _Decoded:
+        """A depth image: optical-frame points; a camera without a mounting is taken as level."""
+        settings = self.options.depth
+        assert settings is not None  # set up for every log with a depth channel
+        points, evidence, frame, stamp = decode_depth(kind, message, settings, self.options.no_return_range, where)
+        decoded = _Decoded(points, evidence, frame, stamp, _IDENTITY)
+        if self._mounting(frame) is None:
+            from occtool.io.depth import OPTICAL_TO_BODY, floor_mounting
+
+            if frame not in settings.from_floor:
+                settings.from_floor[frame] = floor_mounting(points[evidence > 0.0])
+            found = settings.from_floor[frame]
+            if found is None:
+                decoded.origin = _Rigid(OPTICAL_TO_BODY, np.zeros(3))
+            else:
+                decoded.origin = _Rigid(found[0], np.array([0.0, 0.0, found[1]]))
+            self.unmounted.discard(frame)
+            settings.level_frames.add(frame)
+        return decoded
 
     def _mounting(self, message_frame: str) -> _Rigid | None:
         """The message frame (or ``sensor_frame``) into the base frame, from ``/tf_static``."""
@@ -301,6 +363,8 @@ def _reading_notes(scans: _Scans, evidence: float | None, no_return_range: float
         notes.append(f"dropped {scans.dropped_origin} point(s) at the sensor origin (no return)")
     if options.skipped_invalid:
         notes.append(f"skipped {options.skipped_invalid} point(s) with evidence outside [0, 1] or NaN")
+    if options.depth is not None:
+        notes += depth_notes(options.depth, no_return_range)
     return notes
 
 
@@ -346,7 +410,8 @@ class McapScans:
     def __init__(self, path: str | os.PathLike[str], *, topics: Sequence[str] | None = None,
                  evidence_field: str = "evidence", evidence: float | None = None, use_intensities: bool = False,
                  sensor_frame: str | None = None, base_frame: str | None = None, skip_invalid: bool = False,
-                 no_return_range: float | None = None,
+                 no_return_range: float | None = None, depth_features: int = DEFAULT_DEPTH_FEATURES,
+                 depth_noise: float = DEFAULT_DEPTH_NOISE, depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
                  opener: Callable[[str | os.PathLike[str]], Any] | None = None) -> None:
         from occtool.io import check_no_return_range
 
@@ -361,6 +426,7 @@ class McapScans:
         self.skip_invalid = skip_invalid
         self.no_return_range = check_no_return_range(no_return_range)
         self.opener = opener or _Reader
+        self.depth = (depth_features, depth_noise, depth_max_range)
         self.notes: list[str] = []
         self.own_channel = False
         self._pose_source: str | None = None
@@ -389,6 +455,7 @@ class McapScans:
                 raise InputError(f"{name}: base frame '{base}' appears in no transform of the log")
             options = _Options(self.evidence_field, self.evidence, self.use_intensities, self.skip_invalid,
                                self.no_return_range)
+            options.depth = _depth_settings(reader, rows, kinds, name, *self.depth)
             scans = self.state = _Scans(name, base or "base_link", self.sensor_frame, frames, options, keep=False)
             for schema, channel, record, message in reader.messages(self.chosen_topics + tf_topics + odom_topics):
                 if channel.topic in tf_topics:
