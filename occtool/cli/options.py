@@ -186,7 +186,7 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
 
 log_options = _compose(
     click.option(
-        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag"], case_sensitive=False),
+        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg"], case_sensitive=False),
         default=None, help="Log format (default: from the content and extension).",
     ),
     click.option(
