@@ -470,7 +470,69 @@ def register_log(log: RangeLog, *, settings: RegistrationSettings | None = None,
     notes.append(f"poses registered: {report.describe()}")
     regrouped = build_log(scans, source=log.source, tolerance=position_tolerance or DEFAULT_POSITION_TOLERANCE,
                           notes=notes)
+    regrouped.pose_kind = "registered"
     return regrouped, report
+
+
+def pose_kind(log: RangeLog) -> str | None:
+    """What a log's poses are: its reader's word (``log.pose_kind``), else from its notes
+    (``"odometry"``, ``"tf"``), else ``"log"`` (its own pose fields), ``None`` without poses."""
+    if not log.has_poses:
+        return None
+    if log.pose_kind:
+        return log.pose_kind
+    if any(n.startswith("poses from odometry") for n in log.notes):
+        return "odometry"
+    if any(n.startswith("poses from /tf") for n in log.notes):
+        return "tf"
+    return "log"
+
+
+def needs_registration(log: RangeLog) -> bool:
+    """Whether ``occtool map`` registers a log by default: it has no poses, or only odometry."""
+    return pose_kind(log) in (None, "odometry")
+
+
+def read_registered_log(path: str, read_options: dict[str, Any], register: bool | None = None, *,
+                        settings: RegistrationSettings | None = None
+                        ) -> tuple[RangeLog, RegistrationReport | None]:
+    """Read a log for ``occtool map``: scan by scan, registered when ``register`` is true,
+    or by default (``None``) when :func:`needs_registration`; grouped into positions as
+    ``read_options`` ask either way. Returns the log and the report (``None`` when the
+    log's own poses are kept)."""
+    from occtool.io import read_log
+    from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+
+    options = dict(read_options)
+    group_by = options.pop("group_by", "position") or "position"
+    tolerance = options.get("position_tolerance") or DEFAULT_POSITION_TOLERANCE
+    if register is False:
+        return read_log(path, group_by=group_by, **options), None
+    scans = read_log(path, group_by="message", **options)
+    if register is None and not needs_registration(scans):
+        regrouped = build_log([Scan(p.features.points, p.features.evidence, p.pose, p.stamp, p.source)
+                               for p in scans.positions], source=scans.source, tolerance=tolerance,
+                              group_by=group_by, notes=scans.notes)
+        regrouped.pose_kind = scans.pose_kind
+        return regrouped, None
+    registered, report = register_log(scans, settings=settings, position_tolerance=tolerance)
+    if group_by == "message":
+        registered = positions_with_poses(scans, report.poses)
+        registered.notes.append(f"poses registered: {report.describe()}")
+        registered.pose_kind = "registered"
+    return registered, report
+
+
+def write_poses_csv(report: RegistrationReport, path: str | Any, *, overwrite: bool = True) -> None:
+    """Every scan's registered pose as CSV: ``scan,stamp,x,y,z,yaw`` (the world ``map``
+    frame, metres and radians; ``stamp`` in seconds, empty when the log has none)."""
+    from occtool.io._atomic import atomic_write
+
+    with atomic_write(path, "w", overwrite=overwrite) as handle:
+        handle.write("scan,stamp,x,y,z,yaw\n")
+        for k, (pose, stamp) in enumerate(zip(report.poses, report.stamps)):
+            when = "" if stamp is None else f"{stamp:.6f}"
+            handle.write(f"{k},{when},{pose.x:.6f},{pose.y:.6f},{pose.z:.6f},{pose.yaw:.6f}\n")
 
 
 # ---------------------------------------------------------------------- tests and benchmarks
@@ -541,5 +603,6 @@ def positions_with_poses(log: RangeLog, poses: Sequence[Pose]) -> RangeLog:
 
 
 __all__ = ["RegistrationReport", "RegistrationSettings", "close_loops", "compose", "degrade_poses",
-           "optimise_graph", "positions_with_poses", "solve_graph", "register_log", "register_scans", "relative",
-           "scan_points", "segment_errors", "trajectory_error"]
+           "needs_registration", "optimise_graph", "pose_kind", "positions_with_poses", "read_registered_log",
+           "register_log", "register_scans", "relative", "scan_points", "segment_errors", "solve_graph",
+           "trajectory_error", "write_poses_csv"]
