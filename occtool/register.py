@@ -33,6 +33,8 @@ FloatArray = NDArray[np.float64]
 
 #: Heights (metres) a planar scan is repeated at, so GICP sees walls, not lines.
 PLANAR_EXTRUSION = (-0.1, 0.0, 0.1)
+#: More than this share of the scans refused is an error, not a map.
+MAX_REFUSED_SHARE = 0.5
 #: A scan's points spread over less than this height (metres) make it planar.
 PLANAR_SPREAD = 0.02
 
@@ -461,6 +463,13 @@ def register_log(log: RangeLog, *, settings: RegistrationSettings | None = None,
     report = RegistrationReport(scans=len(log.positions), seeded_by=seeded, backend=settings.backend)
     points = [scan_points(p.features, max_range) for p in log.positions]
     poses = register_scans(points, odometry, settings=settings, report=report)
+    if len(points) > 1 and report.refused > MAX_REFUSED_SHARE * (len(points) - 1):
+        what = ("the log has no poses and its scans" if all(o is None for o in odometry)
+                else "the log's scans")
+        raise InputError(
+            f"{log.source or 'the log'}: {what} could not be registered ({report.refused} of {len(points) - 1} "
+            "refused: too few returns, or too little overlap from one scan to the next); "
+            "map it without registration (--no-register, register=False)")
     report.poses = poses
     report.stamps = [p.stamp for p in log.positions]
     report.odometry = [p.pose for p in log.positions]

@@ -21,7 +21,7 @@ def register_options(function: F) -> F:
         help="Estimate the poses by registering the scans (needs the register extra). Default: when the log "
              "has no poses or only wheel odometry (which then seeds it); --no-register keeps the log's "
              "poses.")(function)
-    return function  # type: ignore[no-any-return]
+    return function
 
 
 def read_map_log(source: str, kwargs: dict[str, Any]) -> tuple[Any, Any]:
