@@ -51,6 +51,7 @@ from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
+from registration import registration_section  # noqa: E402
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
@@ -604,6 +605,8 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines += [results["log_map_markdown"], ""]
     if results.get("fleet_markdown"):
         lines += ["## Fleets of logs: one call, local processes and Dask", "", results["fleet_markdown"], ""]
+    if results.get("registration_markdown"):
+        lines += [results["registration_markdown"], ""]
     return lines
 
 
@@ -834,6 +837,7 @@ def main(argv: list[str] | None = None) -> int:
     if data.is_dir() and not args.quick:
         results["log_map_markdown"], results["log_map"] = log_map_section(data)
         results["fleet_markdown"], results["fleet"] = fleet_section(data)
+        results["registration_markdown"], results["registration"] = registration_section(data)  # issue 22
     results["notes"] = notes
     results["targets"] = targets(results["feature_sweep"], results["scale_sweep"], results["scenes"], results["speed"])
     office = reports.get(10_000)
