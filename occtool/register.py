@@ -164,7 +164,8 @@ class _Aligner:
             try:
                 from kiss_icp.pybind import kiss_icp_pybind
             except ImportError:
-                raise MissingDependencyError("kiss-icp", "register", "registering scans with kiss_icp") from None
+                # Not part of the register extra: kept for the comparison in docs/register.md.
+                raise InputError("the kiss_icp registration backend needs kiss-icp: pip install kiss-icp") from None
             self._lib = kiss_icp_pybind
             self._registration = kiss_icp_pybind._Registration(
                 max_num_iterations=settings.max_iterations, convergence_criterion=1e-4, max_num_threads=1)

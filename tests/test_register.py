@@ -134,3 +134,11 @@ def test_info_says_which_poses_a_log_has(shared_data):
     lines = (shared_data / MINES).read_text().splitlines()[:3]
     assert "wheel" in read_log(shared_data / MINES).notes[0]
     assert len(lines) == 3
+
+
+def test_map_without_the_extra_is_one_line_naming_it(shared_data, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "small_gicp", None)
+    result = CliRunner().invoke(cli, ["map", str(shared_data / CCNY), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert len(result.output.strip().splitlines()) == 1 and "occtool[register]" in result.output
+    assert not (tmp_path / "out").exists()
