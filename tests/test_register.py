@@ -54,17 +54,19 @@ def test_relative_and_compose_are_inverse():
                        [b.x, b.y, np.cos(b.yaw), np.sin(b.yaw)])
 
 
-@pytest.mark.parametrize("loop_closure, bound", [(True, 0.1), (False, 0.25)])
-def test_degraded_intel_poses_are_registered_back(intel_slice, loop_closure, bound):
-    truth = [p.pose for p in intel_slice.positions]
+@pytest.mark.parametrize("loop_closure, scans, bound", [(True, 150, 0.1), (False, 80, 0.25)])
+def test_degraded_intel_poses_are_registered_back(intel_slice, loop_closure, scans, bound):
+    scans_log = RangeLog(intel_slice.positions[:scans], source="intel")
+    truth = [p.pose for p in scans_log.positions]
     drifting = degrade_poses(truth, seed=0)
     before = trajectory_error(drifting, truth)
-    log, report = register_log(positions_with_poses(intel_slice, drifting),
+    log, report = register_log(positions_with_poses(scans_log, drifting),
                                settings=RegistrationSettings(loop_closure=loop_closure))
     after = trajectory_error(report.poses, truth)
-    # The odometry drifts by metres over these ~90 m; registration brings it to centimetres
-    # (measured: 0.066 m with loops closed, 0.166 m without, seed 0).
-    assert before > 5.0
+    # The odometry drifts by metres over these ~90 m (~50 m); registration brings it to
+    # centimetres (measured, seed 0: 0.066 m with loops closed over 150 scans, 0.171 m
+    # without over 80).
+    assert before > 2.0
     assert after < bound, (before, after)
     assert segment_errors(report.poses, truth, 10.0).mean() < 0.1
     assert report.refused == 0 and len(report.poses) == len(truth)
@@ -77,16 +79,16 @@ def test_the_ccny_scans_without_any_pose_are_registered_onto_one_another(shared_
     from occtool.register import _in_world, _matrix, matched_share, scan_points
 
     log = read_log(shared_data / CCNY, group_by="message")
-    log.positions = log.positions[:150]
+    log.positions = log.positions[:100]
     _, report = register_log(log)
     assert report.seeded_by.startswith("no odometry") and report.refused == 0
     points = [scan_points(p.features) for p in log.positions]
     first = np.concatenate([_in_world(points[k], report.poses[k]) for k in range(10)])
-    # The last scan, 15 s and half a metre on, lands on the first scans' walls (measured 54 %
-    # of its returns within 5 cm), where left unregistered 6 % do.
+    # The last scan, 10 s and half a metre on, lands on the first scans' walls (measured 81 %
+    # of its returns within 5 cm), where left unregistered 7 % do.
     registered = matched_share(first, points[-1], _matrix(report.poses[-1]), 0.05)
     unregistered = matched_share(first, points[-1], np.eye(4), 0.05)
-    assert registered > 0.4 and registered > 5 * unregistered
+    assert registered > 0.6 and registered > 5 * unregistered
 
 
 def test_a_missing_library_names_the_extra(intel_slice, monkeypatch):
@@ -104,7 +106,7 @@ def test_scans_that_cannot_be_registered_are_an_error():
 
 
 def test_map_of_a_urg_log_registers_it_and_writes_the_poses(shared_data, tmp_path):
-    lines = (shared_data / MINES).read_text().splitlines()[:120]
+    lines = (shared_data / MINES).read_text().splitlines()[:60]
     log = tmp_path / "exp1.dat"
     log.write_text("\n".join(lines) + "\n")
     out = tmp_path / "map"
@@ -112,9 +114,9 @@ def test_map_of_a_urg_log_registers_it_and_writes_the_poses(shared_data, tmp_pat
                                       "--body-height", "0.5", "--pieces", "8"], catch_exceptions=False)
     assert result.exit_code == 0, result.output
     rows = (out / "poses.csv").read_text().splitlines()
-    assert rows[0] == "scan,stamp,x,y,z,yaw" and len(rows) == 121
+    assert rows[0] == "scan,stamp,x,y,z,yaw" and len(rows) == 61
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["registration"]["scans"] == 120
+    assert summary["registration"]["scans"] == 60
     assert summary["registration"]["seeded_by"].startswith("seeded by the log's poses")
     from mcap.reader import make_reader
 
