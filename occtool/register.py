@@ -278,7 +278,9 @@ def _in_world(points: FloatArray, pose: Pose) -> FloatArray:
 def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool, aligner: _Aligner,
                 settings: RegistrationSettings, report: RegistrationReport | None = None) -> list[Pose]:
     """Re-align revisited places: loop edges found by registration, then the pose graph
-    of the sequential steps and the loops solved by robust least squares."""
+    of the sequential steps and the loops solved by :func:`solve_graph` (least squares,
+    the loops that disagree with the rest pruned). The graph is planar (x, y, yaw); a 3D
+    scan keeps the height its sequential registration gave it."""
     started = time.process_time()
     count = len(poses)
     steps = [(k - 1, k, relative(poses[k - 1], poses[k])) for k in range(1, count)]
