@@ -96,7 +96,7 @@ class RegistrationReport:
     def describe(self) -> str:
         loops = f", {self.loop_closures} loop closures of {self.loop_candidates} tried" if self.loop_candidates else ""
         return (f"{self.scans} scans registered with {self.backend} ({self.seeded_by}), {self.refused} refused "
-                f"(seed kept){loops}, {sum(self.seconds.values()):.1f} s")
+                f"(seed kept){loops}, {sum(self.seconds.values()):.1f} s of CPU")
 
     def to_dict(self) -> dict[str, Any]:
         return {"scans": self.scans, "seeded_by": self.seeded_by, "backend": self.backend, "refused": self.refused,
