@@ -177,8 +177,29 @@ def registration_section(data_dir: Path) -> tuple[str, dict[str, Any]]:
     return "\n".join(lines) + "\n", {"intel": intel, "commands": commands}
 
 
+def registration_targets(figures: dict[str, Any] | None) -> list[tuple[str, str, bool | None]]:
+    """Issue 22's targets, as bench/run.py lists them."""
+    out: list[tuple[str, str, bool | None]] = []
+    intel = (figures or {}).get("intel")
+    if intel:
+        looped = [r for r in intel["rows"] if r["loop_closure"]]
+        worst = max(r["rms_m"] for r in looped)
+        out.append(("Intel, poses degraded to odometry: registered RMS <= 0.1 m over the log (loop closure)",
+                    f"{worst:.3f} m at worst of seeds {', '.join(str(r['seed']) for r in looped)}", worst <= 0.1))
+        gap = intel["auc_corrected"]["auc"] - intel["auc_registered"]["auc"]
+        out.append(("Intel: map from the registered poses within 0.02 held-out AUC of the corrected poses' map",
+                    f"{intel['auc_registered']['auc']:.4f} against {intel['auc_corrected']['auc']:.4f}", gap <= 0.02))
+    for row in (figures or {}).get("commands", []):
+        out.append((f"`occtool map {row['log']}` (registered) <= 60 s of CPU",
+                    f"{row['cpu_s']:.1f} s" if not row.get("exit_status") else row.get("error", "failed"),
+                    not row.get("exit_status") and row["cpu_s"] <= 60))
+    return out
+
+
 if __name__ == "__main__":
     data = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE.parent.parent / "shared" / "data"
     markdown, figures = registration_section(data)
     print(markdown)
+    for target in registration_targets(figures):
+        print(target)
     (HERE / "registration-results.json").write_text(json.dumps(figures, indent=1, default=float) + "\n")

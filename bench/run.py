@@ -51,7 +51,7 @@ from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
-from registration import registration_section  # noqa: E402
+from registration import registration_section, registration_targets  # noqa: E402
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
@@ -845,6 +845,7 @@ def main(argv: list[str] | None = None) -> int:
     results["targets"] += quality_targets(results["map_quality_summary"], results.get("laser_logs", []),
                                           results["speed"], model_bytes)
     results["targets"] += whole_log_targets(results.get("log_map"), results.get("fleet"), results.get("large"))
+    results["targets"] += registration_targets(results.get("registration"))
     elapsed = budget.seconds - budget.left
     command = "python bench/run.py " + " ".join(argv if argv is not None else sys.argv[1:])
     results["meta"] = {
