@@ -123,10 +123,11 @@ def test_map_of_a_urg_log_registers_it_and_writes_the_poses(shared_data, tmp_pat
     with open(out / "map.mcap", "rb") as handle:
         channels = make_reader(handle).get_summary().channels.values()
     assert "/tf" in {c.topic for c in channels}
-    kept = CliRunner().invoke(cli, ["-q", "map", str(log), "-o", str(tmp_path / "odom"), "--no-register",
+    # The odometry kept: no poses.csv, and the registered run's one is not left behind.
+    kept = CliRunner().invoke(cli, ["-q", "map", str(log), "-o", str(out), "--no-register",
                                     "--sensor-height", "0.3", "--body-height", "0.5", "--pieces", "8", "--no-mcap"])
     assert kept.exit_code == 0, kept.output
-    assert not (tmp_path / "odom" / "poses.csv").exists()
+    assert not (out / "poses.csv").exists() and "registration" not in json.loads((out / "summary.json").read_text())
 
 
 def test_info_says_which_poses_a_log_has(shared_data):
@@ -160,3 +161,10 @@ def test_a_3d_velodyne_pair_is_registered_in_3d(shared_data):
     # which this pair has 0.3 degrees of).
     assert np.allclose([found.x, found.y, found.z], truth[:3, 3], atol=0.03)
     assert abs(found.yaw - np.arctan2(truth[1, 0], truth[0, 0])) < np.radians(0.2)
+
+
+def test_register_on_a_model_set_is_one_line(tmp_path):
+    (tmp_path / "models").mkdir()
+    result = CliRunner().invoke(cli, ["map", str(tmp_path / "models"), "-o", str(tmp_path / "out"), "--register"])
+    assert result.exit_code == 1
+    assert len(result.output.strip().splitlines()) == 1 and "model set" in result.output

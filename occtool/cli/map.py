@@ -96,6 +96,8 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
         raise click.ClickException(f"{output} exists and is not a folder")
     is_models = Path(source).is_dir() or Path(source).name == "index.json"
     registration = None
+    if is_models and kwargs.get("register"):
+        raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
     if is_models:
         fused, models, positions = fuse_model_set(source, combination=combination, threshold=threshold)
         logger.info("%d models read from %s", len(models), source)

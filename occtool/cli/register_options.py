@@ -48,8 +48,13 @@ def read_map_log(source: str, kwargs: dict[str, Any]) -> tuple[Any, Any]:
 
 
 def write_map_poses(report: Any, output: str, overwrite: bool) -> Path | None:
-    """``OUTPUT/poses.csv``: every scan's registered pose (nothing without registration)."""
+    """``OUTPUT/poses.csv``: every scan's registered pose. Without registration nothing is
+    written, and a ``poses.csv`` left by an earlier registered run is removed (it would
+    describe another map) unless ``overwrite`` is off."""
     if report is None:
+        stale = Path(output) / "poses.csv"
+        if overwrite and stale.is_file():
+            stale.unlink()
         return None
     from occtool.register import write_poses_csv
 
