@@ -74,6 +74,7 @@ class RegistrationSettings:
     loop_sigma: tuple[float, float] = (0.05, 0.02)
     backend: str = "small_gicp"
     loop_chi: float = 5.0
+    step_information: bool = False
 
 
 @dataclass
@@ -172,6 +173,10 @@ class _Aligner:
         else:
             raise InputError(f"registration backend must be small_gicp or kiss_icp, got {settings.backend!r}")
 
+    #: The last small_gicp result's 6x6 information (rotation x, y, z, translation x, y, z,
+    #: in the source's frame), ``None`` for kiss_icp.
+    information: FloatArray | None = None
+
     def align(self, target: FloatArray, source: FloatArray, guess: FloatArray,
               max_correspondence: float | None = None) -> FloatArray:
         """``T_target_source``, from ``guess``."""
@@ -183,7 +188,9 @@ class _Aligner:
             src, _ = lib.preprocess_points(source, downsampling_resolution=s.downsample, num_neighbors=10)
             result = lib.align(tgt, src, tgt_tree, init_T_target_source=guess, registration_type="GICP",
                                max_correspondence_distance=reach, max_iterations=s.max_iterations)
+            self.information = np.asarray(result.H)
             return np.asarray(result.T_target_source)
+        self.information = None
         grid = lib._VoxelHashMap(voxel_size=s.downsample, max_distance=1e6, max_points_per_voxel=20)
         grid._add_points(lib._Vector3dVector(target))
         return np.asarray(self._registration._align_points_to_map(
@@ -236,6 +243,7 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
     poses: list[Pose] = [odometry[0] if odometry[0] is not None else Pose()]
     submap: list[int] = [0]
     refused = 0
+    information: list[FloatArray | None] = [None]
     for k in range(1, count):
         if odometry[k] is not None and odometry[k - 1] is not None:
             step = relative(odometry[k - 1], odometry[k])  # type: ignore[arg-type]
@@ -247,14 +255,17 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         source = prepared[k]
         if len(scans[k]) < 10:
             poses.append(guess)
+            information.append(None)
             refused += 1
             continue
         target = np.concatenate([_in_world(prepared[i], poses[i]) for i in submap])
         matrix = aligner.align(target, source, _matrix(guess))
         if matched_share(target, source, matrix, settings.max_correspondence) >= settings.min_inliers:
             poses.append(_pose(matrix, planar))
+            information.append(aligner.information)
         else:
             poses.append(guess)
+            information.append(None)
             refused += 1
         last = poses[submap[-1]]
         moved = relative(last, poses[k])
@@ -266,7 +277,8 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         report.refused += refused
         report.seconds["registration"] = time.process_time() - started
     if settings.loop_closure and count > 2:
-        poses = close_loops(prepared, poses, planar, aligner, settings, report)
+        weights = _step_weights(poses, information, settings) if settings.step_information else None
+        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights)
     return poses
 
 
@@ -275,8 +287,43 @@ def _in_world(points: FloatArray, pose: Pose) -> FloatArray:
     return points @ matrix[:3, :3].T + matrix[:3, 3]
 
 
+def _step_weights(poses: list[Pose], information: list[FloatArray | None],
+                  settings: RegistrationSettings) -> FloatArray:
+    """Square roots of each step's information for the pose graph, from GICP's own
+    (x, y, yaw block, turned into the previous pose's frame), scaled so that the median
+    step has the translation information of ``settings.odometry_sigma``; a step without
+    (refused, or another library) gets the plain sigmas, three times wider."""
+    st, sr = settings.odometry_sigma
+    plain = np.diag([1 / (3 * st), 1 / (3 * st), 1 / (3 * sr)])
+    blocks: list[FloatArray | None] = []
+    for k in range(1, len(poses)):
+        h = information[k]
+        if h is None or not np.isfinite(h).all():
+            blocks.append(None)
+            continue
+        sub = h[np.ix_([3, 4, 2], [3, 4, 2])]
+        turn = _wrap(poses[k].yaw - poses[k - 1].yaw)
+        g = np.eye(3)
+        g[:2, :2] = [[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]]
+        blocks.append(g @ sub @ g.T)
+    scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
+    factor = (1 / st**2) / float(np.median(scales)) if scales else 1.0
+    out = np.empty((len(blocks), 3, 3))
+    for n, block in enumerate(blocks):
+        if block is None:
+            out[n] = plain
+            continue
+        info = factor * 0.5 * (block + block.T) + np.diag([1e-6 / st**2, 1e-6 / st**2, 1e-6 / sr**2])
+        try:
+            out[n] = np.linalg.cholesky(info).T
+        except np.linalg.LinAlgError:
+            out[n] = plain
+    return out
+
+
 def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool, aligner: _Aligner,
-                settings: RegistrationSettings, report: RegistrationReport | None = None) -> list[Pose]:
+                settings: RegistrationSettings, report: RegistrationReport | None = None,
+                step_weights: FloatArray | None = None) -> list[Pose]:
     """Re-align revisited places: loop edges found by registration, then the pose graph
     of the sequential steps and the loops solved by :func:`solve_graph` (least squares,
     the loops that disagree with the rest pruned). The graph is planar (x, y, yaw); a 3D
@@ -329,7 +376,8 @@ def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool,
             added += 1
         if not added:
             break
-        current, kept = solve_graph(poses, steps, [(i, j, z) for (i, j), z in loops.items()], settings)
+        current, kept = solve_graph(poses, steps, [(i, j, z) for (i, j), z in loops.items()], settings,
+                                    step_weights)
         rejected.update((i, j) for (i, j) in loops if (i, j) not in {(a, b) for a, b, _ in kept})
         loops = {(a, b): z for a, b, z in kept}
     if report is not None:
@@ -341,70 +389,63 @@ def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool,
 
 
 def optimise_graph(initial: list[Pose], steps: list[tuple[int, int, Pose]], loops: list[tuple[int, int, Pose]],
-                   settings: RegistrationSettings) -> list[Pose]:
+                   settings: RegistrationSettings, step_weights: FloatArray | None = None) -> list[Pose]:
     """The SE(2) pose graph (x, y, yaw per scan, the first held) solved by
-    :func:`scipy.optimize.least_squares` with the analytic sparse Jacobian."""
+    :func:`scipy.optimize.least_squares` with the analytic sparse Jacobian.
+
+    Each edge's residual (its x, y in the first pose's frame, and yaw) is weighted by a
+    3x3 square root of its information: ``step_weights`` ``(len(steps), 3, 3)`` for the
+    steps if given, else ``diag(1/sigma, 1/sigma, 1/sigma_yaw)`` from ``settings``."""
     from scipy.optimize import least_squares
     from scipy.sparse import csr_matrix
 
     count = len(initial)
     edges = steps + loops
+    m = len(edges)
     a = np.array([e[0] for e in edges])
     b = np.array([e[1] for e in edges])
     z = np.array([[e[2].x, e[2].y, e[2].yaw] for e in edges])
-    sigma_t = np.array([settings.odometry_sigma[0]] * len(steps) + [settings.loop_sigma[0]] * len(loops))
-    sigma_r = np.array([settings.odometry_sigma[1]] * len(steps) + [settings.loop_sigma[1]] * len(loops))
+    weights = np.zeros((m, 3, 3))
+    st, sr = settings.odometry_sigma
+    lt, lr = settings.loop_sigma
+    weights[:len(steps)] = np.diag([1 / st, 1 / st, 1 / sr]) if step_weights is None else step_weights
+    weights[len(steps):] = np.diag([1 / lt, 1 / lt, 1 / lr])
     x0 = np.array([[p.x, p.y, p.yaw] for p in initial])
     anchor = x0[0].copy()
-    m = len(edges)
 
     def unpack(v: FloatArray) -> FloatArray:
         return np.vstack([anchor, v.reshape(-1, 3)])
 
-    def residual_parts(v: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    def fun(v: FloatArray) -> FloatArray:
         x = unpack(v)
         xi, xj = x[a], x[b]
         c, s = np.cos(xi[:, 2]), np.sin(xi[:, 2])
         dx, dy = xj[:, 0] - xi[:, 0], xj[:, 1] - xi[:, 1]
-        ex = (c * dx + s * dy - z[:, 0]) / sigma_t
-        ey = (-s * dx + c * dy - z[:, 1]) / sigma_t
-        et = ((xj[:, 2] - xi[:, 2] - z[:, 2] + np.pi) % (2 * np.pi) - np.pi) / sigma_r
-        return ex, ey, et, c, s
+        e = np.column_stack([c * dx + s * dy - z[:, 0], -s * dx + c * dy - z[:, 1],
+                             (xj[:, 2] - xi[:, 2] - z[:, 2] + np.pi) % (2 * np.pi) - np.pi])
+        return np.einsum("mij,mj->mi", weights, e).ravel()
 
-    def fun(v: FloatArray) -> FloatArray:
-        ex, ey, et, _, _ = residual_parts(v)
-        return np.concatenate([ex, ey, et])
+    rows = (3 * np.arange(m)[:, None, None] + np.arange(3)[None, :, None]) * np.ones((1, 1, 3), dtype=np.int64)
 
     def jac(v: FloatArray) -> Any:
         x = unpack(v)
         xi, xj = x[a], x[b]
         c, s = np.cos(xi[:, 2]), np.sin(xi[:, 2])
         dx, dy = xj[:, 0] - xi[:, 0], xj[:, 1] - xi[:, 1]
-        rows, cols, vals = [], [], []
-
-        def put(row: NDArray[Any], node: NDArray[Any], var: int, value: FloatArray) -> None:
+        zero, one = np.zeros(m), np.ones(m)
+        ja = np.stack([np.stack([-c, -s, -s * dx + c * dy], axis=1),
+                       np.stack([s, -c, -c * dx - s * dy], axis=1),
+                       np.stack([zero, zero, -one], axis=1)], axis=1)
+        jb = np.stack([np.stack([c, s, zero], axis=1), np.stack([-s, c, zero], axis=1),
+                       np.stack([zero, zero, one], axis=1)], axis=1)
+        parts_rows, parts_cols, parts_vals = [], [], []
+        for node, block in ((a, weights @ ja), (b, weights @ jb)):
             free = node > 0
-            rows.append(row[free])
-            cols.append((node[free] - 1) * 3 + var)
-            vals.append(value[free])
-
-        r = np.arange(m)
-        # ex = c dx + s dy
-        put(r, a, 0, -c / sigma_t)
-        put(r, a, 1, -s / sigma_t)
-        put(r, a, 2, (-s * dx + c * dy) / sigma_t)
-        put(r, b, 0, c / sigma_t)
-        put(r, b, 1, s / sigma_t)
-        # ey = -s dx + c dy
-        put(r + m, a, 0, s / sigma_t)
-        put(r + m, a, 1, -c / sigma_t)
-        put(r + m, a, 2, (-c * dx - s * dy) / sigma_t)
-        put(r + m, b, 0, -s / sigma_t)
-        put(r + m, b, 1, c / sigma_t)
-        # et = yj - yi
-        put(r + 2 * m, a, 2, -np.ones(m) / sigma_r)
-        put(r + 2 * m, b, 2, np.ones(m) / sigma_r)
-        return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            cols = (node[:, None, None] - 1) * 3 + np.arange(3)[None, None, :] + np.zeros((1, 3, 1), dtype=np.int64)
+            parts_rows.append(rows[free].ravel())
+            parts_cols.append(cols[free].ravel())
+            parts_vals.append(block[free].ravel())
+        return csr_matrix((np.concatenate(parts_vals), (np.concatenate(parts_rows), np.concatenate(parts_cols))),
                           shape=(3 * m, 3 * (count - 1)))
 
     result = least_squares(fun, x0[1:].ravel(), jac=jac, method="trf", x_scale="jac", max_nfev=50,
@@ -426,13 +467,14 @@ def _loop_residuals(poses: list[Pose], loops: list[tuple[int, int, Pose]],
 
 
 def solve_graph(initial: list[Pose], steps: list[tuple[int, int, Pose]], loops: list[tuple[int, int, Pose]],
-                settings: RegistrationSettings) -> tuple[list[Pose], list[tuple[int, int, Pose]]]:
+                settings: RegistrationSettings, step_weights: FloatArray | None = None
+                ) -> tuple[list[Pose], list[tuple[int, int, Pose]]]:
     """:func:`optimise_graph` with the loops that disagree with the rest pruned: after each
     solve the loops whose residual exceeds ``settings.loop_chi`` standard deviations (and
     0.7 of the largest) are dropped and the graph solved again, until all agree. Returns
     the poses and the loops kept."""
     kept = list(loops)
-    poses = optimise_graph(initial, steps, kept, settings)
+    poses = optimise_graph(initial, steps, kept, settings, step_weights)
     for _ in range(50):
         if not kept:
             break
@@ -441,7 +483,7 @@ def solve_graph(initial: list[Pose], steps: list[tuple[int, int, Pose]], loops: 
         if worst <= settings.loop_chi:
             break
         kept = [loop for loop, c in zip(kept, chi) if c <= max(settings.loop_chi, 0.7 * worst)]
-        poses = optimise_graph(initial, steps, kept, settings)
+        poses = optimise_graph(initial, steps, kept, settings, step_weights)
     return poses, kept
 
 
