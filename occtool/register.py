@@ -74,7 +74,6 @@ class RegistrationSettings:
     loop_sigma: tuple[float, float] = (0.05, 0.02)
     backend: str = "small_gicp"
     loop_chi: float = 5.0
-    step_information: bool = False
 
 
 @dataclass
@@ -173,10 +172,6 @@ class _Aligner:
         else:
             raise InputError(f"registration backend must be small_gicp or kiss_icp, got {settings.backend!r}")
 
-    #: The last small_gicp result's 6x6 information (rotation x, y, z, translation x, y, z,
-    #: in the source's frame), ``None`` for kiss_icp.
-    information: FloatArray | None = None
-
     def align(self, target: FloatArray, source: FloatArray, guess: FloatArray,
               max_correspondence: float | None = None) -> FloatArray:
         """``T_target_source``, from ``guess``."""
@@ -188,9 +183,7 @@ class _Aligner:
             src, _ = lib.preprocess_points(source, downsampling_resolution=s.downsample, num_neighbors=10)
             result = lib.align(tgt, src, tgt_tree, init_T_target_source=guess, registration_type="GICP",
                                max_correspondence_distance=reach, max_iterations=s.max_iterations)
-            self.information = np.asarray(result.H)
             return np.asarray(result.T_target_source)
-        self.information = None
         grid = lib._VoxelHashMap(voxel_size=s.downsample, max_distance=1e6, max_points_per_voxel=20)
         grid._add_points(lib._Vector3dVector(target))
         return np.asarray(self._registration._align_points_to_map(
@@ -243,7 +236,6 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
     poses: list[Pose] = [odometry[0] if odometry[0] is not None else Pose()]
     submap: list[int] = [0]
     refused = 0
-    information: list[FloatArray | None] = [None]
     for k in range(1, count):
         if odometry[k] is not None and odometry[k - 1] is not None:
             step = relative(odometry[k - 1], odometry[k])  # type: ignore[arg-type]
@@ -255,17 +247,14 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         source = prepared[k]
         if len(scans[k]) < 10:
             poses.append(guess)
-            information.append(None)
             refused += 1
             continue
         target = np.concatenate([_in_world(prepared[i], poses[i]) for i in submap])
         matrix = aligner.align(target, source, _matrix(guess))
         if matched_share(target, source, matrix, settings.max_correspondence) >= settings.min_inliers:
             poses.append(_pose(matrix, planar))
-            information.append(aligner.information)
         else:
             poses.append(guess)
-            information.append(None)
             refused += 1
         last = poses[submap[-1]]
         moved = relative(last, poses[k])
@@ -277,48 +266,13 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         report.refused += refused
         report.seconds["registration"] = time.process_time() - started
     if settings.loop_closure and count > 2:
-        weights = _step_weights(poses, information, settings) if settings.step_information else None
-        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights)
+        poses = close_loops(prepared, poses, planar, aligner, settings, report)
     return poses
 
 
 def _in_world(points: FloatArray, pose: Pose) -> FloatArray:
     matrix = _matrix(pose)
     return points @ matrix[:3, :3].T + matrix[:3, 3]
-
-
-def _step_weights(poses: list[Pose], information: list[FloatArray | None],
-                  settings: RegistrationSettings) -> FloatArray:
-    """Square roots of each step's information for the pose graph, from GICP's own
-    (x, y, yaw block, turned into the previous pose's frame), scaled so that the median
-    step has the translation information of ``settings.odometry_sigma``; a step without
-    (refused, or another library) gets the plain sigmas, three times wider."""
-    st, sr = settings.odometry_sigma
-    plain = np.diag([1 / (3 * st), 1 / (3 * st), 1 / (3 * sr)])
-    blocks: list[FloatArray | None] = []
-    for k in range(1, len(poses)):
-        h = information[k]
-        if h is None or not np.isfinite(h).all():
-            blocks.append(None)
-            continue
-        sub = h[np.ix_([3, 4, 2], [3, 4, 2])]
-        turn = _wrap(poses[k].yaw - poses[k - 1].yaw)
-        g = np.eye(3)
-        g[:2, :2] = [[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]]
-        blocks.append(g @ sub @ g.T)
-    scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
-    factor = (1 / st**2) / float(np.median(scales)) if scales else 1.0
-    out = np.empty((len(blocks), 3, 3))
-    for n, block in enumerate(blocks):
-        if block is None:
-            out[n] = plain
-            continue
-        info = factor * 0.5 * (block + block.T) + np.diag([1e-6 / st**2, 1e-6 / st**2, 1e-6 / sr**2])
-        try:
-            out[n] = np.linalg.cholesky(info).T
-        except np.linalg.LinAlgError:
-            out[n] = plain
-    return out
 
 
 def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool, aligner: _Aligner,
