@@ -49,8 +49,15 @@ class RegistrationSettings:
     fewer than ``min_inliers`` of the scan's points within ``max_correspondence`` of the map
     is refused and the seed kept. Loops: every ``loop_every`` metres of travel a scan is
     registered against the scans near it that lie more than ``loop_gap`` metres of travel
-    back, within ``loop_radius`` of it by the current estimate; a result with at least
-    ``loop_inliers`` of its points matched joins the graph.
+    back, within ``loop_radius`` of it by the current estimate (the nearest such scan and
+    its ``loop_neighbours`` on either side; the query is the scan with the
+    ``loop_source_scans`` before it), first with correspondences within ``loop_search``,
+    then ``loop_match``; a result with at least ``loop_inliers`` of its points within
+    ``loop_match / 2`` joins the graph, for ``loop_rounds`` rounds of search and solve.
+    The graph weighs steps by ``odometry_sigma`` and loops by ``loop_sigma`` (metres,
+    radians) and drops loops left more than ``loop_chi`` standard deviations off.
+    ``backend``: ``"small_gicp"`` (the default, the ``register`` extra) or ``"kiss_icp"``
+    (KISS-ICP's point-to-point ICP, kept for the comparison in docs/register.md).
     """
 
     downsample: float = 0.05
