@@ -52,6 +52,7 @@ from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
+from registration import registration_section, registration_targets  # noqa: E402
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
@@ -607,6 +608,8 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines += ["## Fleets of logs: one call, local processes and Dask", "", results["fleet_markdown"], ""]
     if results.get("depth_markdown"):
         lines += [results["depth_markdown"], ""]
+    if results.get("registration_markdown"):
+        lines += [results["registration_markdown"], ""]
     return lines
 
 
@@ -837,6 +840,7 @@ def main(argv: list[str] | None = None) -> int:
     if data.is_dir() and not args.quick:
         results["log_map_markdown"], results["log_map"] = log_map_section(data)
         results["fleet_markdown"], results["fleet"] = fleet_section(data)
+        results["registration_markdown"], results["registration"] = registration_section(data)  # issue 22
     # Issue 23: depth cameras (the scenes rendered as depth images; about 75 s).
     results["depth_markdown"], results["depth"] = depth_section()
     results["notes"] = notes
@@ -846,6 +850,7 @@ def main(argv: list[str] | None = None) -> int:
     results["targets"] += quality_targets(results["map_quality_summary"], results.get("laser_logs", []),
                                           results["speed"], model_bytes)
     results["targets"] += whole_log_targets(results.get("log_map"), results.get("fleet"), results.get("large"))
+    results["targets"] += registration_targets(results.get("registration"))
     elapsed = budget.seconds - budget.left
     command = "python bench/run.py " + " ".join(argv if argv is not None else sys.argv[1:])
     results["meta"] = {

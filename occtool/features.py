@@ -299,6 +299,10 @@ class RangeLog:
     positions: list[Position]
     source: str = ""
     notes: list[str] = field(default_factory=list)
+    #: What the poses are, where the reader knows: ``"odometry"`` (wheel odometry, drifting),
+    #: ``"tf"``, ``"log"`` (the log's own pose fields, e.g. CARMEN's), ``"registered"``
+    #: (:mod:`occtool.register`); ``None`` when unknown or the log has none.
+    pose_kind: str | None = None
 
     @property
     def has_poses(self) -> bool:

@@ -56,6 +56,8 @@ class RunMap:
     obstacles: FloatArray
     frontiers: FloatArray
     seconds: dict[str, float] = field(default_factory=dict)
+    #: ``(stamp, pose)`` of every scan when the poses were registered (occtool.register): ``/tf`` in map.mcap.
+    trajectory: list[tuple[float | None, Pose]] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
         counts = self.raster.counts()

@@ -115,10 +115,20 @@ def test_xyz_with_four_columns_keeps_the_first_three(tmp_path):
     assert read_log(path).single().features.points.tolist() == [[1, 2, 3], [-1, 0.5, 0.2]]
 
 
-def test_the_raw_hokuyo_urg_log_is_refused_as_a_laser_log(shared_data):
-    error = assert_one_line_error(run("info", shared_data / "mines_paristech_urg" / "exp1.dat"),
-                                  "line 1", "707 values", "raw laser log")
-    assert "212387282" not in error
+def test_a_raw_laser_log_of_another_layout_is_refused_as_a_laser_log(tmp_path):
+    # BreezySLAM's URG layout (707 values a line) is read as format urg; 300 values is no known layout.
+    path = tmp_path / "scan.dat"
+    path.write_text("".join(" ".join(["1500"] * 300) + "\n" for _ in range(3)))
+    error = assert_one_line_error(run("info", path), "line 1", "300 values", "raw laser log")
+    assert "1500 1500" not in error
+
+
+def test_a_damaged_urg_line_is_one_line_naming_it(shared_data, tmp_path):
+    lines = (shared_data / "mines_paristech_urg" / "exp1.dat").read_text().splitlines()[:5]
+    lines[3] = lines[3].rsplit(" ", 2)[0]  # two values short
+    path = tmp_path / "exp1.dat"
+    path.write_text("\n".join(lines) + "\n")
+    assert_one_line_error(run("info", path), "line 4", "706 values")
 
 
 @settings(max_examples=30)

@@ -13,6 +13,7 @@ from occtool.cli.options import (
     overwrite_option,
     seed_option,
 )
+from occtool.cli.register_options import register_options
 
 
 def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float:
@@ -47,6 +48,7 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
               help="Write map.mcap for Foxglove (needs the protobuf extra).")
 @fit_options
 @log_options
+@register_options
 @seed_option
 @overwrite_option
 @config_option
@@ -70,7 +72,8 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
     import logging
     from pathlib import Path
 
-    from occtool.cli.options import fit_from_kwargs, read_log_from_kwargs
+    from occtool.cli.options import fit_from_kwargs
+    from occtool.cli.register_options import read_map_log, trajectory, write_map_poses
     from occtool.errors import InputError
     from occtool.fuse import fuse_log, fuse_model_set
     from occtool.mapping import map_of_run, output_paths, write_run_map
@@ -92,13 +95,16 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
     if Path(output).exists() and not Path(output).is_dir():
         raise click.ClickException(f"{output} exists and is not a folder")
     is_models = Path(source).is_dir() or Path(source).name == "index.json"
+    registration = None
+    if is_models and kwargs.get("register"):
+        raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
     if is_models:
         fused, models, positions = fuse_model_set(source, combination=combination, threshold=threshold)
         logger.info("%d models read from %s", len(models), source)
         extra = {"source": str(source), "fitted_here": False}
     else:
         template = fit_from_kwargs(kwargs, seed=seed)
-        log = read_log_from_kwargs(source, kwargs)
+        log, registration = read_map_log(source, kwargs)
         fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold,
                                          keyframe_share=keyframe_share)
         for note in report.notes:
@@ -113,8 +119,12 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
                  "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
     run = map_of_run(fused, models, positions, resolution=resolution,
                      navigation={"max_range": max_range, "threshold": threshold})
+    run.trajectory = trajectory(registration)
+    if registration is not None:
+        extra["registration"] = registration.to_dict()
     written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
                             georeference=georeference, extra_summary=extra)
+    written += [p for p in [write_map_poses(registration, output, overwrite)] if p is not None]
     summary = run.summary()
     logger.info("fused map: %d positions, %.1f KB; world map %s: %d wall segments, %.1f KB; raster %dx%d: %s",
                 summary["positions"], summary["fused_map_bytes"] / 1e3, Path(output) / "world.occmap",

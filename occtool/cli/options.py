@@ -194,7 +194,8 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
 
 log_options = _compose(
     click.option(
-        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "tum", "3dmatch"], case_sensitive=False),
+        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg", "tum",
+                                                 "3dmatch"], case_sensitive=False),
         default=None, help="Log format (default: from the content and extension).",
     ),
     click.option(

@@ -20,6 +20,9 @@ a time, for fitting a long log in bounded memory. Supported formats (docs/format
 ``rosbag``
     ROS 1 ``.bag`` and ROS 2 ``.db3`` bags (with their ``metadata.yaml``), through
     ``rosbags``: the same messages and ``--topic`` as MCAP.
+``urg``
+    BreezySLAM's raw Hokuyo URG logs (one line of 682 ranges and wheel ticks a scan, as
+    the MINES ParisTech ``exp1.dat``): poses from wheel odometry.
 ``tum``, ``3dmatch``
     folders of depth PNGs with camera poses: TUM RGB-D (``depth.txt``) and 3DMatch /
     7-Scenes (``frame-NNNNNN.depth.png``), :mod:`occtool.io.depth_folders`.
@@ -52,7 +55,7 @@ if TYPE_CHECKING:
 __all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "iter_positions", "read_log",
            "write_csv", "write_mcap"]
 
-FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "tum", "3dmatch")
+FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg", "tum", "3dmatch")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 DEFAULT_CONSTANT_EVIDENCE = 0.9
 CARMEN_RECORDS = (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"NEFF", b"SYNC", b"TRUEPOS")
@@ -114,6 +117,10 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         names = {c.strip().strip('"').lower() for c in first.split(",")}
         if {"x", "y", "z"} <= names:
             return "csv"
+        from occtool.io.urg import looks_like_urg
+
+        if looks_like_urg(first):
+            return "urg"
         if _numeric_fields(first) >= 3 and "," not in first:
             return "xyz"
         if first.split()[:1] == ["NODE"]:
@@ -388,6 +395,11 @@ def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -
             path, evidence=constant, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid,
             no_return_range=no_return_range,
         )
+    if fmt == "urg":
+        from occtool.io.urg import read_urg
+
+        return read_urg(path, evidence=evidence, position_tolerance=tolerance, group_by=group_by,
+                        skip_invalid=skip_invalid)
     from occtool.io.pointcloud import read_pointcloud
 
     return read_pointcloud(
@@ -436,6 +448,9 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
                           row.support)
         for key, value in extra.items():
             header.add_row(key, value)
+        kinds = {row.kind for row in rows if not (row.kind == "transforms" and row.topic.endswith("tf_static"))}
+        header.add_row("poses", _pose_words("tf" if "transforms" in kinds else
+                                            "odometry" if "odometry" in kinds else None))
         return Group(header, table)
     stream = iter_positions(target, format=fmt, skip_invalid=skip_invalid, no_return_range=no_return_range)
     positions = features = 0
@@ -446,10 +461,27 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
         has_poses = has_poses or position.pose is not None
     header.add_row("positions", f"{positions:,}")
     header.add_row("features", f"{features:,}")
-    header.add_row("poses", "yes" if has_poses else "no")
+    kind = None
+    if has_poses:
+        kind = "odometry" if fmt == "urg" or any(n.startswith("poses from odometry") for n in stream.notes) else \
+            "tf" if any(n.startswith("poses from /tf") for n in stream.notes) else "log"
+    header.add_row("poses", _pose_words(kind, fmt))
     for note in stream.notes:
         header.add_row("note", note)
     return header
+
+
+def _pose_words(kind: str | None, fmt: str = "mcap") -> str:
+    """What ``occtool info`` says of a log's poses, and what ``occtool map`` does with them."""
+    if kind is None:
+        return "none: occtool map registers the scans (occtool.register; --no-register maps one position)"
+    if kind == "odometry":
+        return "wheel odometry (drifts): occtool map registers the scans seeded by it (--no-register keeps it)"
+    if kind == "tf":
+        return "/tf: occtool map uses them (--register re-aligns the scans, seeded by them)"
+    where = {"carmen": "each laser line's x y theta (corrected in a *-corrected log)",
+             "csv": "the pose columns"}.get(fmt, "the log's own")
+    return f"{where}: occtool map uses them (--register re-aligns the scans, seeded by them)"
 
 
 def write_csv(features_or_log: Features | RangeLog | Position, path: str | os.PathLike[str]) -> None:

@@ -6,6 +6,8 @@
 * ``/positions`` — ``foxglove.SceneUpdate``: one message per position on its timestamp,
   an entity with the position's navigation polygon (line loops), its obstacle points
   (red spheres) and exploration points (green spheres), in frame ``map``.
+* ``/tf`` — ``foxglove.FrameTransform``, only when the poses were registered
+  (:mod:`occtool.register`): ``map`` -> ``base_link`` of every scan on its timestamp.
 
 Written with ``mcap-protobuf-support`` and ``foxglove-schemas-protobuf`` (the
 ``protobuf`` extra).
@@ -24,6 +26,8 @@ from occtool.fuse import FREE, OCCUPIED
 GRID_TOPIC = "/map"
 SCENE_TOPIC = "/positions"
 FRAME = "map"
+TF_TOPIC = "/tf"
+BASE_FRAME = "base_link"
 POINT_DIAMETER = 0.1
 
 
@@ -112,8 +116,26 @@ def run_map_mcap_bytes(run: Any) -> bytes:
         data=values.tobytes(),
     )
     writer.write_message(GRID_TOPIC, grid, log_time=last, publish_time=last)
+    _write_trajectory(writer, getattr(run, "trajectory", None) or [], stamp_of)
     writer.finish()
     return buffer.getvalue()
 
 
-__all__ = ["FRAME", "GRID_TOPIC", "SCENE_TOPIC", "run_map_mcap_bytes"]
+def _write_trajectory(writer: Any, trajectory: list[Any], stamp_of: Any) -> None:
+    """The registered poses as ``foxglove.FrameTransform`` on ``/tf``: ``map`` -> ``base_link``,
+    one a scan on its timestamp (what ``occtool map --register`` estimated)."""
+    if not trajectory:
+        return
+    from foxglove_schemas_protobuf import FrameTransform_pb2, Quaternion_pb2, Vector3_pb2
+
+    for k, (stamp, pose) in enumerate(trajectory):
+        ns = _nanoseconds(stamp, k * 100_000_000)
+        half = pose.yaw / 2.0
+        message = FrameTransform_pb2.FrameTransform(
+            timestamp=stamp_of(ns), parent_frame_id=FRAME, child_frame_id=BASE_FRAME,
+            translation=Vector3_pb2.Vector3(x=pose.x, y=pose.y, z=pose.z),
+            rotation=Quaternion_pb2.Quaternion(x=0.0, y=0.0, z=float(np.sin(half)), w=float(np.cos(half))))
+        writer.write_message(TF_TOPIC, message, log_time=ns, publish_time=ns)
+
+
+__all__ = ["BASE_FRAME", "FRAME", "GRID_TOPIC", "SCENE_TOPIC", "TF_TOPIC", "run_map_mcap_bytes"]
