@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import ModelFormatError
 from occtool.features import Features
+from occtool.neighbours import NeighbourIndex, nearest_other_distance
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -237,8 +238,6 @@ class Support:
 
     def _index(self, points: FloatArray, count: int, spacing: float) -> None:
         """Index ``points``, the subsample of ``count`` support points."""
-        from scipy.spatial import cKDTree
-
         self.step = _support_step(count)
         # The subsample's rays lie sqrt(step) times as far apart as all the returns': the
         # reach grows with them, so a surface's return finds as many of the subsample's
@@ -247,7 +246,9 @@ class Support:
         # lost a fifth of its bins, a table top's edge among them).
         self.spacing = float(spacing) * math.sqrt(self.step)
         self.points = points
-        self.tree = cKDTree(self._embedded(self.points))
+        # Reach 1 in the embedding (numpy: scipy.spatial's import cost a fresh process more
+        # CPU than a fit of 10k features; the answers are cKDTree's, occtool.neighbours).
+        self.tree = NeighbourIndex(self._embedded(self.points), reach=1.0)
 
     @cached_property
     def _heights(self) -> FloatArray:
@@ -394,8 +395,6 @@ def ray_spacing(points: ArrayLike) -> float:
     """Typical angle (radians) between neighbouring rays: twice the median angle from a
     ray to its nearest neighbour (an even subsample of at most :data:`SPACING_SAMPLE`
     rays, scaled back to the full count)."""
-    from scipy.spatial import cKDTree
-
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = points.shape[0]
     if n < 2:
@@ -403,9 +402,9 @@ def ray_spacing(points: ArrayLike) -> float:
     step = max(1, n // SPACING_SAMPLE)
     sample = points[::step]
     directions = sample / np.linalg.norm(sample, axis=1, keepdims=True)
-    distance, _ = cKDTree(directions).query(directions, k=2)
+    distance = nearest_other_distance(directions)
     # Chord to angle; a subsample's spacing is sqrt(step) times the full set's.
-    angle = 2.0 * np.arcsin(np.clip(distance[:, 1] / 2.0, 0.0, 1.0))
+    angle = 2.0 * np.arcsin(np.clip(distance / 2.0, 0.0, 1.0))
     return float(2.0 * np.median(angle) / math.sqrt(step))
 
 
