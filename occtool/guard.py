@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._stats import median
 from occtool.errors import ModelFormatError
 from occtool.features import Features
 from occtool.neighbours import NeighbourIndex, nearest_other_distance
@@ -405,7 +406,7 @@ def ray_spacing(points: ArrayLike) -> float:
     distance = nearest_other_distance(directions)
     # Chord to angle; a subsample's spacing is sqrt(step) times the full set's.
     angle = 2.0 * np.arcsin(np.clip(distance / 2.0, 0.0, 1.0))
-    return float(2.0 * np.median(angle) / math.sqrt(step))
+    return float(2.0 * median(angle) / math.sqrt(step))
 
 
 def build_guard(alpha: ArrayLike, distance: ArrayLike, level: float, bins: int = GUARD_BINS, *,

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._stats import median
 from occtool.errors import InputError
 from occtool.features import FeatureGeometry, Features, wrap_angle
 from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
@@ -437,7 +438,7 @@ def geometry_findings(features: Features, robot: Robot) -> list[str]:
     planar = is_planar(features)
     inside = (heights > low + BAND_EDGE) & (heights < high - BAND_EDGE)
     if planar:
-        plane = float(np.median(heights))
+        plane = median(heights)
         if not inside.any():
             where = "at the edge of" if low - BAND_EDGE <= plane <= high + BAND_EDGE else "outside"
             findings.append(
@@ -481,7 +482,7 @@ def _densest_layer(heights: np.ndarray, thickness: float = 0.06) -> tuple[float,
     if share < FINDING_SHARE:
         return None
     layer = heights[(heights >= edges[k] - step) & (heights <= edges[k + 1] + step)]
-    return float(np.median(layer)), share
+    return median(layer), share
 
 
 __all__ = ["FLOOR_MODES", "SAMPLE_KINDS", "Samples", "SensorModel", "geometry_findings", "is_planar"]
