@@ -298,7 +298,6 @@ class SensorModel:
         samples, the robot samples, footprint and background. A caller that keeps only
         some samples (the fit's focus) writes those alone, not every sample twice."""
         robot = Robot() if robot is None else robot
-        rng = np.random.default_rng(0) if rng is None else rng
         geometry = FeatureGeometry.of(features) if geometry is None else geometry
         alpha, h, r = geometry.polar()
         if turn is not None:
@@ -329,7 +328,7 @@ class SensorModel:
         if self.footprint_samples:
             extra.append(self._footprint(robot))
         if self.background_samples:
-            extra.append(self._background(robot, rng))
+            extra.append(self._background(robot, np.random.default_rng(0) if rng is None else rng))
         if turn is not None:
             extra = [(wrap_angle(block[0] - turn), *block[1:]) for block in extra]
         blocks += [SampleBlock(*block) for block in extra]
