@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -75,22 +72,3 @@ def test_nearest_other_distance_is_ckdtrees_second_neighbour():
     assert nearest_other_distance(directions)[10] == 0.0
     assert np.isinf(nearest_other_distance(directions[:1])).all()
     np.testing.assert_array_equal(nearest_other_distance(np.ones((4, 3))), np.zeros(4))
-
-
-def test_a_fit_imports_no_scipy():
-    # scipy.spatial's import cost a fresh process more CPU than a fit of 10k features.
-    code = """
-import sys
-import numpy as np
-from occtool.features import Features
-from occtool.fit import OccupancyRegressor
-rng = np.random.default_rng(0)
-a, z = rng.uniform(-1.5, 1.5, 3000), rng.uniform(-0.9, 0.5, 3000)
-r = np.where(np.abs(a) < 0.4, 1.2, 2.5)  # a box ahead of a wall
-points = np.column_stack([r * np.cos(a), r * np.sin(a), z])
-model = OccupancyRegressor(seed=0).fit(Features(points, np.ones(3000)))
-assert model.guard_ is not None
-print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))
-"""
-    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout
-    assert out.strip() == "[]"
