@@ -51,6 +51,7 @@ from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
+from unseen_rooms import unseen_rooms_section, unseen_targets  # noqa: E402
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
@@ -602,6 +603,9 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines.append("")
     if results.get("log_map_markdown"):
         lines += [results["log_map_markdown"], ""]
+    if results.get("unseen_rooms_markdown"):
+        lines += ["## Unseen rooms: fit + extract against the grid's build + extract", "",
+                  results["unseen_rooms_markdown"], ""]
     if results.get("fleet_markdown"):
         lines += ["## Fleets of logs: one call, local processes and Dask", "", results["fleet_markdown"], ""]
     return lines
@@ -815,6 +819,8 @@ def main(argv: list[str] | None = None) -> int:
     results["speed"] = speed_section()
     log(f"speed: fit {results['speed']['fit_s']:.2f} s, extract {results['speed']['extract_s'] * 1000:.1f} ms")
     results["scenes"], notes["scenes"] = scenes_section(budget, seeds, SCENE_COUNTS)
+    # Issue 21: rooms the simulator's defaults do not make, each run in a fresh process.
+    results["unseen_rooms_markdown"], results["unseen_rooms"] = unseen_rooms_section(1 if args.quick else 3)
     results["reading"] = reading_section(20_000 if args.quick else 200_000)
     results["scale_sweep"], notes["scale_sweep"] = scale_sweep(scales, budget)
     data = Path(args.data)
@@ -840,6 +846,7 @@ def main(argv: list[str] | None = None) -> int:
     model_bytes = office["models"]["parametric"]["file_bytes"] if office else None
     results["targets"] += quality_targets(results["map_quality_summary"], results.get("laser_logs", []),
                                           results["speed"], model_bytes)
+    results["targets"] += unseen_targets(results.get("unseen_rooms"))
     results["targets"] += whole_log_targets(results.get("log_map"), results.get("fleet"), results.get("large"))
     elapsed = budget.seconds - budget.left
     command = "python bench/run.py " + " ".join(argv if argv is not None else sys.argv[1:])
