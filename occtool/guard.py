@@ -306,17 +306,14 @@ class Support:
         points were asked in, and for ``points[order]`` the ``(n, k)`` distances (``inf``
         beyond reach) and indices.
 
-        Asked in strips of the reach's pan width, by elevation within a strip, so that
-        consecutive queries walk the same branches of the tree (a million features' 132k
-        queries took two thirds of the time of asking them in the features' order); each
-        point's answer is its own whatever the order.
+        The index asks them in the order of its cells itself (:mod:`occtool.neighbours`);
+        they are taken in their own order (the strips of pan angle they were sorted into
+        served cKDTree's walk of its tree), and each point's answer is its own whatever
+        the order.
         """
-        pan = np.arctan2(points[:, 1], points[:, 0])
-        elevation = np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1]))  # within +-pi/2
-        strip = np.floor(pan / max(SUPPORT_SPACINGS * self.spacing, 1e-9))
-        order = np.argsort(4.0 * strip + elevation, kind="stable")
-        distance, index = self.tree.query(self._embedded(points[order]), k=k, distance_upper_bound=1.0)
-        return order, np.asarray(distance).reshape(-1, k), np.asarray(index).reshape(-1, k)
+        order = np.arange(points.shape[0])
+        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        return order, distance, index
 
     def steep_neighbours(self, points: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
         """The query :meth:`seen_from_above` makes of ``points`` (a nonempty support):
