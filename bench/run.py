@@ -47,6 +47,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from cold_start import cold_start_section, cold_start_targets  # noqa: E402
 from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
@@ -603,6 +604,8 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines.append("")
     if results.get("log_map_markdown"):
         lines += [results["log_map_markdown"], ""]
+    if results.get("cold_start_markdown"):
+        lines += ["## A fresh process: one fit of 10k features", "", results["cold_start_markdown"], ""]
     if results.get("unseen_rooms_markdown"):
         lines += ["## Unseen rooms: fit + extract against the grid's build + extract", "",
                   results["unseen_rooms_markdown"], ""]
@@ -816,6 +819,8 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, Any] = {}
 
     # Cheap, fixed-size sections first; the open-ended sweeps last, within what is left.
+    # Issue 21: a fresh process's fit, first (its children's peak RSS is then their own).
+    results["cold_start_markdown"], results["cold_start"] = cold_start_section()
     results["speed"] = speed_section()
     log(f"speed: fit {results['speed']['fit_s']:.2f} s, extract {results['speed']['extract_s'] * 1000:.1f} ms")
     results["scenes"], notes["scenes"] = scenes_section(budget, seeds, SCENE_COUNTS)
@@ -846,6 +851,7 @@ def main(argv: list[str] | None = None) -> int:
     model_bytes = office["models"]["parametric"]["file_bytes"] if office else None
     results["targets"] += quality_targets(results["map_quality_summary"], results.get("laser_logs", []),
                                           results["speed"], model_bytes)
+    results["targets"] += cold_start_targets(results.get("cold_start"))
     results["targets"] += unseen_targets(results.get("unseen_rooms"))
     results["targets"] += whole_log_targets(results.get("log_map"), results.get("fleet"), results.get("large"))
     elapsed = budget.seconds - budget.left
