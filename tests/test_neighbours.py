@@ -70,5 +70,10 @@ def test_nearest_other_distance_is_ckdtrees_second_neighbour():
     expected = cKDTree(directions).query(directions, k=2)[0][:, 1]
     np.testing.assert_array_equal(nearest_other_distance(directions), expected)
     assert nearest_other_distance(directions)[10] == 0.0
+    # A narrow cone of rays and one stray ray (the reach starts from the cone's spacing).
+    pan, tilt = rng.uniform(-0.01, 0.01, (2, 2000))
+    cone = np.column_stack([np.cos(tilt) * np.cos(pan), np.cos(tilt) * np.sin(pan), np.sin(tilt)])
+    cone[0] = (-1.0, 0.0, 0.0)
+    np.testing.assert_array_equal(nearest_other_distance(cone), cKDTree(cone).query(cone, k=2)[0][:, 1])
     assert np.isinf(nearest_other_distance(directions[:1])).all()
     np.testing.assert_array_equal(nearest_other_distance(np.ones((4, 3))), np.zeros(4))
