@@ -193,6 +193,14 @@ def nearest_other_distance(points: ArrayLike) -> FloatArray:
     reach = 2.0 * float(np.prod(extent) / n) ** (1.0 / extent.size) if extent.size else span
     pending = np.arange(n)
     while pending.size:
+        if pending.size * n <= PAIR_BLOCK // 4:
+            # A few left (rays far from the rest): against every point at once.
+            squared = np.zeros((pending.size, n))
+            for axis in range(dimension):
+                step = points[:, axis][None, :] - points[pending, axis][:, None]
+                squared += step * step
+            result[pending] = np.sqrt(np.partition(squared, 1, axis=1)[:, 1])
+            break
         last = reach > CELL_MARGIN * span * math.sqrt(dimension)  # every other point within it
         index = NeighbourIndex(points, reach=reach)
         distance, _ = index.query(points[pending], k=2, distance_upper_bound=reach)
