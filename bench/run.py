@@ -47,12 +47,14 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from cold_start import cold_start_section, cold_start_targets  # noqa: E402
 from depth import depth_section  # noqa: E402
 from fleet import fleet_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
 from registration import registration_section, registration_targets  # noqa: E402
+from unseen_rooms import unseen_rooms_section, unseen_targets  # noqa: E402
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
@@ -604,6 +606,11 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines.append("")
     if results.get("log_map_markdown"):
         lines += [results["log_map_markdown"], ""]
+    if results.get("cold_start_markdown"):
+        lines += ["## A fresh process: one fit of 10k features", "", results["cold_start_markdown"], ""]
+    if results.get("unseen_rooms_markdown"):
+        lines += ["## Unseen rooms: fit + extract against the grid's build + extract", "",
+                  results["unseen_rooms_markdown"], ""]
     if results.get("fleet_markdown"):
         lines += ["## Fleets of logs: one call, local processes and Dask", "", results["fleet_markdown"], ""]
     if results.get("depth_markdown"):
@@ -818,9 +825,13 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, Any] = {}
 
     # Cheap, fixed-size sections first; the open-ended sweeps last, within what is left.
+    # Issue 21: a fresh process's fit, first (its children's peak RSS is then their own).
+    results["cold_start_markdown"], results["cold_start"] = cold_start_section()
     results["speed"] = speed_section()
     log(f"speed: fit {results['speed']['fit_s']:.2f} s, extract {results['speed']['extract_s'] * 1000:.1f} ms")
     results["scenes"], notes["scenes"] = scenes_section(budget, seeds, SCENE_COUNTS)
+    # Issue 21: rooms the simulator's defaults do not make, each run in a fresh process.
+    results["unseen_rooms_markdown"], results["unseen_rooms"] = unseen_rooms_section(1 if args.quick else 3)
     results["reading"] = reading_section(20_000 if args.quick else 200_000)
     results["scale_sweep"], notes["scale_sweep"] = scale_sweep(scales, budget)
     data = Path(args.data)
@@ -849,6 +860,8 @@ def main(argv: list[str] | None = None) -> int:
     model_bytes = office["models"]["parametric"]["file_bytes"] if office else None
     results["targets"] += quality_targets(results["map_quality_summary"], results.get("laser_logs", []),
                                           results["speed"], model_bytes)
+    results["targets"] += cold_start_targets(results.get("cold_start"))
+    results["targets"] += unseen_targets(results.get("unseen_rooms"))
     results["targets"] += whole_log_targets(results.get("log_map"), results.get("fleet"), results.get("large"))
     results["targets"] += registration_targets(results.get("registration"))
     elapsed = budget.seconds - budget.left

@@ -42,8 +42,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._stats import median
 from occtool.errors import ModelFormatError
 from occtool.features import Features
+from occtool.neighbours import NeighbourIndex, nearest_other_distance
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -237,8 +239,6 @@ class Support:
 
     def _index(self, points: FloatArray, count: int, spacing: float) -> None:
         """Index ``points``, the subsample of ``count`` support points."""
-        from scipy.spatial import cKDTree
-
         self.step = _support_step(count)
         # The subsample's rays lie sqrt(step) times as far apart as all the returns': the
         # reach grows with them, so a surface's return finds as many of the subsample's
@@ -247,7 +247,9 @@ class Support:
         # lost a fifth of its bins, a table top's edge among them).
         self.spacing = float(spacing) * math.sqrt(self.step)
         self.points = points
-        self.tree = cKDTree(self._embedded(self.points))
+        # Reach 1 in the embedding (numpy: scipy.spatial's import cost a fresh process more
+        # CPU than a fit of 10k features; the answers are cKDTree's, occtool.neighbours).
+        self.tree = NeighbourIndex(self._embedded(self.points), reach=1.0)
 
     @cached_property
     def _heights(self) -> FloatArray:
@@ -304,17 +306,14 @@ class Support:
         points were asked in, and for ``points[order]`` the ``(n, k)`` distances (``inf``
         beyond reach) and indices.
 
-        Asked in strips of the reach's pan width, by elevation within a strip, so that
-        consecutive queries walk the same branches of the tree (a million features' 132k
-        queries took two thirds of the time of asking them in the features' order); each
-        point's answer is its own whatever the order.
+        The index asks them in the order of its cells itself (:mod:`occtool.neighbours`);
+        they are taken in their own order (the strips of pan angle they were sorted into
+        served cKDTree's walk of its tree), and each point's answer is its own whatever
+        the order.
         """
-        pan = np.arctan2(points[:, 1], points[:, 0])
-        elevation = np.arctan2(points[:, 2], np.hypot(points[:, 0], points[:, 1]))  # within +-pi/2
-        strip = np.floor(pan / max(SUPPORT_SPACINGS * self.spacing, 1e-9))
-        order = np.argsort(4.0 * strip + elevation, kind="stable")
-        distance, index = self.tree.query(self._embedded(points[order]), k=k, distance_upper_bound=1.0)
-        return order, np.asarray(distance).reshape(-1, k), np.asarray(index).reshape(-1, k)
+        order = np.arange(points.shape[0])
+        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
+        return order, distance, index
 
     def steep_neighbours(self, points: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
         """The query :meth:`seen_from_above` makes of ``points`` (a nonempty support):
@@ -394,8 +393,6 @@ def ray_spacing(points: ArrayLike) -> float:
     """Typical angle (radians) between neighbouring rays: twice the median angle from a
     ray to its nearest neighbour (an even subsample of at most :data:`SPACING_SAMPLE`
     rays, scaled back to the full count)."""
-    from scipy.spatial import cKDTree
-
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = points.shape[0]
     if n < 2:
@@ -403,10 +400,10 @@ def ray_spacing(points: ArrayLike) -> float:
     step = max(1, n // SPACING_SAMPLE)
     sample = points[::step]
     directions = sample / np.linalg.norm(sample, axis=1, keepdims=True)
-    distance, _ = cKDTree(directions).query(directions, k=2)
+    distance = nearest_other_distance(directions)
     # Chord to angle; a subsample's spacing is sqrt(step) times the full set's.
-    angle = 2.0 * np.arcsin(np.clip(distance[:, 1] / 2.0, 0.0, 1.0))
-    return float(2.0 * np.median(angle) / math.sqrt(step))
+    angle = 2.0 * np.arcsin(np.clip(distance / 2.0, 0.0, 1.0))
+    return float(2.0 * median(angle) / math.sqrt(step))
 
 
 def build_guard(alpha: ArrayLike, distance: ArrayLike, level: float, bins: int = GUARD_BINS, *,

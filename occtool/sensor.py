@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._stats import median
 from occtool.errors import InputError
 from occtool.features import FeatureGeometry, Features, wrap_angle
 from occtool.limits import MAX_BODY_SAMPLES, MAX_DISTANCE
@@ -297,7 +298,6 @@ class SensorModel:
         samples, the robot samples, footprint and background. A caller that keeps only
         some samples (the fit's focus) writes those alone, not every sample twice."""
         robot = Robot() if robot is None else robot
-        rng = np.random.default_rng(0) if rng is None else rng
         geometry = FeatureGeometry.of(features) if geometry is None else geometry
         alpha, h, r = geometry.polar()
         if turn is not None:
@@ -328,7 +328,7 @@ class SensorModel:
         if self.footprint_samples:
             extra.append(self._footprint(robot))
         if self.background_samples:
-            extra.append(self._background(robot, rng))
+            extra.append(self._background(robot, np.random.default_rng(0) if rng is None else rng))
         if turn is not None:
             extra = [(wrap_angle(block[0] - turn), *block[1:]) for block in extra]
         blocks += [SampleBlock(*block) for block in extra]
@@ -437,7 +437,7 @@ def geometry_findings(features: Features, robot: Robot) -> list[str]:
     planar = is_planar(features)
     inside = (heights > low + BAND_EDGE) & (heights < high - BAND_EDGE)
     if planar:
-        plane = float(np.median(heights))
+        plane = median(heights)
         if not inside.any():
             where = "at the edge of" if low - BAND_EDGE <= plane <= high + BAND_EDGE else "outside"
             findings.append(
@@ -481,7 +481,7 @@ def _densest_layer(heights: np.ndarray, thickness: float = 0.06) -> tuple[float,
     if share < FINDING_SHARE:
         return None
     layer = heights[(heights >= edges[k] - step) & (heights <= edges[k + 1] + step)]
-    return float(np.median(layer)), share
+    return median(layer), share
 
 
 __all__ = ["FLOOR_MODES", "SAMPLE_KINDS", "Samples", "SensorModel", "geometry_findings", "is_planar"]

@@ -177,9 +177,9 @@ def test_one_support_query_serves_the_seen_from_above_test():
 
 
 @pytest.mark.parametrize("block", [1 << 16, 97])  # all at once, and in blocks
-def test_support_queries_asked_in_strips_count_each_points_neighbours_within_reach(monkeypatch, block):
-    # Queries are asked in strips of pan angle, not in the points' order: each point's count
-    # is still the brute-force count of support points within reach (embedded distance < 1).
+def test_support_queries_count_each_points_neighbours_within_reach(monkeypatch, block):
+    # The index asks queries in the order of its cells, not in the points' order: each point's
+    # count is still the brute-force count of support points within reach (embedded distance < 1).
     monkeypatch.setattr(guard_module, "SUPPORT_QUERY_BLOCK", block)
     rng = np.random.default_rng(12)
     a = rng.uniform(-np.pi, np.pi, 2500)

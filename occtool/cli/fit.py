@@ -42,7 +42,6 @@ def fit(log_paths: tuple[str, ...], output: str | None, overwrite: bool, positio
     reported and the rest is written; an interrupted run leaves an index marked
     incomplete, and --skip-existing resumes it. LOG '-' reads standard input.
     """
-    import glob
     import logging
     import os
     import sys
@@ -56,7 +55,7 @@ def fit(log_paths: tuple[str, ...], output: str | None, overwrite: bool, positio
 
     logger = logging.getLogger("occtool.fit")
     template = fit_from_kwargs(kwargs, seed=seed)
-    logs = _expand(log_paths, glob)
+    logs = _expand(log_paths)
     to_folder = output is not None and (output.endswith(("/", os.sep)) or Path(output).is_dir())
     if len(logs) > 1 and not to_folder:
         raise click.UsageError("several logs need an output folder: -o DIR/")
@@ -94,8 +93,9 @@ def fit(log_paths: tuple[str, ...], output: str | None, overwrite: bool, positio
     )
 
 
-def _expand(paths: tuple[str, ...], glob_module) -> list[str]:
-    """The logs named: each argument a file, '-' or a glob pattern that matches files."""
+def _expand(paths: tuple[str, ...]) -> list[str]:
+    """The logs named: each argument a file, '-' or a glob pattern that matches files
+    (glob is imported for a pattern only: a few ms of every fresh fit otherwise)."""
     import os
 
     logs: list[str] = []
@@ -105,7 +105,9 @@ def _expand(paths: tuple[str, ...], glob_module) -> list[str]:
                 raise click.BadParameter(f"{path} is a folder, not a range log", param_hint="LOG")
             logs.append(path)
             continue
-        matches = sorted(p for p in glob_module.glob(path) if os.path.isfile(p))
+        import glob
+
+        matches = sorted(p for p in glob.glob(path) if os.path.isfile(p))
         if not matches:
             raise click.BadParameter(f"{path} does not exist (nor matches any file)", param_hint="LOG")
         logs.extend(matches)

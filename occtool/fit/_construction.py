@@ -20,6 +20,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool._stats import median
 from occtool.fit._profile import (
     adaptive_support,
     angle_bins,
@@ -392,7 +393,7 @@ class _Fitter:
             rows[:, column] = np.repeat(values, PROFILE_HEIGHTS)
         rows[:, -1] = H_rows
 
-        c = self.crossing_slope(self.segment_ray_samples(first, end, n_bins), _median(D_bins))
+        c = self.crossing_slope(self.segment_ray_samples(first, end, n_bins), median(D_bins))
         # Half the pan-weight budget is left to the side pieces that switch the group off.
         bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
         bound_h = self.p.b_max / c
@@ -603,18 +604,6 @@ class _Fitter:
         self.prediction = F
         return MinMaxTree(self.basis, W, root), history
 
-
-
-def _median(values: FloatArray) -> float:
-    """``float(np.median(values))`` of a few finite values, without its general machinery:
-    the middle value, or the mean of the middle two (their sum halved, as np.mean takes it)."""
-    if values.size == 0 or not np.isfinite(values).all():
-        return float(np.median(values))
-    ordered = np.sort(values)
-    half = values.size // 2
-    if values.size % 2:
-        return float(ordered[half])
-    return float((ordered[half - 1] + ordered[half]) / 2.0)
 
 
 def pan_weight(a1: float, a2: float) -> float:

@@ -295,7 +295,9 @@ class OccupancyRegressor:
         self._validate()
         sensor = self.sensor if self.sensor is not None else SensorModel()
         robot = self.robot if self.robot is not None else Robot()
-        rng = np.random.default_rng(self.seed)
+        # Only background samples draw random numbers (numpy.random's first import is
+        # 10-20 ms of a fresh process's first fit).
+        rng = np.random.default_rng(self.seed) if sensor.background_samples else None
         if len(features) == 0:
             raise InputError("no features to fit")
         # Pan angles and distances of the features, computed once for the screen, the guard,

@@ -161,6 +161,8 @@ class _GeometrySurvey:
         if self.planar_defaults and self.all_planar:
             self.all_planar = is_planar(position.features)
         for name, robot in self.robots.items():
+            if name == "planar" and not self.all_planar:
+                continue  # its findings are read only for a log planar throughout
             findings = geometry_findings(position.features, robot)
             if findings:
                 self.flagged[name] += 1

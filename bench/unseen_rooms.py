@@ -1,0 +1,238 @@
+"""Rooms the simulator's defaults do not make: the fit's cost and quality on any room.
+
+Issue 21, item 2. Each scene differs from the built-in office seen by the default stereo
+camera in one way: the room's size, the density of its clutter, the range noise and
+mismatches, the evidence the features carry, or the sensor's pattern (a 16-row laser
+scanner with constant range noise instead of the pan-tilt stereo camera). Each is
+compared with the 5 cm dense grid by :func:`occtool.compare.compare_grid` (its own
+timing: the parametric fit + extraction against the grid's build + extraction on the
+same 90 % of the features) in a fresh Python process per run, so every figure is a first
+call in its process; a few runs per scene give the spread.
+
+    python bench/unseen_rooms.py [--runs 3] [--json out.json]
+
+:func:`unseen_rooms_section` returns ``(markdown, json_dict)`` for bench/run.py.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+FEATURES = 10_000
+RUNS = 3
+RESOLUTION = 0.05
+#: Scene name -> what differs from the simulator's defaults.
+SCENES = {
+    "small room": "the office scaled to 0.6 of its size",
+    "large room": "the office scaled 2.5 times (walls up to 10 m away, sensor range 10 m)",
+    "dense clutter": "40 random boxes 0.1-1.8 m high in a 7 m x 7 m room",
+    "sparse clutter": "6 random boxes in a 12 m x 12 m room",
+    "noisy stereo": "the office, range noise 0.03 r^2 (3x) and 15 % mismatches (3x)",
+    "weak evidence": "the clutter scene, evidence uniform in [0.3, 1] (the default matcher's is mostly 0.7-1)",
+    "laser-like": "the office seen by a 16-row scanner (tilt -15 to +10 degrees), 1 cm constant noise, "
+                  "2 % mismatches, evidence 0.9",
+}
+
+
+def _scaled(name: str, scale: float) -> Any:
+    from occtool.simulate import build_scene
+
+    scene = build_scene(name)
+    obstacles = tuple(replace(o, footprint=tuple((scale * x, scale * y) for x, y in o.footprint))
+                      for o in scene.obstacles)
+    return replace(scene, obstacles=obstacles, name=f"{name} x{scale:g}")
+
+
+def _boxes_room(count: int, half_width: float, seed: int) -> Any:
+    """A square room with ``count`` random boxes, none within 0.8 m of the robot."""
+    from occtool.robot import Robot
+    from occtool.simulate import WALL_HEIGHT, Scene, box
+
+    rng = np.random.default_rng(seed)
+    w = half_width
+    obstacles = [box("wall north", -w, w, w, w + 0.1, 0.0, WALL_HEIGHT), box("wall south", -w, -w - 0.1, w, -w, 0.0, WALL_HEIGHT),
+                 box("wall east", w, -w, w + 0.1, w, 0.0, WALL_HEIGHT), box("wall west", -w - 0.1, -w, -w, w, 0.0, WALL_HEIGHT)]
+    while len(obstacles) < count + 4:
+        x, y = rng.uniform(-w + 0.3, w - 0.3, 2)
+        sx, sy = rng.uniform(0.15, 0.8, 2)
+        if math.hypot(x, y) < 0.8 + 0.5 * math.hypot(sx, sy):
+            continue
+        low = 0.0 if rng.random() < 0.8 else rng.uniform(0.3, 0.8)  # some hang (shelves, table tops)
+        obstacles.append(box(f"box {len(obstacles) - 4}", x - sx / 2, y - sy / 2, x + sx / 2, y + sy / 2,
+                             low, low + rng.uniform(0.1, 1.8)))
+    return Scene(tuple(obstacles), Robot(), f"{count} boxes", "random boxes")
+
+
+def _laser(scene: Any, n: int, seed: int) -> Any:
+    """Features of a 16-row scanner at the sensor: constant 1 cm noise, 2 % mismatches."""
+    from occtool.features import Features
+    from occtool.simulate import NOTHING, cast_rays
+
+    rng = np.random.default_rng(seed)
+    rows = np.radians(np.linspace(-15.0, 10.0, 16))
+    dirs_kept, ranges_kept, have = [], [], 0
+    while have < n:
+        pan = rng.uniform(-math.pi, math.pi, 2 * n)
+        tilt = rows[rng.integers(0, rows.size, 2 * n)]
+        dirs = np.column_stack([np.cos(tilt) * np.cos(pan), np.cos(tilt) * np.sin(pan), np.sin(tilt)])
+        ranges, surface = cast_rays(scene, dirs, max_range=8.0)
+        seen = (surface != NOTHING) & (ranges >= 0.2)
+        dirs_kept.append(dirs[seen])
+        ranges_kept.append(ranges[seen])
+        have += int(seen.sum())
+    dirs, ranges = np.concatenate(dirs_kept)[:n], np.concatenate(ranges_kept)[:n]
+    measured = ranges + rng.normal(0.0, 0.01, n)
+    wrong = rng.random(n) < 0.02
+    measured[wrong] = rng.uniform(0.2, 8.0, int(wrong.sum()))
+    return Features(dirs * np.maximum(measured, 0.1)[:, None], np.full(n, 0.9))
+
+
+def make_scene(name: str, seed: int) -> tuple[Any, Any]:
+    """The features (``FEATURES`` of them) and truth of scene ``name`` for run ``seed``."""
+    from occtool.features import Features
+    from occtool.simulate import simulate_scene
+
+    if name == "small room":
+        return simulate_scene(_scaled("office", 0.6), n_features=FEATURES, seed=seed)
+    if name == "large room":
+        return simulate_scene(_scaled("office", 2.5), n_features=FEATURES, seed=seed, sensor_range=10.0)
+    if name == "dense clutter":
+        return simulate_scene(_boxes_room(40, 3.5, 7), n_features=FEATURES, seed=seed)
+    if name == "sparse clutter":
+        return simulate_scene(_boxes_room(6, 6.0, 8), n_features=FEATURES, seed=seed, sensor_range=8.0)
+    if name == "noisy stereo":
+        return simulate_scene("office", n_features=FEATURES, seed=seed, range_noise=0.03, outlier_rate=0.15)
+    if name == "weak evidence":
+        features, scene = simulate_scene("clutter", n_features=FEATURES, seed=seed)
+        evidence = np.random.default_rng(seed + 100).uniform(0.3, 1.0, len(features))
+        return Features(features.points, evidence), scene
+    if name == "laser-like":
+        from occtool.simulate import build_scene
+
+        scene = build_scene("office")
+        return _laser(scene, FEATURES, seed), scene
+    raise ValueError(f"unknown scene {name!r}")
+
+
+def _child(name: str, seed: int) -> None:
+    """One comparison in this (fresh) process; its figures as one JSON line."""
+    from occtool.compare import compare_grid
+    from occtool.fit import OccupancyRegressor
+    from occtool.robot import Robot
+
+    features, scene = make_scene(name, seed)
+    robot = Robot()
+    started = time.process_time()
+    report = compare_grid(features, regressor=OccupancyRegressor(robot=robot, seed=seed),
+                          navigation={"robot": robot}, resolution=RESOLUTION, truth=scene, seed=seed,
+                          repeat=1, file_sizes=False)
+    models = report["models"]
+    print(json.dumps({
+        "scene": name, "seed": seed, "features": len(features),
+        "fit_s": models["parametric"]["build_s"], "extract_s": models["parametric"]["extract_s"],
+        "grid_build_s": models["grid"]["build_s"], "grid_extract_s": models["grid"]["extract_s"],
+        "pieces": models["parametric"]["pieces"],
+        "iou": report.get("truth", {}).get("parametric", {}).get("iou"),
+        "grid_iou": report.get("truth", {}).get("grid", {}).get("iou"),
+        "compare_cpu_s": time.process_time() - started,
+    }))
+
+
+def run_scenes(runs: int = RUNS) -> list[dict[str, Any]]:
+    """Every scene ``runs`` times, each run in a fresh process (seeds 0 .. runs - 1)."""
+    rows = []
+    for name in SCENES:
+        for seed in range(runs):
+            out = subprocess.run([sys.executable, __file__, "--child", name, str(seed)], check=True,
+                                 capture_output=True, text=True, cwd=ROOT).stdout
+            rows.append(json.loads(out.strip().splitlines()[-1]))
+    return rows
+
+
+def summarise(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per scene: median, min and max of each time, and how many runs the fit + extract
+    took no longer than the grid's build + extract."""
+    out = []
+    for name in SCENES:
+        mine = [r for r in rows if r["scene"] == name]
+        if not mine:
+            continue
+        param = [r["fit_s"] + r["extract_s"] for r in mine]
+        grid = [r["grid_build_s"] + r["grid_extract_s"] for r in mine]
+
+        def spread(values: list[float]) -> dict[str, float]:
+            return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+        out.append({
+            "scene": name, "runs": len(mine),
+            "fit_s": spread([r["fit_s"] for r in mine]), "extract_s": spread([r["extract_s"] for r in mine]),
+            "parametric_s": spread(param), "grid_s": spread(grid),
+            "ratio": spread([p / g for p, g in zip(param, grid)]),
+            "holds": sum(p <= g for p, g in zip(param, grid)),
+            "iou": statistics.median(r["iou"] for r in mine) if all(r["iou"] is not None for r in mine) else None,
+            "grid_iou": (statistics.median(r["grid_iou"] for r in mine)
+                         if all(r["grid_iou"] is not None for r in mine) else None),
+        })
+    return out
+
+
+def render(summary: list[dict[str, Any]]) -> str:
+    def ms(s: dict[str, float]) -> str:
+        return f"{1000 * s['median']:.0f} ({1000 * s['min']:.0f}-{1000 * s['max']:.0f})"
+
+    lines = [f"{FEATURES:,} features; times in ms from compare-grid's own timing (wall clock, one thread), median "
+             "(min-max) over fresh processes, each the first call in its process; the target: fit + extract no "
+             "longer than the 5 cm dense grid's build + extract, in every run.", "",
+             "| scene | differs by | fit | extract | fit + extract | grid build + extract | ratio | runs holding | "
+             "IoU (param / grid) |", "|---|---|---|---|---|---|---|---|---|"]
+    for s in summary:
+        iou = f"{s['iou']:.3f} / {s['grid_iou']:.3f}" if s["iou"] is not None else "-"
+        lines.append(f"| {s['scene']} | {SCENES[s['scene']]} | {ms(s['fit_s'])} | {ms(s['extract_s'])} | "
+                     f"{ms(s['parametric_s'])} | {ms(s['grid_s'])} | {s['ratio']['median']:.2f} "
+                     f"({s['ratio']['min']:.2f}-{s['ratio']['max']:.2f}) | {s['holds']} of {s['runs']} | {iou} |")
+    return "\n".join(lines)
+
+
+def unseen_targets(data: dict[str, Any] | None) -> list[tuple[str, str, bool | None]]:
+    """Issue 21's target on these rooms, for the bench's table of targets."""
+    summary = (data or {}).get("summary", [])
+    if not summary:
+        return []
+    held = sum(s["holds"] for s in summary)
+    runs = sum(s["runs"] for s in summary)
+    worst = max(summary, key=lambda s: s["ratio"]["max"])
+    return [(f"Unseen rooms ({len(summary)} scenes, {FEATURES:,} features, first call in a fresh process): "
+             "fit + extract <= the dense grid's build + extract in compare-grid's timing, every run",
+             f"{held} of {runs} runs; largest ratio {worst['ratio']['max']:.2f} ({worst['scene']})", held == runs)]
+
+
+def unseen_rooms_section(runs: int = RUNS) -> tuple[str, dict[str, Any]]:
+    """The section's markdown and figures for bench/run.py."""
+    rows = run_scenes(runs)
+    summary = summarise(rows)
+    return render(summary), {"runs": rows, "summary": summary}
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 4 and sys.argv[1] == "--child":
+        sys.path.insert(0, str(ROOT))
+        _child(sys.argv[2], int(sys.argv[3]))
+    else:
+        runs = int(sys.argv[sys.argv.index("--runs") + 1]) if "--runs" in sys.argv else RUNS
+        started = time.perf_counter()
+        markdown, data = unseen_rooms_section(runs)
+        print(markdown)
+        print(f"\n{time.perf_counter() - started:.0f} s", file=sys.stderr)
+        if "--json" in sys.argv:
+            Path(sys.argv[sys.argv.index("--json") + 1]).write_text(json.dumps(data, indent=1) + "\n")
