@@ -48,6 +48,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from fleet import fleet_section  # noqa: E402
+from heldout import heldout_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
@@ -602,6 +603,8 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines.append("")
     if results.get("log_map_markdown"):
         lines += [results["log_map_markdown"], ""]
+    if results.get("heldout_markdown"):
+        lines += [results["heldout_markdown"], ""]
     if results.get("fleet_markdown"):
         lines += ["## Fleets of logs: one call, local processes and Dask", "", results["fleet_markdown"], ""]
     return lines
@@ -833,6 +836,7 @@ def main(argv: list[str] | None = None) -> int:
         results["large"] = large_section()
     if data.is_dir() and not args.quick:
         results["log_map_markdown"], results["log_map"] = log_map_section(data)
+        results["heldout_markdown"], results["heldout"] = heldout_section(data)
         results["fleet_markdown"], results["fleet"] = fleet_section(data)
     results["notes"] = notes
     results["targets"] = targets(results["feature_sweep"], results["scale_sweep"], results["scenes"], results["speed"])
