@@ -489,7 +489,13 @@ def fused_row(out: Path, xy: FloatArray, n_occupied: int) -> dict[str, Any]:
     if not path.is_file():
         return {**row, "auc": None, "bytes": None, "note": "not available: occtool map wrote no world.occmap"}
     started = time.process_time()
-    p = np.asarray(load_map(path).predict(np.column_stack([xy, np.full(len(xy), LASER_Z)])), dtype=np.float64)
+    try:
+        p = np.asarray(load_map(path).predict(np.column_stack([xy, np.full(len(xy), LASER_Z)])), dtype=np.float64)
+    except Exception as exc:  # another branch's reader: any failure is reported, not raised
+        return {**row, "auc": None, "bytes": path.stat().st_size, "note": f"not available: load_map failed: {exc}"}
+    if p.shape != (len(xy),) or not np.isfinite(p).all():
+        return {**row, "auc": None, "bytes": path.stat().st_size,
+                "note": f"not available: predict gave {p.shape} values for {len(xy)} points, or non-finite ones"}
     return {**row, "auc": auc(p[:n_occupied], p[n_occupied:]), "bytes": path.stat().st_size,
             "cpu_s": time.process_time() - started, "note": ""}
 

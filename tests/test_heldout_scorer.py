@@ -95,3 +95,10 @@ def test_textbook_grid_of_one_beam():
     box = (np.array([0.5, 0.5]), np.array([3.5, 0.5]))
     updates = heldout.scan_updates(start, end, np.array([True]), np.array([0]), 1, 1.0, box)
     np.testing.assert_allclose(updates.log_odds(0.85, -0.4, (-2.0, 3.5))[:, 0], [-0.4, -0.4, -0.4, 0.85])
+
+
+def test_fused_row_says_not_available_without_the_map(tmp_path):
+    # Either occtool.fuse has no load_map yet or the folder holds no world.occmap: a row, not an error.
+    row = heldout.fused_row(tmp_path, np.zeros((3, 2)), 1)
+    assert row["auc"] is None and row["note"].startswith("not available")
+    assert heldout.nav2_row(tmp_path, np.zeros((3, 2)), 1)["note"].startswith("not available")
