@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import gzip
+import importlib
 import itertools
 import json
 import math
@@ -482,9 +483,9 @@ def fused_row(out: Path, xy: FloatArray, n_occupied: int) -> dict[str, Any]:
     """(a): ``world.occmap`` through ``occtool.fuse.load_map(...).predict``, when both exist."""
     path = out / "world.occmap"
     row: dict[str, Any] = {"model": "fused map (world.occmap, load_map().predict)"}
-    try:
-        from occtool.fuse import load_map  # type: ignore[attr-defined]
-    except ImportError:
+    try:  # by name: another branch is adding it, and this module must run with or without it
+        load_map = importlib.import_module("occtool.fuse").load_map
+    except (ImportError, AttributeError):
         return {**row, "auc": None, "bytes": None, "note": "not available: occtool.fuse has no load_map"}
     if not path.is_file():
         return {**row, "auc": None, "bytes": None, "note": "not available: occtool map wrote no world.occmap"}
