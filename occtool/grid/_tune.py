@@ -25,9 +25,10 @@ FloatArray = NDArray[np.float64]
 #: Candidate settings: the issue's 0.85 / -0.4 / [-2, 3.5] and a few around it.
 RESOLUTIONS = (0.05, 0.1)
 #: On Intel's training scans the inner AUC peaks on a flat ridge near l_occ / -l_free = 30-40
-#: (l_occ 0.85-1.5 with l_free -0.02 to -0.05), inside these lists.
+#: (l_occ 0.85-1.5 with l_free -0.02 to -0.05); FR-079's at the weakest l_free tried first
+#: (-0.02), so -0.01 was added.
 L_OCC = (0.85, 1.5, 2.5)
-L_FREE = (-0.4, -0.2, -0.1, -0.05, -0.02)
+L_FREE = (-0.4, -0.2, -0.1, -0.05, -0.02, -0.01)
 CLAMPS = ((-2.0, 3.5), (-1.0, 3.5), (-2.0, 6.0))
 #: Free test points per inner held-out beam, and where they stop before its end (metres).
 FREE_POINTS_PER_BEAM = 5
