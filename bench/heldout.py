@@ -451,8 +451,10 @@ def textbook_rows(train: Scans, xy: FloatArray, n_occupied: int, seed: int) -> l
         used = np.flatnonzero(pos + neg)
         tried = []
         for l_occ, l_free, clamp in itertools.product(L_OCC, L_FREE, CLAMPS):
-            log_odds = np.append(inner_updates.log_odds(l_occ, l_free, clamp).ravel(), 0.0)
-            tried.append((grouped_auc(log_odds[used], pos[used], neg[used]), l_occ, l_free, clamp))
+            log_odds = np.append(inner_updates.log_odds(l_occ, l_free, clamp).ravel(), 0.0)[used]
+            # Ranked as probabilities, as the points are: a residual log-odds of 1e-17 is 0.5.
+            p = 1.0 / (1.0 + np.exp(-log_odds))
+            tried.append((grouped_auc(p, pos[used], neg[used]), l_occ, l_free, clamp))
         best = max(tried, key=lambda row: row[0])  # the first listed on a tie
         for label, (l_occ, l_free, clamp), inner_auc in (("issue's setting", ISSUE_SETTING, None),
                                                          ("tuned on the training scans", best[1:], best[0])):

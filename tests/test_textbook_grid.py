@@ -134,3 +134,15 @@ def test_textbook_scores_hand_the_tuner_the_training_scans_only(monkeypatch):
     assert len(seen) == 1 and seen[0].n_scans == 12
     np.testing.assert_allclose(seen[0].end, room.end)
     assert set(auc) == {"textbook_0.1m", "textbook_fixed_0.1m"} and settings["textbook_0.1m"]["bytes"] > 40 * 30
+
+
+def test_the_tuners_grouped_auc_is_the_points_auc():
+    from occtool.compare import roc_auc
+    from occtool.grid._tune import _grouped_auc
+
+    rng = np.random.default_rng(4)
+    occupied, free = rng.integers(0, 6, 300), rng.integers(0, 6, 500)
+    values = np.linspace(0.1, 0.9, 6)
+    grouped = _grouped_auc(values, np.bincount(occupied, minlength=6).astype(float),
+                           np.bincount(free, minlength=6).astype(float))
+    assert grouped == pytest.approx(roc_auc(values[occupied], values[free]))

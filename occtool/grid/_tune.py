@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
+from occtool.grid._logodds import probability
 from occtool.grid._textbook import TEXTBOOK_DEFAULTS, ScanUpdates, TextbookGrid, TextbookParams, WorldBeams
 
 FloatArray = NDArray[np.float64]
@@ -71,6 +72,27 @@ def beam_test_points(beams: WorldBeams, seed: int = 0, per_beam: int = FREE_POIN
     return end, free
 
 
+def _grouped_auc(values: NDArray[np.floating[Any]], occupied: FloatArray, free: FloatArray) -> float:
+    """ROC AUC of points grouped by score: ``occupied[g]`` and ``free[g]`` points score
+    ``values[g]`` (ties half: the figure :func:`occtool.compare.roc_auc` gives the points)."""
+    distinct, inverse = np.unique(values, return_inverse=True)
+    pos = np.bincount(inverse, weights=occupied, minlength=distinct.size)
+    neg = np.bincount(inverse, weights=free, minlength=distinct.size)
+    if pos.sum() == 0 or neg.sum() == 0:
+        return float("nan")
+    below = np.cumsum(neg) - neg
+    return float(np.sum(pos * (below + 0.5 * neg)) / (pos.sum() * neg.sum()))
+
+
+def _cell_counts(updates: ScanUpdates, points: FloatArray) -> FloatArray:
+    """How many of ``points`` fall in each cell of ``updates``' grid, one slot more for outside."""
+    index = np.floor(points / updates.resolution).astype(np.int64) - updates.lower
+    inside = np.all((index >= 0) & (index < np.array(updates.shape)), axis=1)
+    cells = updates.shape[0] * updates.shape[1]
+    flat = np.where(inside, index[:, 0] * updates.shape[1] + index[:, 1], cells)
+    return np.bincount(flat, minlength=cells + 1).astype(np.float64)
+
+
 def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
                   l_occ: tuple[float, ...] = L_OCC, l_free: tuple[float, ...] = L_FREE,
                   clamps: tuple[tuple[float, float], ...] = CLAMPS, holdout: float = 0.1, block: int = 40,
@@ -93,7 +115,6 @@ def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESO
         Per resolution, a :class:`TunedGrid` rebuilt from all of ``training`` with the
         setting that scored best on the inner held-out scans (the first listed on a tie).
     """
-    from occtool.compare import roc_auc
     from occtool.log_score import holdout_blocks
 
     if not (resolutions and l_occ and l_free and clamps):
@@ -116,13 +137,17 @@ def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESO
         # The inner training scans' updates are theirs among all training scans' (same cells).
         updates = everything.of_scans(~inner_held)
         occupied, free = beam_test_points(training.of_scans(inner_held), seed=seed)
-        points = np.concatenate([occupied, free])
+        # The inner test points counted per cell (outside the box: one more cell, log-odds 0),
+        # so that a candidate ranks the cells, not every point (the same AUC).
+        pos, neg = _cell_counts(updates, occupied), _cell_counts(updates, free)
+        used = np.flatnonzero(pos + neg)
         candidates = []
         best: tuple[float, TextbookParams] | None = None
         for occ, fre, clamp in itertools.product(l_occ, l_free, clamps):
             params = TextbookParams(resolution, occ, fre, clamp)
-            p = updates.grid(params).occupancy(points)
-            auc = roc_auc(p[:len(occupied)], p[len(occupied):])
+            log_odds = np.append(updates.grid(params).log_odds.ravel(), np.float32(0.0))[used]
+            # Ranked as probabilities, as the points are: a residual log-odds of 1e-17 is 0.5.
+            auc = _grouped_auc(probability(log_odds), pos[used], neg[used])
             candidates.append({**params.as_dict(), "inner_auc": auc})
             if best is None or auc > best[0]:
                 best = (auc, params)
