@@ -101,6 +101,16 @@ def _octomap(row: dict[str, Any]) -> str:
     return f"{row['auc']['octomap']:.3f} / {row['octomap_bytes'] / 1e6:.2f} MB / {row['octomap_s']:.0f} s"
 
 
+def _textbook(row: dict[str, Any]) -> str:
+    auc = row["auc"]
+    return " / ".join(f"{auc[f'textbook_{r}m']:.3f} ({auc[f'textbook_fixed_{r}m']:.3f})" for r in ("0.05", "0.1"))
+
+
+def _textbook_bytes(row: dict[str, Any]) -> str:
+    settings = row["textbook"]
+    return " / ".join(f"{settings[f'textbook_{r}m']['bytes'] / 1e6:.2f} MB" for r in ("0.05", "0.1"))
+
+
 def _per_beam(nav2: dict[str, float]) -> str:
     return f"{nav2['returns_on_occupied']:.1%} / {nav2['beams_clear']:.1%} / {nav2['scans_both_95']:.1%}"
 
@@ -136,8 +146,11 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
          f"occupied, 5 points drawn uniformly along its beam up to 0.1 m before the end free. Fused: the local "
          f"models of the training keyframes (a position is fitted when 5 % of the 0.2 m cells its returns hit "
          f"are new; laser 0.3 m above the floor, robot 0.5 m tall), combined as named (log-odds: the default). "
-         f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping) from the same training scans, at "
-         f"{resolution:g} m and coarser. OctoMap: the same training scans inserted from each scan's pose "
+         f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping, every beam's update summed, clamped once) "
+         f"from the same training scans, at {resolution:g} m and coarser. Textbook grid: each cell updated once a "
+         f"scan (l_occ at a return, l_free where a beam crosses), clamped after every scan, its l_occ, l_free and "
+         f"clamp picked per resolution on an inner split of the training scans (occtool.grid.tune_textbook), and "
+         f"in brackets the issue's l_occ 0.85, l_free -0.4, clamp [-2, 3.5]. OctoMap: the same training scans inserted from each scan's pose "
          f"(pyoctomap, {resolution:g} m, OctoMap's defaults; memory as its memoryUsage()). Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
          f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "
          f"Nav2 reads a map, for reference. Per beam: a return agrees on an occupied cell or a neighbour, a beam "
@@ -147,10 +160,12 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
         "",
         "| log | held out | fused AUC log-odds / DS / mean | grid AUC " + " / ".join(
             n.replace("grid_", "").replace("grid", f"{resolution:g}m") for n in grid_names)
+        + " | textbook grid AUC 0.05 / 0.1 m, tuned on the training scans (the issue's setting) | textbook bytes "
+          "0.05 / 0.1 m (a byte a cell)"
         + f" | OctoMap AUC / memory / build ({resolution:g} m) | test points covered | fused map | grid | fit / raster / grid build | per beam: returns on occupied "
           "(+neighbour) / beams clear to 0.1 m / scans with both >= 95 % | per cell: end-point cells on occupied / "
           "traversed cells clear / scans with both >= 95 % | grid's per beam | grid's per cell |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         auc = row["auc"]
@@ -159,7 +174,7 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
             f"| {row['log']} | {row['held_out_scans']} of {row['scans']} | "
             f"{auc['fused_log_odds']:.3f} / {auc['fused_dempster_shafer']:.3f} / {auc['fused_mean']:.3f} | "
             + " / ".join(f"{auc[n]:.3f}" for n in grid_names)
-            + f" | {_octomap(row)} | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
+            + f" | {_textbook(row)} | {_textbook_bytes(row)} | {_octomap(row)} | {row['coverage']:.1%} | {row['fused_bytes'] / 1e6:.2f} MB ({row['fused_positions']} of "
             f"{row['training_positions']} positions) | {row['grid_bytes'] / 1e6:.2f} MB | "
             f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
             f"{_per_beam(nav2)} | {_per_cell(nav2)} | {_per_beam(grid2)} | {_per_cell(grid2)} |"

@@ -50,6 +50,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from cold_start import cold_start_section, cold_start_targets  # noqa: E402
 from depth import depth_section  # noqa: E402
 from fleet import fleet_section  # noqa: E402
+from heldout import heldout_section  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
@@ -606,6 +607,8 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines.append("")
     if results.get("log_map_markdown"):
         lines += [results["log_map_markdown"], ""]
+    if results.get("heldout_markdown"):
+        lines += [results["heldout_markdown"], ""]
     if results.get("cold_start_markdown"):
         lines += ["## A fresh process: one fit of 10k features", "", results["cold_start_markdown"], ""]
     if results.get("unseen_rooms_markdown"):
@@ -850,6 +853,7 @@ def main(argv: list[str] | None = None) -> int:
         results["large"] = large_section()
     if data.is_dir() and not args.quick:
         results["log_map_markdown"], results["log_map"] = log_map_section(data)
+        results["heldout_markdown"], results["heldout"] = heldout_section(data)
         results["fleet_markdown"], results["fleet"] = fleet_section(data)
         results["registration_markdown"], results["registration"] = registration_section(data)  # issue 22
     # Issue 23: depth cameras (the scenes rendered as depth images; about 75 s).

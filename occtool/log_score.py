@@ -8,6 +8,11 @@ traversal of :mod:`occtool.grid`) and scores both on the held-out beams: each be
 point is occupied; points drawn uniformly along the beam up to 0.1 m before its end are
 free. ROC AUC (:func:`occtool.compare.roc_auc`) with model bytes and build times.
 
+Beside that grid, the textbook one (:func:`occtool.grid.textbook_grid`: each cell updated
+once a scan, ``l_occ`` at the return, ``l_free`` before it, clamped after every scan) at
+0.05 and 0.1 m, its settings tuned on an inner split of the training scans alone
+(:func:`occtool.grid.tune_textbook`), and with the issue's fixed ones (:func:`textbook_scores`).
+
 :func:`nav2_agreement` checks a rasterised map against scans: each return should fall
 on an occupied cell or one of its eight neighbours, and the cells along each beam up to
 0.1 m before its end should not be occupied.
@@ -275,6 +280,12 @@ class LogScore:
     octomap_bytes: int | None = None
     octomap_s: float | None = None
     octomap_note: str = ""
+    #: The textbook grids (``auc["textbook_0.05m"]`` tuned, ``auc["textbook_fixed_0.05m"]`` the
+    #: issue's setting...): per name the chosen setting, its inner AUC, bytes at one byte a
+    #: cell over the training box, and the candidates tried (:func:`textbook_scores`).
+    textbook: dict[str, Any] | None = None
+    #: Seconds to tune and build the textbook grids.
+    textbook_s: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         from dataclasses import asdict
@@ -310,6 +321,10 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         (:func:`occtool.octomap.build_world_octomap`) and score it as ``auc["octomap"]``.
         Without ``pyoctomap`` (the ``octomap`` extra) the score says so in
         :attr:`LogScore.octomap_note` and has no OctoMap figures.
+
+    The textbook grids at 0.05 and 0.1 m are always scored (:func:`textbook_scores`): tuned on
+    an inner split of the training scans with the same ``holdout``, ``block`` and ``seed``,
+    and with the issue's fixed setting; :attr:`LogScore.textbook` holds their settings.
     """
     from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
@@ -352,6 +367,10 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         other = world_grid(train, size)
         other_p = other.occupancy(np.column_stack([points[:, :2], np.full(len(points), 0.5 * size)]))
         auc[f"grid_{size:g}m"] = roc_auc(other_p[:len(occupied)], other_p[len(occupied):])
+    started = time.perf_counter()
+    textbook_auc, textbook = textbook_scores(train, points, len(occupied), holdout=holdout, block=block, seed=seed)
+    textbook_s = time.perf_counter() - started
+    auc.update(textbook_auc)
     octomap_figures: dict[str, Any] = (_octomap_scores(train, points, len(occupied), resolution) if octomap
                                        else {"octomap_note": "not asked for"})
     octomap_auc: dict[str, float] = octomap_figures.pop("auc", {})
@@ -365,8 +384,44 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         occupied_points=len(occupied), free_points=len(free), auc=auc, coverage=float(observed.mean()),
         fused_bytes=fused.nbytes, grid_bytes=int(grid.nbytes), fit_s=report.fit_seconds, raster_s=raster_s,
         grid_s=grid_s, nav2=nav2_agreement(raster, train), nav2_grid=nav2_agreement(grid_raster(grid), train),
-        **octomap_figures,
+        textbook=textbook, textbook_s=textbook_s, **octomap_figures,
     )
+
+
+def _beams(scans: list[Position]) -> Any:
+    """The scans' beams in the world plane (:class:`occtool.grid.WorldBeams`)."""
+    from occtool.grid import WorldBeams
+
+    starts, ends, returns, owner = _world_rays(scans)
+    return WorldBeams(starts[:, :2], ends[:, :2], returns, owner)
+
+
+def textbook_scores(train: list[Position], points: FloatArray, n_occupied: int, *, holdout: float = HOLDOUT,
+                    block: int = BLOCK, seed: int = 0,
+                    resolutions: tuple[float, ...] = (0.05, 0.1)) -> tuple[dict[str, float], dict[str, Any]]:
+    """AUC of the textbook grids of ``train`` on the test ``points`` (the first ``n_occupied`` occupied).
+
+    The settings are tuned by :func:`occtool.grid.tune_textbook` on ``train`` alone (an inner
+    split ``holdout`` / ``block`` / ``seed`` of those scans); ``points`` are read only by
+    the grids it returns. Returns ``auc`` (``textbook_0.05m``: tuned, ``textbook_fixed_0.05m``:
+    l_occ 0.85, l_free -0.4, clamp [-2, 3.5]; and so on per resolution) and per name the
+    setting, inner AUC and bytes at one byte a cell.
+    """
+    from occtool.compare import roc_auc
+    from occtool.grid import TEXTBOOK_DEFAULTS, tune_textbook
+
+    tuned = tune_textbook(_beams(train), resolutions=resolutions, holdout=holdout, block=block, seed=seed)
+    auc: dict[str, float] = {}
+    settings: dict[str, Any] = {}
+    for resolution, result in tuned.items():
+        for name, grid in ((f"textbook_{resolution:g}m", result.grid),
+                           (f"textbook_fixed_{resolution:g}m", result.default_grid)):
+            p = grid.occupancy(points)
+            auc[name] = roc_auc(p[:n_occupied], p[n_occupied:])
+        settings[f"textbook_{resolution:g}m"] = result.as_dict()
+        settings[f"textbook_fixed_{resolution:g}m"] = {**TEXTBOOK_DEFAULTS.as_dict(), "resolution": resolution,
+                                                        "bytes": result.default_grid.byte_size}
+    return auc, settings
 
 
 def _octomap_scores(train: list[Position], points: FloatArray, n_occupied: int, resolution: float) -> dict[str, Any]:
@@ -393,4 +448,4 @@ def _octomap_scores(train: list[Position], points: FloatArray, n_occupied: int, 
 
 
 __all__ = ["LogScore", "evaluate_log", "grid_raster", "holdout_blocks", "holdout_test_points", "nav2_agreement",
-           "world_grid"]
+           "textbook_scores", "world_grid"]

@@ -147,7 +147,8 @@ def test_evaluate_log_prints_the_figures(mapped):
     result = run("evaluate-log", log, "--block", "5", "--holdout", "0.2", "--json", *LASER)
     assert result.exit_code == 0, result.output
     figures = json.loads(result.output)
-    expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid"}
+    expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid", "textbook_0.05m", "textbook_0.1m",
+                "textbook_fixed_0.05m", "textbook_fixed_0.1m"}
     from occtool.octomap import octomap_available
 
     if octomap_available():
@@ -156,6 +157,7 @@ def test_evaluate_log_prints_the_figures(mapped):
         assert figures["auc"]["octomap"] > 0.5
     assert set(figures["auc"]) == expected
     assert figures["auc"]["fused_log_odds"] > 0.9
+    assert figures["auc"]["textbook_0.05m"] > 0.5 and figures["textbook"]["textbook_0.1m"]["bytes"] > 0
     assert 0 < figures["fused_positions"] <= figures["training_positions"]
     assert 0 <= figures["nav2"]["scans_cells_both_95"] <= 1
 

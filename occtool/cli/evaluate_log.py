@@ -28,7 +28,9 @@ from occtool.cli.options import config_option, fit_options, log_options, seed_op
 def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, keyframe_share: float | None,
                  as_json: bool, seed: int, **kwargs: Any) -> None:
     """Hold out --holdout of LOG's scans in blocks of --block consecutive scans, fuse the
-    local models of the rest, build a dense 2D log-odds grid and an OctoMap (when
+    local models of the rest, build a dense 2D log-odds grid (OctoMap's parameters), the
+    textbook log-odds grid at 0.05 and 0.1 m (tuned on an inner split of the training
+    scans, and with l_occ 0.85, l_free -0.4, clamp [-2, 3.5]) and an OctoMap (when
     pyoctomap is installed) from the same scans, and score them on the held-out beams (end
     points occupied, points along each beam up to 0.1 m before its end free): ROC AUC,
     model bytes, build times, and how well the fused map's raster agrees with its
@@ -58,6 +60,12 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
                f"fit {result['fit_s']:.1f} s, raster {result['raster_s']:.1f} s); "
                f"grid {result['grid_bytes'] / 1e6:.2f} MB (built in {result['grid_s']:.1f} s); "
                f"test points the fused map covers: {result['coverage']:.1%}")
+    for name, figures in (result["textbook"] or {}).items():
+        how = ("tuned on an inner split of the training scans" + (f", {figures['note']}" if figures.get("note") else "")
+               if "inner_auc" in figures else "the issue's fixed setting")
+        click.echo(f"  {name}: l_occ {figures['l_occ']:g}, l_free {figures['l_free']:g}, clamp "
+                   f"[{figures['clamp'][0]:g}, {figures['clamp'][1]:g}] ({how}); "
+                   f"{figures['bytes'] / 1e6:.2f} MB at a byte a cell")
     if result["octomap_bytes"] is not None:
         click.echo(f"  OctoMap {result['octomap_bytes'] / 1e6:.2f} MB at {resolution:g} m "
                    f"(built in {result['octomap_s']:.1f} s)")

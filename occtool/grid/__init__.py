@@ -44,6 +44,8 @@ The parts, one concept a module (private; everything public is imported from her
 ``_grid``       :class:`OccupancyGrid`: occupancy at points, ``inverse_range`` along rays
 ``_unknown``    unobserved space: :data:`UNKNOWN_SPACE`, observed bands and columns
 ``_build``      :func:`build_grid`: samples per crossed cell, the footprint prior
+``_textbook``   :func:`textbook_grid`: the textbook 2D log-odds grid of world-frame beams
+``_tune``       :func:`tune_textbook`: its settings picked on an inner split of training scans
 ==============  =========================================================================
 """
 
@@ -57,7 +59,16 @@ from occtool.grid._build import (
 )
 from occtool.grid._grid import OccupancyGrid
 from occtool.grid._logodds import OCTOMAP_DEFAULTS, LogOddsParams, logit, probability
+from occtool.grid._textbook import (
+    TEXTBOOK_DEFAULTS,
+    ScanUpdates,
+    TextbookGrid,
+    TextbookParams,
+    WorldBeams,
+    textbook_grid,
+)
 from occtool.grid._traverse import RaySegments, traverse
+from occtool.grid._tune import TunedGrid, beam_test_points, tune_textbook
 from occtool.grid._unknown import (
     UNKNOWN_SPACE,
     band_layers,
@@ -69,11 +80,18 @@ from occtool.grid._unknown import (
 __all__ = [
     "MAX_GRID_BYTES",
     "OCTOMAP_DEFAULTS",
+    "TEXTBOOK_DEFAULTS",
     "UNKNOWN_SPACE",
     "LogOddsParams",
     "OccupancyGrid",
     "RaySegments",
+    "ScanUpdates",
+    "TextbookGrid",
+    "TextbookParams",
+    "TunedGrid",
+    "WorldBeams",
     "band_layers",
+    "beam_test_points",
     "build_grid",
     "check_unknown",
     "first_unobserved",
@@ -84,5 +102,7 @@ __all__ = [
     "observation_log_odds",
     "probability",
     "ray_plan",
+    "textbook_grid",
     "traverse",
+    "tune_textbook",
 ]

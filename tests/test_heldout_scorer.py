@@ -1,0 +1,109 @@
+"""bench/heldout.py, the independent scorer: its AUC, its Nav2 reader, its CARMEN parser and split."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+
+import heldout  # noqa: E402
+
+from occtool.errors import InputError  # noqa: E402
+
+
+def test_auc_known_answers():
+    # Occupied 0.9, 0.5; free 0.5, 0.1, 0.3: pairs won 3 + (0.5 tie + 2) = 5.5 of 6.
+    assert heldout.auc(np.array([0.9, 0.5]), np.array([0.5, 0.1, 0.3])) == pytest.approx(5.5 / 6)
+    assert heldout.auc(np.ones(3), np.ones(4)) == pytest.approx(0.5)
+    assert heldout.auc(np.array([2.0, 3.0]), np.array([0.0, 1.0])) == 1.0
+    assert heldout.auc(np.array([0.0]), np.array([1.0, 2.0])) == 0.0
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, 5, 200).astype(float), rng.integers(0, 5, 300).astype(float)
+    brute = np.mean((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :]))
+    assert heldout.auc(a, b) == pytest.approx(brute)
+    # Grouped by score (the tuner's shortcut): the same figure.
+    values = np.arange(5.0)
+    grouped = heldout.grouped_auc(values, np.bincount(a.astype(int), minlength=5).astype(float),
+                                  np.bincount(b.astype(int), minlength=5).astype(float))
+    assert grouped == pytest.approx(brute)
+
+
+def test_nav2_reader_against_occtools_writer(tmp_path):
+    from occtool.io.nav2 import write_nav2
+
+    # Row 0 is the bottom (y = origin y): occupied at (col 1, row 0), unknown along the top row.
+    pixels = np.full((3, 4), 254, dtype=np.uint8)
+    pixels[0, 1] = 0
+    pixels[2, :] = 205
+    write_nav2(pixels, 0.5, (-1.0, 2.0), tmp_path / "map.yaml")
+    loaded = heldout.read_nav2(tmp_path / "map.yaml")
+    assert loaded.resolution == 0.5 and loaded.origin == (-1.0, 2.0, 0.0)
+    expected = np.where(pixels == 0, 1.0, np.where(pixels == 254, 0.0, 0.5))
+    np.testing.assert_array_equal(loaded.value, expected)
+    # World points: the occupied cell spans x -0.5..0, y 2..2.5; off the map reads unknown.
+    points = np.array([[-0.25, 2.25], [-0.75, 2.25], [0.2, 3.2], [5.0, 5.0]])
+    np.testing.assert_array_equal(loaded.lookup(points), [1.0, 0.0, 0.5, 0.5])
+
+
+def test_nav2_reader_follows_negate_and_thresholds(tmp_path):
+    (tmp_path / "m.pgm").write_bytes(b"P5\n# c\n3 1\n255\n" + bytes([0, 128, 255]))
+    (tmp_path / "m.yaml").write_text("image: m.pgm\nresolution: 1\norigin: [0, 0, 0]\nnegate: 1\n"
+                                     "occupied_thresh: 0.65\nfree_thresh: 0.196\nmode: trinary\n")
+    # negate: p = v / 255: 0 free, 128 (0.50) unknown, 255 occupied.
+    np.testing.assert_array_equal(heldout.read_nav2(tmp_path / "m.yaml").value, [[0.0, 0.5, 1.0]])
+    (tmp_path / "bad.yaml").write_text("image: m.pgm\n")
+    with pytest.raises(InputError):
+        heldout.read_nav2(tmp_path / "bad.yaml")
+
+
+def test_carmen_parser_split_and_test_points(tmp_path):
+    path = tmp_path / "tiny.log"
+    ranges = ["2.05"] * 179 + ["81.83"]
+    lines = ["# comment", "ODOM 0 0 0 0 0 0 1 host 1"]
+    for k in range(100):
+        lines.append("FLASER 180 " + " ".join(ranges if k % 10 else ["81.83"] * 180)
+                     + f" {k * 0.1} 1.0 0.0 0 0 0 {k} host {k}")
+    path.write_text("\n".join(lines) + "\n")
+    scans = heldout.parse_carmen(path)
+    assert len(scans) == 100 and scans.lines[1].startswith("FLASER 180 2.05")
+    # Beam 0 points right (-90 degrees), beam 90 forward; 81.83 repeats: no return.
+    assert scans.angles[0, 0] == pytest.approx(-np.pi / 2) and scans.angles[0, 90] == pytest.approx(0.0)
+    assert scans.no_return[1, 179] and not scans.no_return[1, 0] and scans.no_return[0].all()
+    assert heldout.held_out(100, seed=0).sum() in (20, 40)  # one block of the three
+    held = heldout.held_out(910, seed=3)
+    assert held.sum() == 80 and (heldout.held_out(910, seed=3) == held).all()
+    # Written apart from occtool's, it picks the same blocks as evaluate-log does.
+    from occtool.log_score import holdout_blocks
+
+    assert (holdout_blocks(910, 0.1, 40, seed=3) == held).all()
+    starts = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int)])) == 1)
+    assert all(s % 40 == 0 for s in starts)
+    occupied, free = heldout.test_points(scans.take(np.arange(100) == 1))
+    # One scan, 179 returns 2.05 m out: free points at 0.1 ... 1.9 m (19 a beam).
+    assert occupied.shape == (179, 2) and free.shape == (179 * 19, 2)
+    forward = free[np.abs(free[:, 1] - 1.0) < 1e-9]
+    np.testing.assert_allclose(np.sort(forward[:, 0]) - 0.1, np.arange(1, 20) * 0.1, atol=1e-9)
+    with pytest.raises(InputError):
+        heldout.held_out(30, seed=0)
+    (tmp_path / "bad.log").write_text("FLASER 180 1 2 3\n")
+    with pytest.raises(InputError):
+        heldout.parse_carmen(tmp_path / "bad.log")
+
+
+def test_textbook_grid_of_one_beam():
+    # One beam from (0.5, 0.5) to (3.5, 0.5) at 1 m: cells 0-2 free, 3 occupied.
+    start, end = np.array([[0.5, 0.5]]), np.array([[3.5, 0.5]])
+    box = (np.array([0.5, 0.5]), np.array([3.5, 0.5]))
+    updates = heldout.scan_updates(start, end, np.array([True]), np.array([0]), 1, 1.0, box)
+    np.testing.assert_allclose(updates.log_odds(0.85, -0.4, (-2.0, 3.5))[:, 0], [-0.4, -0.4, -0.4, 0.85])
+
+
+def test_fused_row_says_not_available_without_the_map(tmp_path):
+    # Either occtool.fuse has no load_map yet or the folder holds no world.occmap: a row, not an error.
+    row = heldout.fused_row(tmp_path, np.zeros((3, 2)), 1)
+    assert row["auc"] is None and row["note"].startswith("not available")
+    assert heldout.nav2_row(tmp_path, np.zeros((3, 2)), 1)["note"].startswith("not available")
