@@ -286,6 +286,14 @@ class LogScore:
     textbook: dict[str, Any] | None = None
     #: Seconds to tune and build the textbook grids.
     textbook_s: float | None = None
+    #: The world map (``auc["world"]``, :func:`occtool.fuse.build_world_map`): what
+    #: ``world.occmap`` holds, in bytes, and its wall segments.
+    world_bytes: int | None = None
+    world_segments: int | None = None
+    #: Where the test points fall on the Nav2 map (``auc["nav2_map"]``, the world map's
+    #: raster read occupied 1, free 0, unknown 0.5): shares of the held-out returns on
+    #: occupied, free and unknown cells, and of the free points on occupied and unknown ones.
+    nav2_hits: dict[str, float] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         from dataclasses import asdict
@@ -375,17 +383,43 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
                                        else {"octomap_note": "not asked for"})
     octomap_auc: dict[str, float] = octomap_figures.pop("auc", {})
     auc.update(octomap_auc)
+    from occtool.fuse import build_world_map
+
     started = time.perf_counter()
-    raster = fused.rasterise(resolution)
+    world = build_world_map(fused)
+    world_p = world.predict(points)
+    auc["world"] = roc_auc(world_p[:len(occupied)], world_p[len(occupied):])
+    raster = world.rasterise(resolution)
     raster_s = time.perf_counter() - started
+    nav2_p, nav2_hits = _trinary(raster, points, len(occupied))
+    auc["nav2_map"] = roc_auc(nav2_p[:len(occupied)], nav2_p[len(occupied):])
     return LogScore(
         source=str(path), scans=len(scans), held_out_scans=int(held.sum()),
         training_positions=len(fused) + len(report.not_keyframes) + len(report.skipped), fused_positions=len(fused),
         occupied_points=len(occupied), free_points=len(free), auc=auc, coverage=float(observed.mean()),
         fused_bytes=fused.nbytes, grid_bytes=int(grid.nbytes), fit_s=report.fit_seconds, raster_s=raster_s,
         grid_s=grid_s, nav2=nav2_agreement(raster, train), nav2_grid=nav2_agreement(grid_raster(grid), train),
-        textbook=textbook, textbook_s=textbook_s, **octomap_figures,
+        textbook=textbook, textbook_s=textbook_s, world_bytes=world.nbytes, world_segments=len(world),
+        nav2_hits=nav2_hits, **octomap_figures,
     )
+
+
+def _trinary(raster: Raster, points: FloatArray, n_occupied: int) -> tuple[FloatArray, dict[str, float]]:
+    """A Nav2 raster read as map_server's trinary map at ``points`` (occupied 1, free 0,
+    unknown 0.5, outside unknown) and where the first ``n_occupied`` (returns) and the
+    rest (free points) fall."""
+    from occtool.fuse import FREE, UNKNOWN
+
+    row, col, inside = raster.cell_of(points[:, :2])
+    cells = np.where(inside, raster.cells[row, col], UNKNOWN)
+    p = np.where(cells == OCCUPIED, 1.0, np.where(cells == FREE, 0.0, 0.5))
+    returns, free = cells[:n_occupied], cells[n_occupied:]
+    hits = {"returns_on_occupied": float(np.mean(returns == OCCUPIED)),
+            "returns_on_free": float(np.mean(returns == FREE)),
+            "returns_on_unknown": float(np.mean(returns == UNKNOWN)),
+            "free_on_occupied": float(np.mean(free == OCCUPIED)),
+            "free_on_unknown": float(np.mean(free == UNKNOWN))}
+    return p, hits
 
 
 def _beams(scans: list[Position]) -> Any:

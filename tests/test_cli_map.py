@@ -148,6 +148,7 @@ def test_evaluate_log_prints_the_figures(mapped):
     assert result.exit_code == 0, result.output
     figures = json.loads(result.output)
     expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid", "textbook_0.05m", "textbook_0.1m",
+                "world", "nav2_map",
                 "textbook_fixed_0.05m", "textbook_fixed_0.1m"}
     from occtool.octomap import octomap_available
 

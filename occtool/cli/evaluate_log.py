@@ -60,6 +60,13 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
                f"fit {result['fit_s']:.1f} s, raster {result['raster_s']:.1f} s); "
                f"grid {result['grid_bytes'] / 1e6:.2f} MB (built in {result['grid_s']:.1f} s); "
                f"test points the fused map covers: {result['coverage']:.1%}")
+    if result.get("world_bytes") is not None:
+        hits = result["nav2_hits"]
+        click.echo(f"  world map (world.occmap) {result['world_bytes'] / 1e3:.1f} KB, {result['world_segments']} wall "
+                   f"segments; its Nav2 map: held-out returns on occupied / free / unknown cells "
+                   f"{hits['returns_on_occupied']:.1%} / {hits['returns_on_free']:.1%} / "
+                   f"{hits['returns_on_unknown']:.1%}, "
+                   f"free points on occupied {hits['free_on_occupied']:.1%}, on unknown {hits['free_on_unknown']:.1%}")
     for name, figures in (result["textbook"] or {}).items():
         how = ("tuned on an inner split of the training scans" + (f", {figures['note']}" if figures.get("note") else "")
                if "inner_auc" in figures else "the issue's fixed setting")
