@@ -69,7 +69,8 @@ def whole_log_time(log: str | Path, *, keyframe_shares: tuple[float | None, ...]
             if done.returncode == 0:
                 summary = json.loads((out / "summary.json").read_text())
                 row.update(positions=summary["positions"], not_keyframes=summary.get("not_keyframes", 0),
-                           fit_seconds=summary.get("fit_seconds"), fused_bytes=summary["fused_map_bytes"])
+                           fit_seconds=summary.get("fit_seconds"), fused_bytes=summary["fused_map_bytes"],
+                           world_bytes=summary.get("world_map", {}).get("file_bytes"))
             else:
                 row["error"] = (done.stderr.strip().splitlines() or ["?"])[-1]
             rows.append(row)
@@ -82,16 +83,18 @@ def whole_log_markdown(rows: list[dict[str, Any]]) -> list[str]:
     """The table of :func:`whole_log_time`'s runs."""
     lines = ["", "The whole log through the real command: `occtool map LOG -o DIR --no-mcap " + " ".join(MAP_ARGS)
              + "` (one process, one position after another) under /usr/bin/time -v; CPU is user + system.", "",
-             "| log | keyframe share | positions fitted (of all) | wall | CPU | fit alone (wall, summary.json) | peak RSS | fused map |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| log | keyframe share | positions fitted (of all) | wall | CPU | fit alone (wall, summary.json) | peak RSS | "
+             "fused map (in memory) | world.occmap |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
         share = "default (0.05)" if row["keyframe_share"] is None else f"{row['keyframe_share']:g}"
         if row.get("exit_status"):
-            lines.append(f"| {row['log']} | {share} | failed: {row.get('error')} | | | | | |")
+            lines.append(f"| {row['log']} | {share} | failed: {row.get('error')} | | | | | | |")
             continue
         lines.append(f"| {row['log']} | {share} | {row['positions']} ({row['positions'] + row['not_keyframes']}) | "
                      f"{row['wall_s']:.1f} s | {row['cpu_s']:.1f} s | {row['fit_seconds']:.1f} s | "
-                     f"{row['peak_rss_mb']:.0f} MB | {row['fused_bytes'] / 1e6:.2f} MB |")
+                     f"{row['peak_rss_mb']:.0f} MB | {row['fused_bytes'] / 1e6:.2f} MB | "
+                     f"{(row.get('world_bytes') or 0) / 1e3:.1f} KB |")
     return lines
 
 
@@ -118,6 +121,31 @@ def _per_beam(nav2: dict[str, float]) -> str:
 def _per_cell(nav2: dict[str, float]) -> str:
     return (f"{nav2['endpoint_cells_on_occupied']:.1%} / {nav2['traversed_cells_clear']:.1%} / "
             f"{nav2['scans_cells_both_95']:.1%}")
+
+
+def world_map_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    """The world map (``world.occmap``) and its Nav2 raster against the best textbook grid of each log."""
+    lines = ["", "The world map `occtool map` writes (`world.occmap`: walls as min/max pieces over the observed "
+             "region) and its Nav2 raster (read as map_server's trinary map: occupied 1, free 0, unknown 0.5), on "
+             "the same test points, against the best of the tuned textbook grids (issue 20's targets: the world "
+             "map >= the best grid + 0.01 and no bigger than the 0.1 m byte grid; the Nav2 map >= the 0.05 m "
+             "textbook grid).", "",
+             "| log | world map AUC | bytes | best textbook grid AUC | its 0.1 m bytes | world - best | "
+             "Nav2 map AUC | textbook 0.05 m AUC | Nav2: returns on occupied / free / unknown | free points on "
+             "occupied |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        auc, hits, textbook = row["auc"], row.get("nav2_hits") or {}, row.get("textbook") or {}
+        if "world" not in auc:
+            continue
+        best = max(("textbook_0.05m", "textbook_0.1m"), key=lambda n: auc.get(n, -1.0))
+        grid_bytes = textbook.get("textbook_0.1m", {}).get("bytes")
+        lines.append(
+            f"| {row['log']} | {auc['world']:.4f} | {row['world_bytes'] / 1e3:.1f} KB | {auc[best]:.4f} "
+            f"({best.split('_')[1]}) | {grid_bytes / 1e3 if grid_bytes else float('nan'):.1f} KB | "
+            f"{auc['world'] - auc[best]:+.4f} | {auc['nav2_map']:.4f} | {auc['textbook_0.05m']:.4f} | "
+            f"{hits.get('returns_on_occupied', float('nan')):.1%} / {hits.get('returns_on_free', float('nan')):.1%} / "
+            f"{hits.get('returns_on_unknown', float('nan')):.1%} | {hits.get('free_on_occupied', float('nan')):.1%} |")
+    return lines
 
 
 def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LOGS, *, seed: int = 0,
@@ -179,6 +207,7 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
             f"{row['fit_s']:.0f} / {row['raster_s']:.0f} / {row['grid_s']:.0f} s | "
             f"{_per_beam(nav2)} | {_per_cell(nav2)} | {_per_beam(grid2)} | {_per_cell(grid2)} |"
         )
+    lines += world_map_markdown(rows)
     whole: list[dict[str, Any]] = []
     intel = Path(data_dir) / LOGS[0][0] / LOGS[0][1]
     if whole_log and intel.is_file():
