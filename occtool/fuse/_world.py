@@ -365,15 +365,14 @@ def position_ranges(fused: Any) -> FloatArray:
     return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
 
 
-def build_world_map(fused: Any, *, run: RunReturns | None = None, cell: float = CELL,
+def build_world_map(fused: Any, *, cell: float = CELL,
                     max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS, reach: float = WALL_REACH,
                     region_reach: float = REGION_REACH, simplify: float = 0.03, **params: Any) -> WorldMap:
     """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
     (:func:`occtool.fuse._occmap.quantise`).
 
-    ``run`` is what the positions saw (default: the positions of ``fused``, a
-    :class:`FusedMap`, :func:`returns_of_fused`). The walls are fitted to the returns no
-    farther than ``reach`` from their position (:func:`occtool.fuse._walls.fit_segments`
+    What ``fused``'s positions saw (a :class:`FusedMap`) is read as :func:`returns_of_fused`.
+    The walls are fitted to the returns no farther than ``reach`` from their position (:func:`occtool.fuse._walls.fit_segments`
     with ``cell``, ``max_thickness`` and ``min_returns``); the beams up to ``region_reach``
     see through them and sweep the observed region, which is
     simplified by ``simplify`` metres (Douglas-Peucker, topology kept). The map speaks for
@@ -388,7 +387,7 @@ def build_world_map(fused: Any, *, run: RunReturns | None = None, cell: float = 
     for name, value in (("reach", reach), ("region_reach", region_reach)):
         if not value > 0:
             raise InputError(f"{name} must be a positive number of metres, got {value}")
-    run = returns_of_fused(fused) if run is None else run
+    run = returns_of_fused(fused)
     points, owner = run.return_points(reach)
     segments: Segments = fit_segments(points, owner, cell=cell, max_thickness=max_thickness, min_returns=min_returns)
     through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)

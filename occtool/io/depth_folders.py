@@ -157,14 +157,20 @@ def _numbers(path: Path) -> FloatArray:
         return np.loadtxt(path, dtype=np.float64, ndmin=2)
 
 
-def _read_k(path: Path) -> FloatArray:
+def _matrix(path: Path, size: int, what: str) -> FloatArray:
+    """The ``size`` x ``size`` matrix of numbers in ``path``; ``what`` names it in the error."""
+    shape = f"{size}x{size}"
     try:
         values = _numbers(path)
     except (ValueError, OSError) as exc:
-        raise InputError(f"{path}: camera intrinsics must be a 3x3 matrix of numbers ({exc})") from None
-    if values.shape != (3, 3):
-        raise InputError(f"{path}: camera intrinsics must be a 3x3 matrix of numbers, got shape {values.shape}")
+        raise InputError(f"{path}: {what} must be a {shape} matrix of numbers ({exc})") from None
+    if values.shape != (size, size):
+        raise InputError(f"{path}: {what} must be a {shape} matrix of numbers, got shape {values.shape}")
     return values
+
+
+def _read_k(path: Path) -> FloatArray:
+    return _matrix(path, 3, "camera intrinsics")
 
 
 def _inside(folder: Path, name: str, where: str) -> Path:
@@ -276,12 +282,7 @@ def _match_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[f
         where = str(pose_file)
         if not pose_file.is_file():
             raise InputError(f"{image}: its pose file {pose_file.name} is missing")
-        try:
-            values = _numbers(pose_file)
-        except (ValueError, OSError) as exc:
-            raise InputError(f"{where}: a pose must be a 4x4 matrix of numbers ({exc})") from None
-        if values.shape != (4, 4):
-            raise InputError(f"{where}: a pose must be a 4x4 matrix of numbers, got shape {values.shape}")
+        values = _matrix(pose_file, 4, "a pose")
         if not np.isfinite(values).all():
             # 7-Scenes and 3DMatch mark a frame whose tracking failed with -inf or NaN poses.
             notes.append(f"{pose_file.name}: the pose is not finite (tracking lost): frame dropped")
