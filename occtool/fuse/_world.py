@@ -372,7 +372,8 @@ def build_world_map(fused: Any, *, cell: float = CELL,
     (:func:`occtool.fuse._occmap.quantise`).
 
     What ``fused``'s positions saw (a :class:`FusedMap`) is read as :func:`returns_of_fused`.
-    The walls are fitted to the returns no farther than ``reach`` from their position (:func:`occtool.fuse._walls.fit_segments`
+    The walls are fitted to the returns no farther than ``reach`` from their position
+    (:func:`occtool.fuse._walls.fit_segments`
     with ``cell``, ``max_thickness`` and ``min_returns``); the beams up to ``region_reach``
     see through them and sweep the observed region, which is
     simplified by ``simplify`` metres (Douglas-Peucker, topology kept). The map speaks for
