@@ -386,7 +386,7 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     from occtool.fuse import build_world_map
 
     started = time.perf_counter()
-    world = build_world_map(fused)
+    world = build_world_map(fused, sightings=report.sightings)
     world_p = world.predict(points)
     auc["world"] = roc_auc(world_p[:len(occupied)], world_p[len(occupied):])
     raster = world.rasterise(resolution)

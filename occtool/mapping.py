@@ -102,15 +102,17 @@ def _frontiers(raster: Raster, placed: list[PlacedMap], lookahead: float) -> Flo
     walk = pts[:, None, :] + steps[None, :, None] * direction[:, None, :]
     row, col, inside = raster.cell_of(walk.reshape(-1, 2))
     cells = np.where(inside, raster.cells[row, col], UNKNOWN).reshape(len(pts), len(steps))
+    # Off the raster is unexplored; an unknown cell the run observed (a wall's uncertain edge) is not.
+    unexplored = np.where(inside, raster.unexplored(row, col), True).reshape(len(pts), len(steps))
     not_free = cells != FREE
     first = np.argmax(not_free, axis=1)
     reached = not_free.any(axis=1)
-    return pts[reached & (cells[np.arange(len(pts)), first] == UNKNOWN)]
+    return pts[reached & unexplored[np.arange(len(pts)), first]]
 
 
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
-               lookahead: float = FRONTIER_LOOKAHEAD) -> RunMap:
+               lookahead: float = FRONTIER_LOOKAHEAD, sightings: Any = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -126,6 +128,9 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     navigation
         Keywords of :meth:`occtool.fit.OccupancyRegressor.navigation_map` (``max_range``,
         ``threshold``, ``robot``...).
+    sightings
+        What every position of the run saw (:attr:`occtool.fuse.FuseReport.sightings`), for
+        the world map's walls; ``None``: the fused map's own positions.
     """
     from occtool.navigation import NavigationWarning
 
@@ -135,7 +140,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
 
     seconds = {}
     started = time.perf_counter()
-    world = build_world_map(fused)
+    world = build_world_map(fused, sightings=sightings)
     seconds["world_map"] = time.perf_counter() - started
     started = time.perf_counter()
     raster = world.rasterise(resolution)

@@ -98,8 +98,42 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     assert solid == pytest.approx(1.0) and passing == pytest.approx(0.625)
     raster = world.rasterise(0.05)
     row, col, _ = raster.cell_of([[1.0, 1.0], [3.0, 1.0], [2.0, 1.0], [5.0, 1.0]])
-    # The wall most positions saw through is not drawn for Nav2 (share below 0.5).
-    assert raster.cells[row, col].tolist() == [OCCUPIED, FREE, FREE, UNKNOWN]
+    # The wall most positions saw through is not drawn for Nav2 (share below 0.5), nor
+    # drawn free: it is unknown, and so is the uncertain edge of every wall; the region
+    # between them is free, past it nothing was observed.
+    assert raster.cells[row, col].tolist() == [OCCUPIED, UNKNOWN, FREE, UNKNOWN]
+    assert raster.explored[row, col].tolist() == [True, True, True, False]
+    rim = world.wall_half_width + world.wall_rim
+    edge_row, edge_col, _ = raster.cell_of([[1.0 + 0.5 * (world.wall_half_width + rim), 1.0],
+                                            [1.0 + rim + 0.05, 1.0]])
+    assert raster.cells[edge_row, edge_col].tolist() == [UNKNOWN, FREE]
+
+
+def test_frontiers_ignore_a_walls_uncertain_edge():
+    """An unknown cell the run observed (a wall's edge) is no frontier; one nothing observed is."""
+    from occtool.fuse import Raster
+    from occtool.mapping import PlacedMap, _frontiers
+
+    cells = np.full((1, 40), FREE, dtype=np.uint8)
+    cells[0, 20:23] = UNKNOWN  # a wall's edge, observed
+    cells[0, 23] = OCCUPIED
+    cells[0, 30:] = UNKNOWN  # never observed
+    explored = np.ones((1, 40), dtype=bool)
+    explored[0, 30:] = False
+    raster = Raster(cells, 0.05, (0.0, 0.0), np.zeros((1, 40), dtype=np.float32), np.zeros((1, 40), dtype=bool),
+                    explored=explored)
+
+    class Nav:
+        def __init__(self, points):
+            self.exploration_points = points
+
+    from occtool.features import Pose
+    towards_wall = PlacedMap(0, Pose(x=0.0, y=0.025), None, Nav([[0.9, 0.025]]))
+    towards_unseen = PlacedMap(1, Pose(x=1.2, y=0.025), None, Nav([[1.4, 0.025]]))
+    found = _frontiers(raster, [towards_wall, towards_unseen], lookahead=1.0)
+    assert found.tolist() == [[1.4, 0.025]]
+    raster.explored = None  # without the mask every unknown cell is unexplored
+    assert len(_frontiers(raster, [towards_wall, towards_unseen], lookahead=1.0)) == 2
 
 
 def test_quantised_map_round_trips_bit_for_bit(tmp_path):
@@ -118,6 +152,56 @@ def test_quantised_map_round_trips_bit_for_bit(tmp_path):
     # The header and checksum are all the file adds to what predict needs.
     assert size - world.nbytes < 1000
     assert encode(loaded) == path.read_bytes()
+
+
+def test_segments_keep_their_geometry_in_eight_bytes():
+    """Middle, direction and half-length codes: ends within a few millimetres of the fitted
+    ones, a segment longer than a byte of 2 mm widens the unit instead of being cut."""
+    rng = np.random.default_rng(5)
+    start = rng.uniform(-5, 5, (200, 2))
+    end = start + rng.normal(0, 0.3, (200, 2))
+    end[0] = start[0] + [2.0, 0.5]  # 1.03 m half-length
+    region = shapely.MultiPolygon([shapely.box(-6, -6, 6, 6)])
+    world = WorldMap(start, end, np.zeros(200), np.ones(200), region, band=BAND)
+    coded = quantise(world)
+    assert coded.half_unit > 0.002
+    same = np.minimum(np.hypot(*(coded.start - start).T) + np.hypot(*(coded.end - end).T),
+                      np.hypot(*(coded.start - end).T) + np.hypot(*(coded.end - start).T))
+    assert same.max() < 0.02
+    assert coded.nbytes == 8 * 200 + 5 * 4 + 3 * 2 * 4  # a box: 5 vertices; ring, part, geometry offsets
+    assert np.array_equal(decode(encode(coded)).end, coded.end)
+
+
+def _version_1(world):
+    """``world`` as a version 1 file (both end points in uint16 units)."""
+    import json
+    import struct
+    import zlib
+
+    from occtool.fuse._occmap import MAGIC
+
+    units = lambda xy: np.round((xy - world.origin) / world.unit).astype("<u2")  # noqa: E731
+    arrays = [("segments", np.hstack([units(world.start), units(world.end)])),
+              ("thickness", np.round(world.thickness * 1000).astype(np.uint8)),
+              ("trust", np.round(world.trust * 255).astype(np.uint8))]
+    header = {"format": "occtool.occmap", "version": 1, "unit": world.unit, "origin": list(world.origin),
+              "settings": world.params(), "arrays": [[n, a.dtype.name, list(a.shape)] for n, a in arrays]}
+    text = json.dumps(header).encode()
+    body = MAGIC + struct.pack("<I", len(text)) + text + b"".join(a.tobytes() for _, a in arrays)
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def test_version_1_files_still_load_and_later_ones_are_refused():
+    world = quantise(WorldMap([[0.0, 0.0]], [[1.0, 0.0]], [0.01], [1.0], shapely.MultiPolygon(), band=BAND))
+    old = decode(_version_1(world), "old.occmap")
+    assert np.allclose(old.start, world.start, atol=0.003) and np.allclose(old.end, world.end, atol=0.003)
+    assert old.half_unit is None and decode(encode(old)).half_unit is not None  # rewritten as version 2
+    newer = _version_1(world).replace(b'"version": 1', b'"version": 9')
+    import struct
+    import zlib
+    newer = newer[:-4] + struct.pack("<I", zlib.crc32(newer[:-4]))
+    with pytest.raises(InputError, match="format version 9, this occtool reads 1 and 2"):
+        decode(newer, "new.occmap")
 
 
 @pytest.fixture(scope="module")

@@ -100,6 +100,7 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
         raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
     if is_models:
         fused, models, positions = fuse_model_set(source, combination=combination, threshold=threshold)
+        sightings = None
         logger.info("%d models read from %s", len(models), source)
         extra = {"source": str(source), "fitted_here": False}
     else:
@@ -112,13 +113,14 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
         positions = list(zip(report.fitted, fused.poses, fused.stamps))
+        sightings = report.sightings
         logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,
                     report.fit_seconds, len(report.not_keyframes))
         extra = {"source": str(source), "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
                  "skipped_positions": [index for index, _ in report.skipped],
                  "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
     run = map_of_run(fused, models, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold})
+                     navigation={"max_range": max_range, "threshold": threshold}, sightings=sightings)
     run.trajectory = trajectory(registration)
     if registration is not None:
         extra["registration"] = registration.to_dict()

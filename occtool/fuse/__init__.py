@@ -68,7 +68,7 @@ from occtool.fuse._reach import (
     reach_from_guard,
     returns_from_guard,
 )
-from occtool.fuse._world import WorldMap, build_world_map
+from occtool.fuse._world import RunReturns, WorldMap, build_world_map, returns_of_positions
 from occtool.keyframes import select_keyframes
 
 __all__ = [
@@ -91,6 +91,7 @@ __all__ = [
     "FuseReport",
     "FusedMap",
     "Raster",
+    "RunReturns",
     "WorldMap",
     "build_world_map",
     "fuse_log",
@@ -101,5 +102,6 @@ __all__ = [
     "observed_reach",
     "reach_from_guard",
     "returns_from_guard",
+    "returns_of_positions",
     "select_keyframes",
 ]

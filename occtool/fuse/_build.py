@@ -16,6 +16,7 @@ from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._map import FusedMap
 from occtool.fuse._reach import nearest_returns, observed_reach, reach_from_guard, returns_from_guard
+from occtool.fuse._world import returns_of_positions
 from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.robot import Robot
 
@@ -33,6 +34,9 @@ class FuseReport:
     fitted: list[int] = field(default_factory=list)
     #: Positions left out before fitting because earlier keyframes covered what they saw.
     not_keyframes: list[int] = field(default_factory=list)
+    #: What every position saw, keyframes or not (:func:`occtool.fuse.returns_of_positions`):
+    #: the world map's walls (:func:`occtool.fuse.build_world_map`'s ``sightings``).
+    sightings: Any = None
 
 
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
@@ -70,8 +74,9 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     robot = params.get("robot") or Robot()
     keep = select_keyframes(positions, robot, new_share=keyframe_share)
     not_keyframes = sorted(set(p.index for p in positions) - {positions[k].index for k in keep})
-    positions = [positions[k] for k in keep]
     focus_range = params.get("focus_range", math.inf) if params.get("focus", True) else math.inf
+    sightings = returns_of_positions(positions, robot, focus_range=focus_range, level=params.get("level"))
+    positions = [positions[k] for k in keep]
     started = time.perf_counter()
     models, poses, reaches, returns, return_offsets, stamps, skipped = [], [], [], [], [], [], []
     fitted_positions: list[int] = []
@@ -100,7 +105,7 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
                      threshold=threshold, stamps=stamps, returns=np.stack(returns),
                      return_offsets=np.stack(return_offsets), return_reach=focus_range + robot.radius)
     report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes, fitted_positions,
-                        not_keyframes)
+                        not_keyframes, sightings)
     return fused, models, report
 
 

@@ -9,8 +9,12 @@ Layout (little-endian)::
     ...       the arrays' bytes, back to back
     4 bytes   uint32 CRC-32 of everything before it
 
-Arrays: ``segments`` uint16 ``(S, 4)`` end points in units from ``origin``;
-``thickness`` and ``trust`` uint8 ``(S,)`` (millimetres, 1/255ths); the observed region
+Arrays (version 2): ``middles`` uint16 ``(S, 2)``, each segment's middle in units from
+``origin``; ``directions`` uint8 ``(S,)``, its direction in [0, pi) in steps of pi/256;
+``half_lengths`` uint8 ``(S,)`` in the header's ``half_unit`` (2 mm unless a segment is
+longer than 1.02 m); ``thickness`` and ``trust`` uint8 ``(S,)`` (millimetres,
+1/255ths): 8 bytes a segment, where its two end points took 10 in version 1 (``segments``
+uint16 ``(S, 4)``, still read). The observed region
 as shapely's ragged arrays: ``region_coords`` uint16 ``(V, 2)`` in units and its
 ``region_offsets_*`` uint32. A map is quantised to this precision when it is built
 (:func:`quantise`), so a map read back answers exactly as the one written.
@@ -32,7 +36,13 @@ import numpy as np
 from occtool.errors import InputError
 
 MAGIC = b"\x89OCCMAP\n"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions :func:`decode` reads.
+READS = (1, 2)
+#: A segment's half-length in this unit (metres) unless one is longer than 255 of them.
+HALF_UNIT = 0.002
+#: Direction steps over [0, pi).
+DIRECTION_STEPS = 256
 #: A header longer than this is not an occmap header (bytes).
 MAX_HEADER = 1 << 20
 _DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "uint32": np.uint32}
@@ -48,6 +58,32 @@ def _grid(lower: np.ndarray, upper: np.ndarray, unit: float) -> tuple[np.ndarray
     return origin, unit
 
 
+def _half_unit(half_length: np.ndarray) -> float:
+    """The unit that holds every half-length in a byte: :data:`HALF_UNIT`, widened if need be."""
+    longest = float(half_length.max()) if half_length.size else 0.0
+    return max(HALF_UNIT, math.ceil(longest / 255.0 * 1e4) / 1e4)
+
+
+def _segment_codes(world: Any, origin: np.ndarray, unit: float,
+                   half_unit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each segment's middle (uint16 units), direction and half-length (uint8 codes)."""
+    middle = 0.5 * (world.start + world.end)
+    span = world.end - world.start
+    direction = np.mod(np.arctan2(span[:, 1], span[:, 0]), math.pi)
+    steps = np.mod(np.round(direction / (math.pi / DIRECTION_STEPS)), DIRECTION_STEPS).astype(np.uint8)
+    half = np.clip(np.round(0.5 * np.hypot(span[:, 0], span[:, 1]) / half_unit), 0, 255).astype(np.uint8)
+    return np.clip(np.round((middle - origin) / unit), 0, 65535).astype("<u2"), steps, half
+
+
+def _segment_ends(middles: np.ndarray, steps: np.ndarray, half: np.ndarray, origin: np.ndarray, unit: float,
+                  half_unit: float) -> tuple[np.ndarray, np.ndarray]:
+    """End points of the coded segments (the one formula :func:`quantise` and :func:`decode` share)."""
+    middle = origin + middles.astype(np.float64) * unit
+    angle = steps.astype(np.float64) * (math.pi / DIRECTION_STEPS)
+    reach = (half.astype(np.float64) * half_unit)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+    return middle - reach, middle + reach
+
+
 def quantise(world: Any, unit: float | None = None) -> Any:
     """``world`` with its numbers rounded to what the file stores (a new map; same settings)."""
     import shapely
@@ -61,6 +97,8 @@ def quantise(world: Any, unit: float | None = None) -> Any:
     def snap(xy: np.ndarray) -> np.ndarray:
         return origin + np.clip(np.round((xy - origin) / unit), 0, 65535) * unit
 
+    half_unit = _half_unit(0.5 * np.hypot(*(world.end - world.start).T))
+    start, end = _segment_ends(*_segment_codes(world, origin, unit, half_unit), origin, unit, half_unit)
     thickness = np.clip(np.round(world.thickness * 1000.0), 0, 255) / 1000.0
     trust = np.clip(np.round(world.trust * 255.0), 0, 255) / 255.0
     region = world.region
@@ -68,8 +106,8 @@ def quantise(world: Any, unit: float | None = None) -> Any:
         # On the file's grid and valid there (origin is a whole number of units), then
         # through the loader's own arithmetic, so that a map read back is this one.
         region = _areal(shapely.transform(_areal(shapely.set_precision(region, unit)), snap))
-    quantised = WorldMap(snap(world.start), snap(world.end), thickness, trust, region, **world.params())
-    quantised.unit, quantised.origin = unit, origin
+    quantised = WorldMap(start, end, thickness, trust, region, **world.params())
+    quantised.unit, quantised.origin, quantised.half_unit = unit, origin, half_unit
     return quantised
 
 
@@ -92,14 +130,16 @@ def _arrays(world: Any) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
 
     unit = getattr(world, "unit", None)
     origin = getattr(world, "origin", None)
-    if unit is None or origin is None:
+    half_unit = getattr(world, "half_unit", None)
+    if unit is None or origin is None or half_unit is None:
         world = quantise(world)
-        unit, origin = world.unit, world.origin
+        unit, origin, half_unit = world.unit, world.origin, world.half_unit
 
     def units(xy: np.ndarray) -> np.ndarray:
         return np.clip(np.round((xy - origin) / unit), 0, 65535).astype("<u2")
 
-    arrays = [("segments", np.hstack([units(world.start), units(world.end)]).reshape(-1, 4)),
+    middles, steps, half = _segment_codes(world, origin, unit, half_unit)
+    arrays = [("middles", middles.reshape(-1, 2)), ("directions", steps), ("half_lengths", half),
               ("thickness", np.clip(np.round(world.thickness * 1000.0), 0, 255).astype(np.uint8)),
               ("trust", np.clip(np.round(world.trust * 255.0), 0, 255).astype(np.uint8))]
     region = _areal(world.region) if not world.region.is_empty else shapely.MultiPolygon()
@@ -108,7 +148,7 @@ def _arrays(world: Any) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
         arrays.append(("region_coords", units(coords)))
         for n, offset in enumerate(offsets):
             arrays.append((f"region_offsets_{n}", np.asarray(offset, dtype="<u4")))
-    header = {"format": "occtool.occmap", "version": FORMAT_VERSION, "unit": unit,
+    header = {"format": "occtool.occmap", "version": FORMAT_VERSION, "unit": unit, "half_unit": half_unit,
               "origin": [float(origin[0]), float(origin[1])], "settings": world.params(),
               "arrays": [[name, str(a.dtype.name), list(a.shape)] for name, a in arrays]}
     return header, arrays
@@ -157,17 +197,20 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         raise fail(f"header is not JSON: {exc.msg if hasattr(exc, 'msg') else exc}") from None
     if not isinstance(header, dict) or header.get("format") != "occtool.occmap":
         raise fail("header does not name the occmap format")
-    if header.get("version") != FORMAT_VERSION:
-        raise fail(f"format version {header.get('version')!r}, this occtool reads {FORMAT_VERSION}")
+    version = header.get("version")
+    if version not in READS:
+        raise fail(f"format version {version!r}, this occtool reads {' and '.join(map(str, READS))}")
     try:
         unit = float(header["unit"])
+        half_unit = float(header["half_unit"]) if version >= 2 else None
         origin = np.array(header["origin"], dtype=np.float64).reshape(2)
         settings = dict(header["settings"])
         layout = [(str(n), _DTYPES[str(t)], tuple(int(s) for s in shape)) for n, t, shape in header["arrays"]]
     except (KeyError, TypeError, ValueError) as exc:
         raise fail(f"header field missing or malformed: {exc}") from None
-    if not (math.isfinite(unit) and unit > 0 and np.isfinite(origin).all()):
-        raise fail("unit or origin is not a finite positive number")
+    if not (math.isfinite(unit) and unit > 0 and np.isfinite(origin).all()
+            and (half_unit is None or (math.isfinite(half_unit) and half_unit > 0))):
+        raise fail("unit, half_unit or origin is not a finite positive number")
     offset = start + length
     arrays: dict[str, np.ndarray] = {}
     for array_name, dtype, shape in layout:
@@ -182,7 +225,12 @@ def decode(data: bytes, name: str = "occmap") -> Any:
     if offset != len(data) - 4:
         raise fail(f"{len(data) - 4 - offset} bytes after the last array")
     try:
-        segments = arrays["segments"].reshape(-1, 4).astype(np.float64) * unit
+        if half_unit is None:  # version 1: both end points
+            segments = arrays["segments"].reshape(-1, 4).astype(np.float64) * unit
+            start, end = origin + segments[:, :2], origin + segments[:, 2:]
+        else:
+            start, end = _segment_ends(arrays["middles"].reshape(-1, 2), arrays["directions"].reshape(-1),
+                                       arrays["half_lengths"].reshape(-1), origin, unit, half_unit)
         thickness = arrays["thickness"].astype(np.float64) / 1000.0
         trust = arrays["trust"].astype(np.float64) / 255.0
     except (KeyError, ValueError) as exc:
@@ -197,11 +245,11 @@ def decode(data: bytes, name: str = "occmap") -> Any:
             raise fail(f"observed region is malformed: {exc}") from None
     try:
         band = settings.pop("band")
-        world = WorldMap(origin + segments[:, :2], origin + segments[:, 2:], thickness, trust, region,
+        world = WorldMap(start, end, thickness, trust, region,
                          band=(float(band[0]), float(band[1])), **{k: float(v) for k, v in settings.items()})
     except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
         raise fail(str(exc)) from None
-    world.unit, world.origin = unit, origin
+    world.unit, world.origin, world.half_unit = unit, origin, half_unit
     return world
 
 

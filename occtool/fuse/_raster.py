@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -19,6 +19,8 @@ class Raster:
     row 0 at ``origin[1]`` (the bottom: y grows with the row); cell ``(j, i)`` spans
     ``origin + (i, j) * resolution`` to one resolution more. ``conflict`` marks cells where
     positions contradicted each other; ``probability`` is the fused occupancy (0.5 unknown).
+    ``explored`` (``None``: none) marks cells the run observed: an unknown cell there is
+    uncertain (a wall's edge), not unexplored, and no frontier.
     """
 
     cells: NDArray[np.uint8]
@@ -26,6 +28,12 @@ class Raster:
     origin: tuple[float, float]
     probability: NDArray[np.float32]
     conflict: NDArray[np.bool_]
+    explored: NDArray[np.bool_] | None = field(default=None)
+
+    def unexplored(self, row: NDArray[np.intp], col: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Whether cells ``(row, col)`` are unknown because nothing observed them."""
+        unknown = self.cells[row, col] == UNKNOWN
+        return unknown if self.explored is None else unknown & ~self.explored[row, col]
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -50,6 +50,10 @@ UNKNOWN_LEVEL = 0.5
 THROUGH_MARGIN = 0.1
 #: The Nav2 raster's occupied cells: their centres within this of a trusted wall (metres, past its thickness).
 WALL_HALF_WIDTH = 0.075
+#: The Nav2 raster's observed cells this near any wall (metres, past its thickness) and not
+#: occupied are unknown, not free: a trinary map's middle value for a wall's uncertain edge
+#: and for walls too few positions confirmed (chosen on inner splits, docs/map.md).
+WALL_RIM = 0.125
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
 #: Beams sweep the observed region and see through walls no farther than this from their
@@ -82,14 +86,14 @@ class WorldMap:
         World heights ``(low, high)`` the map speaks for (the robot's body band).
     width, free_level, unknown_level
         See :data:`WIDTH`, :data:`FREE_LEVEL`, :data:`UNKNOWN_LEVEL`.
-    wall_half_width, wall_share
-        The Nav2 raster's walls (:meth:`rasterise`).
+    wall_half_width, wall_share, wall_rim
+        The Nav2 raster's walls and their uncertain edge (:meth:`rasterise`).
     """
 
     def __init__(self, start: ArrayLike, end: ArrayLike, thickness: ArrayLike, trust: ArrayLike, region: Any, *,
                  band: tuple[float, float], width: float = WIDTH, free_level: float = FREE_LEVEL,
                  unknown_level: float = UNKNOWN_LEVEL, wall_half_width: float = WALL_HALF_WIDTH,
-                 wall_share: float = WALL_SHARE) -> None:
+                 wall_share: float = WALL_SHARE, wall_rim: float = WALL_RIM) -> None:
         import shapely
 
         self.start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
@@ -102,6 +106,8 @@ class WorldMap:
         for name, value in (("width", width), ("wall_half_width", wall_half_width)):
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be a positive number of metres, got {value}")
+        if not (math.isfinite(wall_rim) and wall_rim >= 0):
+            raise InputError(f"wall_rim must be a number of metres >= 0, got {wall_rim}")
         for name, value in (("free_level", free_level), ("unknown_level", unknown_level), ("wall_share", wall_share)):
             if not 0.0 <= value <= 1.0:
                 raise InputError(f"{name} must lie in [0, 1], got {value}")
@@ -115,9 +121,12 @@ class WorldMap:
         self.unknown_level = float(unknown_level)
         self.wall_half_width = float(wall_half_width)
         self.wall_share = float(wall_share)
-        #: The file's grid (:func:`occtool.fuse._occmap.quantise` sets them): unit, metres, and origin.
+        self.wall_rim = float(wall_rim)
+        #: The file's grid (:func:`occtool.fuse._occmap.quantise` sets them): unit, metres, and
+        #: origin; the unit of segments' half-lengths (``None`` in a version 1 file).
         self.unit: float | None = None
         self.origin: FloatArray | None = None
+        self.half_unit: float | None = None
         self._index: Any = None
 
     def __len__(self) -> int:
@@ -145,9 +154,9 @@ class WorldMap:
 
     @property
     def nbytes(self) -> int:
-        """Bytes of what :meth:`predict` needs, as the file stores it: per segment four
-        coordinates (uint16 units), thickness and trust (a byte each); per vertex of the
-        region two coordinates (uint16) and its rings' and parts' offsets (uint32)."""
+        """Bytes of what :meth:`predict` needs, as the file stores it: per segment its middle
+        (two uint16 units), direction, half-length, thickness and trust (a byte each); per
+        vertex of the region two coordinates (uint16) and its rings' and parts' offsets (uint32)."""
         import shapely
 
         if self.region.is_empty:
@@ -155,7 +164,7 @@ class WorldMap:
         else:
             _, coords, parts = shapely.to_ragged_array([self.region])
             vertices, offsets = coords.shape[0], sum(p.size for p in parts)
-        return int(len(self) * (4 * 2 + 2) + vertices * 2 * 2 + offsets * 4)
+        return int(len(self) * (2 * 2 + 4) + vertices * 2 * 2 + offsets * 4)
 
     def grid_bytes(self, resolution: float) -> int:
         """Bytes of a one-byte-a-cell grid of the map's bounding box at ``resolution`` metres:
@@ -208,14 +217,16 @@ class WorldMap:
             best[ok] = np.maximum(best[ok], value)
         return best
 
-    def wall_distance(self, xy: ArrayLike, *, trusted: bool = True) -> FloatArray:
+    def wall_distance(self, xy: ArrayLike, *, trusted: bool = True, within: float | None = None) -> FloatArray:
         """Distance from world ``(K, 2)`` points to the nearest segment's band (its line widened by
-        its thickness; ``trusted``: only segments of trust >= ``wall_share``); ``inf`` beyond reach."""
+        its thickness; ``trusted``: only segments of trust >= ``wall_share``); ``inf`` beyond
+        ``within`` of every band (default :attr:`wall_half_width`)."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         best = np.full(xy.shape[0], np.inf)
         if not len(self) or not xy.shape[0]:
             return best
-        distance, index = self._neighbours(xy, self._reach(self.wall_half_width + 1e-9))
+        within = self.wall_half_width if within is None else within
+        distance, index = self._neighbours(xy, self._reach(within + 1e-9))
         middle, axis, normal, half = self._frames
         keep = self.trust >= self.wall_share if trusted else np.ones(len(self), dtype=bool)
         for j in range(index.shape[1]):
@@ -255,9 +266,12 @@ class WorldMap:
 
     def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000) -> Raster:
         """Free / occupied / unknown cells, as Nav2 loads them: occupied within
-        :attr:`wall_half_width` of a trusted wall's band, free elsewhere in the observed
-        region, unknown elsewhere. Row 0 is the bottom; ``probability`` is :meth:`predict`
-        at the cell centres."""
+        :attr:`wall_half_width` of a trusted wall's band; unknown within :attr:`wall_rim` of
+        any wall's band (an edge the walls' spread leaves uncertain, or a wall few positions
+        confirmed); free elsewhere in the observed region, unknown elsewhere. Row 0 is the
+        bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks the
+        cells the run observed or placed a wall near (the unknown among them are uncertain,
+        not unexplored: no frontier lies there)."""
         if not (math.isfinite(resolution) and resolution > 0):
             raise InputError(f"resolution must be a positive number of metres, got {resolution}")
         lower, upper = self.bounds
@@ -270,19 +284,21 @@ class WorldMap:
                                    origin[1] + (jj.ravel() + 0.5) * resolution])
         observed = self.observed(centres)
         wall = self.wall_distance(centres) <= self.wall_half_width
+        rim = self.wall_distance(centres, trusted=False, within=self.wall_rim) <= self.wall_rim
         base = np.where(observed, self.free_level, self.unknown_level)
         probability = np.maximum(base, self.wall_value(centres))
         cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
-        cells[observed] = FREE
+        cells[observed & ~rim] = FREE
         cells[wall] = OCCUPIED
         return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
-                      probability.reshape(ny, nx).astype(np.float32), np.zeros((ny, nx), dtype=bool))
+                      probability.reshape(ny, nx).astype(np.float32), np.zeros((ny, nx), dtype=bool),
+                      explored=(observed | rim | wall).reshape(ny, nx))
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays)."""
         return {"band": list(self.band), "width": self.width, "free_level": self.free_level,
                 "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
-                "wall_share": self.wall_share}
+                "wall_share": self.wall_share, "wall_rim": self.wall_rim}
 
     def save(self, path: Any, *, overwrite: bool = True) -> int:
         """Write the map to ``path`` (:mod:`occtool.fuse._occmap`, atomically); returns its bytes."""
@@ -333,6 +349,28 @@ def returns_of_fused(fused: Any) -> RunReturns:
     return RunReturns(fused._pose_array.copy(), ranges, fused.returns != NO_OBSTACLE, np.asarray(offsets))
 
 
+def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = math.inf,
+                         level: float | None = None) -> RunReturns:
+    """:class:`RunReturns` of a log's positions (each with features and a pose), fitted or
+    not: their nearest returns per bin (:func:`occtool.fuse._reach.nearest_returns` at
+    ``level``) and their reach (:func:`occtool.fuse._reach.observed_reach`). A run's
+    keyframes are a share of its positions; the others' returns still place walls."""
+    from occtool.fuse._reach import NO_OBSTACLE, nearest_returns, observed_reach
+
+    positions = list(positions)
+    if not positions:
+        raise InputError("no positions to read returns from")
+    returns, offsets, reaches = [], [], []
+    for item in positions:  # a loop over positions, each vectorised over its features
+        nearest, offset = nearest_returns(item.features, robot, level=level)
+        returns.append(nearest)
+        offsets.append(offset)
+        reaches.append(observed_reach(item.features, robot, focus_range))
+    poses = np.array([[p.pose.x, p.pose.y, p.pose.z, p.pose.yaw] for p in positions], dtype=np.float64)
+    stacked = np.stack(returns)
+    return RunReturns(poses, _ranges(stacked, np.stack(reaches)), stacked != NO_OBSTACLE, np.stack(offsets))
+
+
 def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
     """Union of what each position (``poses`` ``(P, 4)`` x, y, z, yaw) saw: rays up to
     ``distances`` (``(P, bins)``, at most ``reach``) at the bins' centres."""
@@ -352,26 +390,33 @@ def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> 
 def position_ranges(fused: Any) -> FloatArray:
     """``(P, bins)`` each position's range per return bin: its nearest return, or where it had
     none its reach in that direction (0 where it saw nothing), metres."""
-    from occtool.fuse._reach import NO_OBSTACLE, REACH_UNIT
-
     if fused.returns is None:
         raise InputError("this fused map keeps no returns: a world map needs them")
-    returns = fused.returns
+    return _ranges(fused.returns, fused.reaches)
+
+
+def _ranges(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatArray:
+    """Nearest returns ``(P, bins)`` (millimetres) where a bin has one, else the reach
+    (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres."""
+    from occtool.fuse._reach import NO_OBSTACLE, REACH_UNIT
+
     bins = returns.shape[1]
-    reach = fused.reaches[:, 0].astype(np.float64) * REACH_UNIT
-    # Each return bin takes the reach of the coarser bin its centre lies in.
+    reach = reaches[:, 0].astype(np.float64) * REACH_UNIT
     centre = (np.arange(bins) + 0.5) / bins
     coarse = np.minimum((centre * reach.shape[1]).astype(np.intp), reach.shape[1] - 1)
     return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
 
 
-def build_world_map(fused: Any, *, cell: float = CELL,
+def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: float = CELL,
                     max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS, reach: float = WALL_REACH,
                     region_reach: float = REGION_REACH, simplify: float = 0.03, **params: Any) -> WorldMap:
     """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
     (:func:`occtool.fuse._occmap.quantise`).
 
-    What ``fused``'s positions saw (a :class:`FusedMap`) is read as :func:`returns_of_fused`.
+    ``sightings`` is what every position of the run saw (:func:`returns_of_positions`; by
+    default ``fused``'s own positions, :func:`returns_of_fused`): the walls are fitted to
+    its returns and its beams see through them; the observed region is swept by ``fused``'s
+    positions (a :class:`FusedMap`), which hold the run's local models.
     The walls are fitted to the returns no farther than ``reach`` from their position
     (:func:`occtool.fuse._walls.fit_segments`
     with ``cell``, ``max_thickness`` and ``min_returns``); the beams up to ``region_reach``
@@ -388,12 +433,13 @@ def build_world_map(fused: Any, *, cell: float = CELL,
     for name, value in (("reach", reach), ("region_reach", region_reach)):
         if not value > 0:
             raise InputError(f"{name} must be a positive number of metres, got {value}")
-    run = returns_of_fused(fused)
+    own = returns_of_fused(fused)
+    run = own if sightings is None else sightings
     points, owner = run.return_points(reach)
     segments: Segments = fit_segments(points, owner, cell=cell, max_thickness=max_thickness, min_returns=min_returns)
     through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
     trust = segments.hits / np.maximum(segments.hits + through, 1)
-    region = _observed_region(run.ranges, run.poses, region_reach)
+    region = _observed_region(own.ranges, own.poses, region_reach)
     if simplify > 0 and not region.is_empty:
         region = shapely.simplify(region, simplify, preserve_topology=True)
     low, high = fused.robot.body_band
@@ -404,4 +450,4 @@ def build_world_map(fused: Any, *, cell: float = CELL,
     return quantise(world)
 
 
-__all__ = ["RunReturns", "WorldMap", "build_world_map", "position_ranges", "returns_of_fused"]
+__all__ = ["RunReturns", "WorldMap", "build_world_map", "position_ranges", "returns_of_fused", "returns_of_positions"]
