@@ -445,3 +445,25 @@ def test_the_fixture_is_what_its_readme_command_makes(tmp_path) -> None:
             np.testing.assert_array_equal(read_depth_png(mine), read_depth_png(theirs))
         else:
             assert mine.read_text() == theirs.read_text(), name
+
+
+@pytest.mark.parametrize("camera, distorted", [("freiburg1", True), ("freiburg2", True), ("freiburg3", False)])
+def test_tum_distortion_is_ignored_with_one_warning(tmp_path, camera, distorted) -> None:
+    """freiburg1's and freiburg2's published distortion is not applied (no OpenCV): one warning says so."""
+    import shutil
+
+    pytest.importorskip("PIL")
+    real = FIXTURES / "tum-fr3-cabinet"
+    folder = tmp_path / f"rgbd_dataset_{camera}_test"
+    (folder / "depth").mkdir(parents=True)
+    listed = [line for line in (real / "depth.txt").read_text().splitlines() if not line.startswith("#")][:2]
+    for line in listed:
+        shutil.copy(real / line.split()[1], folder / line.split()[1])
+    (folder / "depth.txt").write_text("\n".join(listed) + "\n")
+    shutil.copy(real / "groundtruth.txt", folder / "groundtruth.txt")  # no camera-intrinsics.txt: TUM's by name
+    log = read_log(folder, group_by="message", depth_features=500)
+    assert any(f"TUM's {camera} camera (" in note for note in log.notes)
+    warned = [note for note in log.notes if "distortion" in note]
+    assert len(warned) == (1 if distorted else 0)
+    if distorted:
+        assert warned[0].startswith("warning:") and "ignored" in warned[0]

@@ -9,6 +9,7 @@
     dropped (noted). Intrinsics: ``camera-intrinsics.txt`` beside ``depth.txt`` if there is
     one (a 3x3 K), else TUM's published values for a folder named ``*freiburg1*``,
     ``*freiburg2*`` or ``*freiburg3*``, else the ROS default 525, 525, 319.5, 239.5 (noted).
+    freiburg1's and freiburg2's published distortion is ignored (one warning).
 ``3dmatch``
     3DMatch and 7-Scenes: ``frame-NNNNNN.depth.png`` (16-bit millimetres, 0 and 65535 =
     no measurement) with ``frame-NNNNNN.pose.txt`` (the camera-to-world 4x4), in the
@@ -64,6 +65,8 @@ TUM_INTRINSICS = {
     "freiburg3": (535.4, 539.2, 320.1, 247.6),
 }
 ROS_DEFAULT_INTRINSICS = (525.0, 525.0, 319.5, 239.5)
+#: TUM's cameras whose published calibration has lens distortion (freiburg3's images are undistorted).
+TUM_DISTORTED = ("freiburg1", "freiburg2")
 #: 7-Scenes' Kinect (fx, fy, cx, cy), for a folder without ``camera-intrinsics.txt``.
 SEVEN_SCENES_INTRINSICS = (585.0, 585.0, 320.0, 240.0)
 #: Most depth frames one folder may name.
@@ -263,6 +266,10 @@ def _tum_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[flo
         if key is not None:
             intrinsics = TUM_INTRINSICS[key]
             notes.append(f"intrinsics: TUM's {key} camera {intrinsics} (fx, fy, cx, cy; from the folder's name)")
+            if key in TUM_DISTORTED:
+                notes.append(f"warning: TUM's {key} camera has lens distortion (its published d0-d4), ignored: "
+                             "the images are back-projected through the pinhole K alone (undistorting them "
+                             "needs OpenCV, not a dependency)")
         else:
             intrinsics = ROS_DEFAULT_INTRINSICS
             notes.append(f"no camera-intrinsics.txt: the ROS default intrinsics {intrinsics} (fx, fy, cx, cy) "
