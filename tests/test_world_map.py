@@ -84,6 +84,20 @@ def test_a_wall_is_a_min_of_linear_pieces_over_the_free_level():
     assert world.predict([[1.99, 2.05, z]])[0] == pytest.approx(0.75, abs=1e-9)
 
 
+def test_free_space_reads_less_sure_away_from_the_positions():
+    region = shapely.MultiPolygon([shapely.box(-20.0, -1.0, 20.0, 1.0)])
+    world = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], region, band=BAND, positions=[[0.0, 0.0]])
+    p = world.predict([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [-10.0, 0.0, 0.0], [19.0, 0.0, 0.0], [25.0, 0.0, 0.0]])
+    # A cone from the position (0.1 + 0.01 d), below unknown however far; unknown outside the region.
+    assert np.allclose(p, [0.1, 0.15, 0.2, 0.29, 0.5])
+    far = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], shapely.MultiPolygon([shapely.box(0, -1, 100, 1)]),
+                   band=BAND, positions=[[0.0, 0.0]])
+    assert far.predict([[99.0, 0.0, 0.0]])[0] == pytest.approx(0.45)
+    # Without positions (a version 1 file) the level is flat.
+    flat = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], region, band=BAND)
+    assert np.allclose(flat.predict([[0.0, 0.0, 0.0], [19.0, 0.0, 0.0]]), flat.free_level)
+
+
 def test_unknown_outside_the_region_and_the_band():
     world = _square_map()
     far = world.predict([[-3.0, -3.0, 0.0], [1.0, 1.0, 0.5], [1.0, 1.0, -0.3]])
@@ -220,7 +234,10 @@ def test_the_room_log_walls_free_inside_unknown_behind(room_map):
     behind = np.array([[x1 + 1.5, 0.3, 0.0], [1.0, y1 + 1.5, 0.0]])
     p = world.predict(np.vstack([walls, inside, behind]))
     assert (p[:4] > 0.9).all()
-    assert np.allclose(p[4:7], world.free_level)
+    # Free, rising a hundredth a metre from the nearest position.
+    nearest = np.min(np.hypot(*(inside[:, None, :2] - world.positions[None]).transpose(2, 0, 1)), axis=1)
+    assert np.allclose(p[4:7], world.free_level + world.free_slope * nearest)
+    assert world.free_level == 0.1 and world.free_slope == 0.01 and len(world.positions) == len(fused)
     assert np.allclose(p[7:], 0.5)
     # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.
     assert world.nbytes < fused.nbytes / 10 and world.nbytes < world.grid_bytes(0.1)

@@ -14,7 +14,8 @@ Arrays (version 2): ``middles`` uint16 ``(S, 2)``, each segment's middle in unit
 ``half_lengths`` uint8 ``(S,)`` in the header's ``half_unit`` (2 mm unless a segment is
 longer than 1.02 m); ``thickness`` and ``trust`` uint8 ``(S,)`` (millimetres,
 1/255ths): 8 bytes a segment, where its two end points took 10 in version 1 (``segments``
-uint16 ``(S, 4)``, still read). The observed region
+uint16 ``(S, 4)``, still read); ``positions`` uint16 ``(P, 2)`` in units, the run's
+positions (the free level rises away from them; absent in version 1). The observed region
 as shapely's ragged arrays: ``region_coords`` uint16 ``(V, 2)`` in units and its
 ``region_offsets_*`` uint32. A map is quantised to this precision when it is built
 (:func:`quantise`), so a map read back answers exactly as the one written.
@@ -106,7 +107,9 @@ def quantise(world: Any, unit: float | None = None) -> Any:
         # On the file's grid and valid there (origin is a whole number of units), then
         # through the loader's own arithmetic, so that a map read back is this one.
         region = _areal(shapely.transform(_areal(shapely.set_precision(region, unit)), snap))
-    quantised = WorldMap(start, end, thickness, trust, region, **world.params())
+    params = world.params()
+    band = params.pop("band")
+    quantised = WorldMap(start, end, thickness, trust, region, band=band, positions=snap(world.positions), **params)
     quantised.unit, quantised.origin, quantised.half_unit = unit, origin, half_unit
     return quantised
 
@@ -142,6 +145,7 @@ def _arrays(world: Any) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
     arrays = [("middles", middles.reshape(-1, 2)), ("directions", steps), ("half_lengths", half),
               ("thickness", np.clip(np.round(world.thickness * 1000.0), 0, 255).astype(np.uint8)),
               ("trust", np.clip(np.round(world.trust * 255.0), 0, 255).astype(np.uint8))]
+    arrays.append(("positions", units(world.positions).reshape(-1, 2)))
     region = _areal(world.region) if not world.region.is_empty else shapely.MultiPolygon()
     if not region.is_empty:
         _, coords, offsets = shapely.to_ragged_array([region])
@@ -245,7 +249,9 @@ def decode(data: bytes, name: str = "occmap") -> Any:
             raise fail(f"observed region is malformed: {exc}") from None
     try:
         band = settings.pop("band")
-        world = WorldMap(start, end, thickness, trust, region,
+        positions = (origin + arrays["positions"].reshape(-1, 2).astype(np.float64) * unit
+                     if "positions" in arrays else None)
+        world = WorldMap(start, end, thickness, trust, region, positions=positions,
                          band=(float(band[0]), float(band[1])), **{k: float(v) for k, v in settings.items()})
     except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
         raise fail(str(exc)) from None

@@ -15,10 +15,12 @@ models observed into one world-frame function of a few kilobytes:
   coordinates;
 * **the observed region**: the union of what each local model saw (its rays up to its
   nearest return per degree, or its reach where it had none), one shapely geometry;
-* ``F = MAX(base, MAX over segments)``, ``base`` :data:`FREE_LEVEL` inside the observed
-  region and 0.5 (unknown) outside it; 0.5 at heights outside the robot's body band.
+* ``F = MAX(base, MAX over segments)``, ``base`` inside the observed region
+  :data:`FREE_LEVEL` at the run's positions rising by :data:`FREE_SLOPE` a metre away from
+  the nearest (a far beam's angle and its pose's error clear space less surely), below
+  0.5; 0.5 (unknown) outside the region and at heights outside the robot's body band.
 
-Only the segments (end points, thickness, trust) and the region's vertices are stored:
+Only the segments (end points, thickness, trust), the positions and the region's vertices are stored:
 :attr:`WorldMap.nbytes` counts them at the precision :mod:`occtool.fuse._occmap` writes
 them (a unit of :data:`UNIT` metres, 5 mm by default), which is everything
 :meth:`WorldMap.predict` needs. The map is 2D: the occupancy of the robot's body band,
@@ -42,8 +44,12 @@ FloatArray = NDArray[np.float64]
 
 #: Occupancy falls from a wall's trust to 0 over this distance from it (metres, past its thickness).
 WIDTH = 0.2
-#: Occupancy of the observed region away from walls.
-FREE_LEVEL = 0.2
+#: Occupancy of the observed region away from walls, at a position of the run.
+FREE_LEVEL = 0.1
+#: ... rising by this much a metre from the nearest position (chosen on inner splits, docs/map.md),
+FREE_SLOPE = 0.01
+#: ... up to this (below unknown: observed space never reads unknown).
+FREE_CAP = 0.45
 #: Occupancy where no position observed.
 UNKNOWN_LEVEL = 0.5
 #: A beam passing a segment's middle more than this in front of its own return saw through it (metres).
@@ -82,16 +88,20 @@ class WorldMap:
         returned from it or saw through it, in [0, 1].
     region
         A shapely (multi)polygon: where some position observed.
+    positions
+        ``(P, 2)`` world x, y of the positions that observed it (``None``: none kept, the
+        free level is flat).
     band
         World heights ``(low, high)`` the map speaks for (the robot's body band).
-    width, free_level, unknown_level
-        See :data:`WIDTH`, :data:`FREE_LEVEL`, :data:`UNKNOWN_LEVEL`.
+    width, free_level, free_slope, unknown_level
+        See :data:`WIDTH`, :data:`FREE_LEVEL`, :data:`FREE_SLOPE`, :data:`UNKNOWN_LEVEL`.
     wall_half_width, wall_share, wall_rim
         The Nav2 raster's walls and their uncertain edge (:meth:`rasterise`).
     """
 
     def __init__(self, start: ArrayLike, end: ArrayLike, thickness: ArrayLike, trust: ArrayLike, region: Any, *,
-                 band: tuple[float, float], width: float = WIDTH, free_level: float = FREE_LEVEL,
+                 band: tuple[float, float], positions: ArrayLike | None = None, width: float = WIDTH,
+                 free_level: float = FREE_LEVEL, free_slope: float = FREE_SLOPE,
                  unknown_level: float = UNKNOWN_LEVEL, wall_half_width: float = WALL_HALF_WIDTH,
                  wall_share: float = WALL_SHARE, wall_rim: float = WALL_RIM) -> None:
         import shapely
@@ -108,6 +118,12 @@ class WorldMap:
                 raise InputError(f"{name} must be a positive number of metres, got {value}")
         if not (math.isfinite(wall_rim) and wall_rim >= 0):
             raise InputError(f"wall_rim must be a number of metres >= 0, got {wall_rim}")
+        if not (math.isfinite(free_slope) and free_slope >= 0):
+            raise InputError(f"free_slope must be a number >= 0 (occupancy a metre), got {free_slope}")
+        self.positions = (np.zeros((0, 2)) if positions is None
+                          else np.asarray(positions, dtype=np.float64).reshape(-1, 2))
+        if not np.isfinite(self.positions).all():
+            raise InputError("positions must be finite x, y")
         for name, value in (("free_level", free_level), ("unknown_level", unknown_level), ("wall_share", wall_share)):
             if not 0.0 <= value <= 1.0:
                 raise InputError(f"{name} must lie in [0, 1], got {value}")
@@ -118,6 +134,8 @@ class WorldMap:
         self.band = (float(band[0]), float(band[1]))
         self.width = float(width)
         self.free_level = float(free_level)
+        self.free_slope = float(free_slope)
+        self._position_index: Any = None
         self.unknown_level = float(unknown_level)
         self.wall_half_width = float(wall_half_width)
         self.wall_share = float(wall_share)
@@ -144,6 +162,8 @@ class WorldMap:
         import shapely
 
         boxes = [np.concatenate([self.start, self.end])] if len(self) else []
+        if self.positions.shape[0]:
+            boxes.append(self.positions)
         if not self.region.is_empty:
             x0, y0, x1, y1 = shapely.bounds(self.region)
             boxes.append(np.array([[x0, y0], [x1, y1]]))
@@ -156,7 +176,8 @@ class WorldMap:
     def nbytes(self) -> int:
         """Bytes of what :meth:`predict` needs, as the file stores it: per segment its middle
         (two uint16 units), direction, half-length, thickness and trust (a byte each); per
-        vertex of the region two coordinates (uint16) and its rings' and parts' offsets (uint32)."""
+        vertex of the region two coordinates (uint16) and its rings' and parts' offsets (uint32);
+        per position two coordinates (uint16)."""
         import shapely
 
         if self.region.is_empty:
@@ -164,7 +185,7 @@ class WorldMap:
         else:
             _, coords, parts = shapely.to_ragged_array([self.region])
             vertices, offsets = coords.shape[0], sum(p.size for p in parts)
-        return int(len(self) * (2 * 2 + 4) + vertices * 2 * 2 + offsets * 4)
+        return int(len(self) * (2 * 2 + 4) + vertices * 2 * 2 + offsets * 4 + self.positions.shape[0] * 2 * 2)
 
     def grid_bytes(self, resolution: float) -> int:
         """Bytes of a one-byte-a-cell grid of the map's bounding box at ``resolution`` metres:
@@ -239,6 +260,20 @@ class WorldMap:
             best[ok] = np.minimum(best[ok], np.hypot(across, along))
         return best
 
+    def free_value(self, xy: ArrayLike) -> FloatArray:
+        """Occupancy of observed space away from walls at world ``(K, 2)`` points:
+        :attr:`free_level` plus :attr:`free_slope` a metre from the nearest position, under
+        :data:`FREE_CAP`; flat without positions."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if not self.positions.shape[0] or self.free_slope == 0.0 or not xy.shape[0]:
+            return np.full(xy.shape[0], min(self.free_level, FREE_CAP))
+        from scipy.spatial import cKDTree
+
+        if self._position_index is None:
+            self._position_index = cKDTree(self.positions)
+        distance, _ = self._position_index.query(xy)
+        return np.minimum(self.free_level + self.free_slope * np.asarray(distance), FREE_CAP)
+
     def observed(self, xy: ArrayLike) -> NDArray[np.bool_]:
         """Whether world ``(K, 2)`` points lie in the observed region."""
         import shapely
@@ -260,7 +295,9 @@ class WorldMap:
         out = np.full(points.shape[0], self.unknown_level)
         band = (points[:, 2] >= self.band[0] - 1e-9) & (points[:, 2] <= self.band[1] + 1e-9)
         xy = points[band, :2]
-        base = np.where(self.observed(xy), self.free_level, self.unknown_level)
+        observed = self.observed(xy)
+        base = np.full(xy.shape[0], self.unknown_level)
+        base[observed] = self.free_value(xy[observed])
         out[band] = np.clip(np.maximum(base, self.wall_value(xy)), 0.0, 1.0)
         return out
 
@@ -285,7 +322,8 @@ class WorldMap:
         observed = self.observed(centres)
         wall = self.wall_distance(centres) <= self.wall_half_width
         rim = self.wall_distance(centres, trusted=False, within=self.wall_rim) <= self.wall_rim
-        base = np.where(observed, self.free_level, self.unknown_level)
+        base = np.full(centres.shape[0], self.unknown_level)
+        base[observed] = self.free_value(centres[observed])
         probability = np.maximum(base, self.wall_value(centres))
         cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
         cells[observed & ~rim] = FREE
@@ -297,6 +335,7 @@ class WorldMap:
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays)."""
         return {"band": list(self.band), "width": self.width, "free_level": self.free_level,
+                "free_slope": self.free_slope,
                 "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
                 "wall_share": self.wall_share, "wall_rim": self.wall_rim}
 
@@ -445,7 +484,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
     world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
-                     **params)
+                     positions=own.poses[:, :2], **params)
     # Rounded to the file's precision now, so that the map written is the map used.
     return quantise(world)
 
