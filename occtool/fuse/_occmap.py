@@ -231,10 +231,10 @@ def decode(data: bytes, name: str = "occmap") -> Any:
     try:
         if half_unit is None:  # version 1: both end points
             segments = arrays["segments"].reshape(-1, 4).astype(np.float64) * unit
-            start, end = origin + segments[:, :2], origin + segments[:, 2:]
+            first, last = origin + segments[:, :2], origin + segments[:, 2:]
         else:
-            start, end = _segment_ends(arrays["middles"].reshape(-1, 2), arrays["directions"].reshape(-1),
-                                       arrays["half_lengths"].reshape(-1), origin, unit, half_unit)
+            first, last = _segment_ends(arrays["middles"].reshape(-1, 2), arrays["directions"].reshape(-1),
+                                        arrays["half_lengths"].reshape(-1), origin, unit, half_unit)
         thickness = arrays["thickness"].astype(np.float64) / 1000.0
         trust = arrays["trust"].astype(np.float64) / 255.0
     except (KeyError, ValueError) as exc:
@@ -251,7 +251,7 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         band = settings.pop("band")
         positions = (origin + arrays["positions"].reshape(-1, 2).astype(np.float64) * unit
                      if "positions" in arrays else None)
-        world = WorldMap(start, end, thickness, trust, region, positions=positions,
+        world = WorldMap(first, last, thickness, trust, region, positions=positions,
                          band=(float(band[0]), float(band[1])), **{k: float(v) for k, v in settings.items()})
     except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
         raise fail(str(exc)) from None
