@@ -94,6 +94,9 @@ RESOLUTIONS = (0.05, 0.1)
 L_OCC = (0.85, 1.5, 2.5)
 L_FREE = (-0.4, -0.2, -0.1, -0.05, -0.02, -0.01)
 CLAMPS = ((-2.0, 3.5), (-1.0, 3.5), (-2.0, 6.0))
+#: nav2_map_saver's default thresholds: a grid saved for map_server is trinary at these.
+SAVER_OCCUPIED = 0.65
+SAVER_FREE = 0.25
 BEAMS_PER_CHUNK = 10_000
 MAX_CELLS = 200_000_000
 
@@ -463,6 +466,12 @@ def textbook_rows(train: Scans, xy: FloatArray, n_occupied: int, seed: int) -> l
                          "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution, "l_occ": l_occ,
                          "l_free": l_free, "clamp": list(clamp), "inner_auc": inner_auc,
                          "cpu_s": time.process_time() - started})
+        # The tuned grid as its Nav2 map: map_saver's trinary thresholds (unseen cells, 0.5, unknown).
+        trinary = np.where(p > SAVER_OCCUPIED, 1.0, np.where(p < SAVER_FREE, 0.0, 0.5))
+        rows.append({"model": f"textbook grid {resolution:g} m, tuned, saved as a Nav2 map", "nav2_of_grid": True,
+                     "auc": auc(trinary[:n_occupied], trinary[n_occupied:]),
+                     "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution,
+                     "note": f"map_saver's thresholds: occupied above {SAVER_OCCUPIED:g}, free below {SAVER_FREE:g}"})
     return rows
 
 
@@ -630,6 +639,42 @@ def heldout_section(data_dir: str | os.PathLike[str], logs: tuple[tuple[str, str
         text += [markdown(result)]
     text += [f"- {note}" for note in notes]
     return "\n".join(text) + "\n", {"logs": results, "notes": notes}
+
+
+def _row(result: dict[str, Any], start: str) -> dict[str, Any] | None:
+    return next((r for r in result["rows"] if r["model"].startswith(start) and r.get("auc") is not None), None)
+
+
+def heldout_targets(data: dict[str, Any] | None,
+                    log_map: dict[str, Any] | None = None) -> list[tuple[str, str, bool | None]]:
+    """Issue 20's targets, from this scorer's figures (and the whole-log time of ``log_map``)."""
+    out: list[tuple[str, str, bool | None]] = []
+    for result in (data or {}).get("logs", []):
+        world, nav2 = _row(result, "fused map"), _row(result, "Nav2 map")
+        grids = [r for r in result["rows"] if r["model"].endswith("tuned on the training scans")]
+        grid_05 = next((r for r in grids if r["resolution"] == 0.05), None)
+        grid_1 = next((r for r in grids if r["resolution"] == 0.1), None)
+        saved_05 = next((r for r in result["rows"] if r.get("nav2_of_grid") and r["resolution"] == 0.05), None)
+        if world is None or nav2 is None or not grids or grid_05 is None or grid_1 is None:
+            out.append((f"{result['log']}: world.occmap and the Nav2 map scored", "not available", False))
+            continue
+        best = max(grids, key=lambda r: r["auc"])
+        name = result["log"].split("-corrected")[0]
+        out.append((f"{name} (independent scorer): world.occmap AUC >= the best tuned textbook grid + 0.01",
+                    f"{world['auc']:.4f} vs {best['auc']:.4f} ({best['resolution']:g} m): {world['auc'] - best['auc']:+.4f}",
+                    world["auc"] >= best["auc"] + 0.01))
+        out.append((f"{name}: world.occmap no bigger than the 0.1 m one-byte grid",
+                    f"{world['bytes'] / 1e3:.1f} KB vs {grid_1['bytes'] / 1e3:.1f} KB", world["bytes"] <= grid_1["bytes"]))
+        out.append((f"{name}: Nav2 map AUC >= the tuned 0.05 m textbook grid",
+                    f"{nav2['auc']:.4f} vs {grid_05['auc']:.4f}" + (
+                        f" (that grid saved as a Nav2 map: {saved_05['auc']:.4f})" if saved_05 else ""),
+                    nav2["auc"] >= grid_05["auc"]))
+    for row in (log_map or {}).get("whole_log", []):
+        if row.get("exit_status") or row.get("keyframe_share") is not None:
+            continue
+        out.append(("Intel whole log through `occtool map` (default keyframes) <= 60 s of CPU",
+                    f"{row['cpu_s']:.0f} s CPU, {row['wall_s']:.0f} s wall", row["cpu_s"] <= 60))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from cold_start import cold_start_section, cold_start_targets  # noqa: E402
 from depth import depth_section  # noqa: E402
 from fleet import fleet_section  # noqa: E402
-from heldout import heldout_section  # noqa: E402
+from heldout import heldout_section, heldout_targets  # noqa: E402
 from large import large_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
@@ -868,6 +868,7 @@ def main(argv: list[str] | None = None) -> int:
     results["targets"] += unseen_targets(results.get("unseen_rooms"))
     results["targets"] += whole_log_targets(results.get("log_map"), results.get("fleet"), results.get("large"))
     results["targets"] += registration_targets(results.get("registration"))
+    results["targets"] += heldout_targets(results.get("heldout"), results.get("log_map"))  # issue 20
     elapsed = budget.seconds - budget.left
     command = "python bench/run.py " + " ".join(argv if argv is not None else sys.argv[1:])
     results["meta"] = {
