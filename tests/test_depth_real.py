@@ -55,9 +55,10 @@ def test_the_map_has_the_cabinet_and_the_floor_round_it_free(mapped):
     cx, cy, hx, hy = CABINET
     for (x, y), (ox, oy) in (((cx + hx, cy), (1, 0)), ((cx - hx, cy), (-1, 0)),
                              ((cx, cy + hy), (0, 1)), ((cx, cy - hy), (0, -1))):
-        # Each side's surface occupied within 5 cm, the floor 15 cm outside it free.
+        # Each side's surface occupied within 5 cm; the floor 30 cm outside it free (nearer,
+        # the wall's uncertain edge is unknown: occtool.fuse._world.WALL_RIM).
         assert CELL_OCCUPIED in [cell(x + d * ox, y + d * oy) for d in (-0.05, 0.0, 0.05)], (x, y)
-        assert cell(x + 0.15 * ox, y + 0.15 * oy) == CELL_FREE, (x, y)
+        assert cell(x + 0.3 * ox, y + 0.3 * oy) == CELL_FREE, (x, y)
     assert cell(cx, cy) != CELL_FREE
     # The floor between the camera and the cabinet: 30 % and 50 % of the way from each
     # position of the path to the cabinet's centre (measured: 21 and 20 of 22 free).

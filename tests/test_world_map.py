@@ -112,10 +112,9 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     assert solid == pytest.approx(1.0) and passing == pytest.approx(0.625)
     raster = world.rasterise(0.05)
     row, col, _ = raster.cell_of([[1.0, 1.0], [3.0, 1.0], [2.0, 1.0], [5.0, 1.0]])
-    # The wall most positions saw through is not drawn for Nav2 (share below 0.5), nor
-    # drawn free: it is unknown, and so is the uncertain edge of every wall; the region
-    # between them is free, past it nothing was observed.
-    assert raster.cells[row, col].tolist() == [OCCUPIED, UNKNOWN, FREE, UNKNOWN]
+    # The wall most positions saw through is not drawn for Nav2 (share below 0.5); the
+    # trusted wall's uncertain edge is unknown; past the region nothing was observed.
+    assert raster.cells[row, col].tolist() == [OCCUPIED, FREE, FREE, UNKNOWN]
     assert raster.explored[row, col].tolist() == [True, True, True, False]
     rim = world.wall_half_width + world.wall_rim
     edge_row, edge_col, _ = raster.cell_of([[1.0 + 0.5 * (world.wall_half_width + rim), 1.0],

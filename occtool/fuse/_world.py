@@ -56,9 +56,9 @@ UNKNOWN_LEVEL = 0.5
 THROUGH_MARGIN = 0.1
 #: The Nav2 raster's occupied cells: their centres within this of a trusted wall (metres, past its thickness).
 WALL_HALF_WIDTH = 0.075
-#: The Nav2 raster's observed cells this near any wall (metres, past its thickness) and not
-#: occupied are unknown, not free: a trinary map's middle value for a wall's uncertain edge
-#: and for walls too few positions confirmed (chosen on inner splits, docs/map.md).
+#: The Nav2 raster's observed cells this near a trusted wall (metres, past its thickness) and
+#: not occupied are unknown, not free: a trinary map's middle value for a wall's uncertain
+#: edge (chosen on inner splits, docs/map.md).
 WALL_RIM = 0.125
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
@@ -304,8 +304,8 @@ class WorldMap:
     def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000) -> Raster:
         """Free / occupied / unknown cells, as Nav2 loads them: occupied within
         :attr:`wall_half_width` of a trusted wall's band; unknown within :attr:`wall_rim` of
-        any wall's band (an edge the walls' spread leaves uncertain, or a wall few positions
-        confirmed); free elsewhere in the observed region, unknown elsewhere. Row 0 is the
+        it (an edge the walls' spread leaves uncertain); free elsewhere in the observed
+        region, unknown elsewhere. Row 0 is the
         bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks the
         cells the run observed or placed a wall near (the unknown among them are uncertain,
         not unexplored: no frontier lies there)."""
@@ -321,7 +321,7 @@ class WorldMap:
                                    origin[1] + (jj.ravel() + 0.5) * resolution])
         observed = self.observed(centres)
         wall = self.wall_distance(centres) <= self.wall_half_width
-        rim = self.wall_distance(centres, trusted=False, within=self.wall_rim) <= self.wall_rim
+        rim = self.wall_distance(centres, within=self.wall_rim) <= self.wall_rim
         base = np.full(centres.shape[0], self.unknown_level)
         base[observed] = self.free_value(centres[observed])
         probability = np.maximum(base, self.wall_value(centres))
