@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.fuse import FusedMap, Raster, WorldMap
+from occtool.fuse import FusedMap, Raster, RunReturns, WorldMap
 from occtool.io._atomic import atomic_write
 
 FloatArray = NDArray[np.float64]
@@ -112,7 +112,7 @@ def _frontiers(raster: Raster, placed: list[PlacedMap], lookahead: float) -> Flo
 
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
-               lookahead: float = FRONTIER_LOOKAHEAD, sightings: Any = None) -> RunMap:
+               lookahead: float = FRONTIER_LOOKAHEAD, sightings: RunReturns | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters

@@ -16,7 +16,7 @@ from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._map import FusedMap
 from occtool.fuse._reach import nearest_returns, observed_reach, reach_from_guard, returns_from_guard
-from occtool.fuse._world import returns_of_positions
+from occtool.fuse._world import RunReturns, returns_of_positions
 from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.robot import Robot
 
@@ -36,7 +36,7 @@ class FuseReport:
     not_keyframes: list[int] = field(default_factory=list)
     #: What every position saw, keyframes or not (:func:`occtool.fuse.returns_of_positions`):
     #: the world map's walls (:func:`occtool.fuse.build_world_map`'s ``sightings``).
-    sightings: Any = None
+    sightings: RunReturns | None = None
 
 
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
