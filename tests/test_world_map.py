@@ -334,3 +334,28 @@ def test_query_a_damaged_map_is_one_line(tmp_path):
     result = CliRunner().invoke(cli, ["-q", "query", str(bad), str(points), "-o", str(tmp_path / "o.csv")])
     assert result.exit_code == 1 and "not a readable occtool map" in result.output
     assert len(result.output.strip().splitlines()) == 1
+
+
+def test_a_lasers_every_beam_places_walls_a_cameras_cloud_its_nearest_per_degree():
+    """returns_of_positions: half-degree bins for a scanning laser's positions (a return each
+    half degree lands in a bin of its own), one-degree bins for a dense cloud."""
+    from occtool.features import Features, Pose
+    from occtool.fuse import returns_of_positions
+
+    class Position:
+        def __init__(self, points):
+            self.features = Features(points, np.full(len(points), 0.9))
+            self.pose = Pose()
+
+    robot = Robot()
+    z = 0.5 * sum(robot.body_band)
+    beams = np.radians(np.arange(-90.0, 90.0, 0.5) + 0.25)  # at the bins' centres
+    laser = np.column_stack([3.0 * np.cos(beams), 3.0 * np.sin(beams), np.full(beams.size, z)])
+    run = returns_of_positions([Position(laser)], robot)
+    assert run.ranges.shape[1] == 720 and run.returned.sum() == beams.size
+    rng = np.random.default_rng(0)
+    rows = np.repeat(beams, 40)
+    cloud = np.column_stack([3.0 * np.cos(rows), 3.0 * np.sin(rows), rng.uniform(*robot.body_band, rows.size)])
+    dense = returns_of_positions([Position(cloud)], robot)
+    assert dense.ranges.shape[1] == 360 and dense.returned.sum() == 180
+    assert np.allclose(dense.ranges[dense.returned], 3.0, atol=1e-3)

@@ -70,6 +70,15 @@ REGION_REACH = 8.0
 WALL_SHARE = 0.5
 #: Coordinates are stored in this unit (metres): 5 mm.
 UNIT = 0.005
+#: Pan bins of the positions' nearest returns the walls are fitted to, for a scanning laser
+#: (half a degree: every beam at that spacing; chosen on inner splits, docs/map.md) ...
+SIGHTING_BINS = 720
+#: ... told by at most this many returns a degree in the body band (median over positions:
+#: 1.1-2 on the bench's CARMEN logs, 6 on FR-079, whose positions group a few scans); denser
+#: clouds (a depth camera's rows: 130 on fixtures/tum-fr3-cabinet) keep their nearest per
+#: degree (the return guard's bins), as the nearest of many noisy returns in a finer bin is
+#: drawn nearer than the wall.
+LASER_RETURNS_PER_DEGREE = 10.0
 #: Segment middles searched around a query point (the ridges of more never overlap there).
 NEIGHBOURS = 12
 
@@ -389,25 +398,44 @@ def returns_of_fused(fused: Any) -> RunReturns:
 
 
 def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = math.inf,
-                         level: float | None = None) -> RunReturns:
+                         level: float | None = None, bins: int | None = None) -> RunReturns:
     """:class:`RunReturns` of a log's positions (each with features and a pose), fitted or
-    not: their nearest returns per bin (:func:`occtool.fuse._reach.nearest_returns` at
-    ``level``) and their reach (:func:`occtool.fuse._reach.observed_reach`). A run's
-    keyframes are a share of its positions; the others' returns still place walls."""
+    not: their nearest returns in each of ``bins`` pan bins
+    (:func:`occtool.fuse._reach.nearest_returns` at ``level``) and their reach
+    (:func:`occtool.fuse._reach.observed_reach`). A run's keyframes are a share of its
+    positions; the others' returns still place walls. ``bins=None``: :data:`SIGHTING_BINS`
+    for a scanning laser's positions, the return guard's one a degree for denser clouds
+    (:data:`LASER_RETURNS_PER_DEGREE`)."""
     from occtool.fuse._reach import NO_OBSTACLE, nearest_returns, observed_reach
+    from occtool.guard import GUARD_BINS
 
     positions = list(positions)
     if not positions:
         raise InputError("no positions to read returns from")
+    if bins is None:
+        density = float(np.median([_returns_per_degree(p.features, robot, level) for p in positions]))
+        bins = SIGHTING_BINS if density <= LASER_RETURNS_PER_DEGREE else GUARD_BINS
     returns, offsets, reaches = [], [], []
     for item in positions:  # a loop over positions, each vectorised over its features
-        nearest, offset = nearest_returns(item.features, robot, level=level)
+        nearest, offset = nearest_returns(item.features, robot, level=level, bins=bins)
         returns.append(nearest)
         offsets.append(offset)
         reaches.append(observed_reach(item.features, robot, focus_range))
     poses = np.array([[p.pose.x, p.pose.y, p.pose.z, p.pose.yaw] for p in positions], dtype=np.float64)
     stacked = np.stack(returns)
     return RunReturns(poses, _ranges(stacked, np.stack(reaches)), stacked != NO_OBSTACLE, np.stack(offsets))
+
+
+def _returns_per_degree(features: Any, robot: Any, level: float | None) -> float:
+    """A position's returns in the body band per degree of pan they occupy (0 without any)."""
+    low, high = robot.body_band
+    x, y, z = features.points.T
+    returned = features.evidence > 0 if level is None else features.evidence >= level
+    keep = returned & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
+    if not keep.any():
+        return 0.0
+    degree = np.floor(np.degrees(np.arctan2(y[keep], x[keep]))).astype(np.int64)
+    return float(keep.sum()) / float(np.unique(degree).size)
 
 
 def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
