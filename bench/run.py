@@ -809,7 +809,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--output", default="bench/results.md", help="Markdown results file.")
     parser.add_argument("--quick", action="store_true", help="Small sizes only (a smoke run, minutes less).")
-    parser.add_argument("--budget", type=float, default=3000.0,
+    parser.add_argument("--budget", type=float, default=5400.0,
                         help="Seconds the run may take; larger items are skipped to stay within it.")
     parser.add_argument("--data", default=str(ROOT.parent / "shared" / "data"), help="Folder of the real data sets.")
     args = parser.parse_args(argv)
