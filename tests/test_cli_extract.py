@@ -117,7 +117,12 @@ def test_a_fitted_model_brings_its_slope_bounds_and_robot(fitted_model, tmp_path
     assert result.exit_code == 0, result.output
     collection = json.loads(out.read_text())
     assert collection["properties"]["return_snap"] == 0
-    assert shapely.geometry.shape(collection["features"][0]["geometry"]).area <= snapped.area + 1e-9
+    # Within GEOS's chords: the shrink of the two star polygons draws its corner arcs
+    # apart, so the unsnapped one pokes out by a few micrometres in places (measured 6.5 um
+    # and 1.8e-6 m^2 here, 12 um with 16 chords a quarter); its area alone says little.
+    unsnapped = shapely.geometry.shape(collection["features"][0]["geometry"])
+    assert unsnapped.difference(snapped.buffer(1e-4)).area <= 1e-9
+    assert unsnapped.area <= snapped.area + 1e-5
 
 
 def test_config_file_gives_defaults(sphere_inverse, tmp_path):

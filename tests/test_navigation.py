@@ -204,7 +204,7 @@ def test_round_room_is_the_disk_of_the_smaller_radius(room, max_range):
     assert nav.polygon.exterior.is_ccw
     if room - ROBOT.radius < max_range:
         assert len(nav.exploration_points) == 0
-        # (the shrink is 0.3 mm more than the radius, so GEOS's chords round corners keep it)
+        # (the shrink is 0.17 mm more than the radius, so GEOS's chords round corners keep it)
         np.testing.assert_allclose(np.hypot(*nav.obstacle_points.T), expected, atol=5e-4)
         # Evenly spaced around the whole circle at about the point spacing.
         assert len(nav.obstacle_points) == math.ceil(2 * math.pi * max_range / ROBOT.radius)
@@ -531,6 +531,10 @@ def test_rotating_the_model_rotates_the_polygon(scene, steps):
 
 @settings(max_examples=25)
 @given(scene=scenes, radius=st.floats(0.05, 0.4))
+# Found by a fresh run: a corner exactly one radius from the robot, round which GEOS drew
+# the shrink's arc of 27.24 angle steps (16 a quarter) with 27 chords, cutting 7 um inside
+# the radius: the robot, touching the corner, was mapped free (and sent along it).
+@example(scene=star_room(np.asarray([1.0, 1.0, 1.0, 1.0, 1.5, 0.34375, 1.5625, 1.0, 1.0]), 0.0), radius=0.34375)
 def test_the_body_reaches_every_point_of_the_polygon_straight(scene, radius):
     heights = [-0.9, -0.5, -0.1]
     with warnings.catch_warnings():

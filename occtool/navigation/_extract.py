@@ -47,7 +47,17 @@ InverseRange = Callable[[FloatArray, FloatArray, float], ArrayLike]
 FreeBounds = Callable[[FloatArray, FloatArray, FloatArray, float], FloatArray]
 
 #: Segments per quarter circle of the arcs the shrink draws round obstacle corners.
-SHRINK_QUAD_SEGMENTS = 16
+#: GEOS rounds the chords of each arc to the nearest whole number (``int(angle / quantum
+#: + 0.5)``, quantum = pi / 2 / quad_segs), so one chord may span up to 1.5 quanta and cut
+#: inside the arc to ``cos(0.75 quantum)`` of its radius: :func:`shrink_distance` allows
+#: for that. With 16 a quarter and one quantum a chord allowed for (``radius / cos(pi /
+#: 64)``), a chord could come 0.15 % of the radius inside it, and on a random room
+#: (tests/test_navigation.py) a robot of radius 0.344 m was mapped 7 um inside its radius
+#: of a sharp corner. 32 a quarter shrinks by ``radius / cos(3 pi / 256)``, 0.07 % more
+#: than the radius instead of 0.12 %: on the seven scenes (1k and 3k features, seed 0)
+#: IoU against the truth moved by -4e-5 to +1.6e-4, violation by under 5e-6, extraction
+#: time the same.
+SHRINK_QUAD_SEGMENTS = 32
 #: Most obstacle and exploration points a map may carry (a guard against a tiny spacing).
 MAX_POINTS = 20_000
 #: A ray whose model crossing stops at most this far (m) in front of the guarded returns
@@ -186,7 +196,7 @@ def navigation_map(
     # enough that after the shrink the free space still covers the max-range circle.
     # GEOS draws the arcs round obstacle corners with chords, which cut inside the true
     # arc: shrink by a little more than the radius so the chords keep the full radius.
-    shrink = radius / math.cos(math.pi / (4 * SHRINK_QUAD_SEGMENTS))
+    shrink = shrink_distance(radius)
     read_range = (max_range + shrink) / math.cos(math.pi / n_angles) * (1 + 1e-6) + 1e-9
     distances, slice_distances = _sweep(inverse_range, free_bounds, alpha, requested, cuts.heights, level,
                                         read_range)
@@ -229,6 +239,18 @@ def navigation_map(
         straight_line=bool(straight_line),
         return_snap=return_snap if guard is not None else 0.0,
     )
+
+
+def shrink_distance(radius: float, quad_segs: int = SHRINK_QUAD_SEGMENTS) -> float:
+    """How far to shrink the free area (GEOS ``buffer``, ``quad_segs`` chords a quarter
+    circle) so that even its chords round obstacle corners keep ``radius`` from them.
+
+    GEOS draws an arc of angle ``theta`` round a corner with ``int(theta / q + 0.5)``
+    chords of equal angle, ``q = pi / 2 / quad_segs``, or with one chord when that is 0: a
+    chord spans less than ``1.5 q`` (one chord for an arc just under ``1.5 q``), and its
+    middle lies ``cos(angle / 2)`` of the arc's radius from the corner.
+    """
+    return radius / math.cos(0.75 * math.pi / (2 * quad_segs))
 
 
 def _checked_parameters(threshold: float, max_range: float, n_angles: int, point_spacing: float | None,
