@@ -60,15 +60,13 @@ def _child_cost(command: list[str], env: dict[str, str]) -> tuple[float, float, 
     gets here) nor its resident pages are charged to the command. Without ``time``: the
     operating system's accounting of this process's children."""
     if Path(TIME).is_file():
+        from fleet import _time_v  # the bench's one reader of /usr/bin/time -v
+
         wall = time.perf_counter()
         done = subprocess.run([TIME, "-v", *command], check=True, capture_output=True, text=True, env=env, cwd=ROOT)
         wall = time.perf_counter() - wall
-        figures = {}
-        for line in done.stderr.splitlines():
-            name, _, value = line.strip().rpartition(": ")
-            figures[name] = value
-        cpu = float(figures["User time (seconds)"]) + float(figures["System time (seconds)"])
-        return cpu, wall, float(figures["Maximum resident set size (kbytes)"]) / 1024
+        figures = _time_v(done.stderr)
+        return figures["user_s"] + figures["system_s"], wall, figures["peak_rss_mb"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     wall = time.perf_counter()
     subprocess.run(command, check=True, capture_output=True, env=env, cwd=ROOT)
