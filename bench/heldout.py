@@ -1,7 +1,7 @@
 """An independent held-out score of ``occtool map`` on a CARMEN log (issue 20).
 
 Written to share no code with occtool's model, fusion, grids or scoring: numpy and scipy
-only, its own CARMEN parser, split, ray traversal, grids, Nav2 reader and AUC. occtool is
+only (and Pillow for a PNG map image), its own CARMEN parser, split, ray traversal, grids, Nav2 reader and AUC. occtool is
 run as a user runs it, ``python -m occtool -q map TRAIN.log -o DIR ...`` in a subprocess,
 and its outputs are read from disk. The only occtool names imported are
 ``occtool.errors.InputError`` (one-line errors) and, to read ``DIR/world.occmap`` when the
@@ -24,12 +24,15 @@ Protocol:
   ``occtool.fuse.load_map(path).predict`` at ``z = LASER_Z`` (the laser's plane in
   occtool's world frame: CARMEN poses lie at z 0 and heights count from the sensor), when
   both exist; (b) ``DIR/map.yaml`` + its PGM as ``map_server`` loads them (occupied 1,
-  free 0, unknown 0.5), with where the returns and free points fall; (c) textbook 2D
+  free 0, unknown 0.5), with where the returns and free points fall, and the same for a
+  second run with ``--nav2-mode scale`` (its PNG's graded cells read as map_server's
+  ``cell / 100``, transparent unknown 0.5); (c) textbook 2D
   log-odds grids of the training scans at 0.05 and 0.1 m (each cell updated once a scan:
   ``l_occ`` where a beam of the scan returns, else ``l_free`` where one crosses; clamped
   after every scan; free rays to 5 m as ``--no-return-range 5``; unseen 0.5), with the
   issue's setting and tuned on an inner split of the training scans (same protocol, held
-  out from the training scans only); bytes: the cells of the training box at a byte each;
+  out from the training scans only), and the tuned grid saved as a trinary and as a scale
+  Nav2 map (map_saver's thresholds; unseen cells unknown); bytes: the cells of the training box at a byte each;
   (d) minus the distance to the nearest training return (scipy's cKDTree), bytes: the
   returns as two float32 each.
 
@@ -326,11 +329,38 @@ def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2:
         raise InputError(f"{yaml_path}: not a readable map_server map ({exc})") from None
     if len(origin) != 3 or not resolution > 0 or mode not in ("trinary", "scale"):
         raise InputError(f"{yaml_path}: origin must be [x, y, yaw], resolution positive, mode trinary or scale")
-    grey = read_pgm(image)
+    opaque = None
+    if image.suffix.lower() == ".png":
+        grey, alpha = read_png(image)
+        if alpha is not None and mode == "trinary":
+            grey = (3.0 * grey + alpha) / 4.0  # map_server averages alpha in with the colours
+        elif alpha is not None:
+            opaque = alpha == 255.0
+    else:
+        grey = read_pgm(image)
     p = grey / 255.0 if negate else (255.0 - grey) / 255.0
-    between = 0.5 if mode == "trinary" else np.clip((p - free_thresh) / (occupied_thresh - free_thresh), 0, 1)
+    between = 0.5 if mode == "trinary" else np.rint(
+        100.0 * (p - free_thresh) / (occupied_thresh - free_thresh)) / 100.0
     value = np.where(p > occupied_thresh, 1.0, np.where(p < free_thresh, 0.0, between))
+    if opaque is not None:
+        value = np.where(opaque, value, 0.5)  # scale mode: a transparent pixel is unknown
     return Nav2(np.ascontiguousarray(value[::-1]), resolution, (origin[0], origin[1], origin[2]))
+
+
+def read_png(path: Path) -> tuple[FloatArray, FloatArray | None]:
+    """A PNG image's brightness (the mean of its colour channels, 0-255, row 0 the top) and
+    its alpha, if it has one."""
+    try:
+        from PIL import Image
+    except ImportError:
+        raise InputError(f"{path}: reading a PNG map needs Pillow") from None
+    try:
+        with Image.open(path) as image:
+            image.load()
+            alpha = np.asarray(image.getchannel("A"), dtype=np.float64) if "A" in image.getbands() else None
+            return np.asarray(image.convert("RGB"), dtype=np.float64).mean(axis=-1), alpha
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable PNG ({exc})") from None
 
 
 # ----------------------------------------------------------------------------- textbook grids
@@ -472,6 +502,13 @@ def textbook_rows(train: Scans, xy: FloatArray, n_occupied: int, seed: int) -> l
                      "auc": auc(trinary[:n_occupied], trinary[n_occupied:]),
                      "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution,
                      "note": f"map_saver's thresholds: occupied above {SAVER_OCCUPIED:g}, free below {SAVER_FREE:g}"})
+        # ... and as a scale map, loaded back: cells between the thresholds graded in hundredths.
+        graded = np.rint(100.0 * (p - SAVER_FREE) / (SAVER_OCCUPIED - SAVER_FREE)) / 100.0
+        scale = np.where(p == 0.5, 0.5, np.where(p > SAVER_OCCUPIED, 1.0, np.where(p < SAVER_FREE, 0.0, graded)))
+        rows.append({"model": f"textbook grid {resolution:g} m, tuned, saved as a scale Nav2 map",
+                     "nav2_scale_of_grid": True, "auc": auc(scale[:n_occupied], scale[n_occupied:]),
+                     "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution,
+                     "note": f"map_saver's scale thresholds {SAVER_OCCUPIED:g} / {SAVER_FREE:g}, unseen cells unknown"})
     return rows
 
 
@@ -487,11 +524,11 @@ def _time_v(stderr: str) -> dict[str, float]:
     return out
 
 
-def run_map(train_log: Path, out: Path) -> dict[str, Any]:
+def run_map(train_log: Path, out: Path, extra: tuple[str, ...] = ()) -> dict[str, Any]:
     """Run ``python -m occtool -q map TRAIN -o OUT ...`` (one thread a library) and time it."""
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
            "MKL_NUM_THREADS": "1"}
-    command = [sys.executable, "-m", "occtool", "-q", "map", str(train_log), "-o", str(out), *MAP_OPTIONS]
+    command = [sys.executable, "-m", "occtool", "-q", "map", str(train_log), "-o", str(out), *MAP_OPTIONS, *extra]
     timer = ["/usr/bin/time", "-v"] if Path("/usr/bin/time").is_file() else []
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
@@ -499,7 +536,7 @@ def run_map(train_log: Path, out: Path) -> dict[str, Any]:
     wall = time.perf_counter() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     figures: dict[str, Any] = {"command": " ".join(["python", "-m", "occtool", "-q", "map", "TRAIN.log", "-o", "DIR",
-                                                    *MAP_OPTIONS]),
+                                                    *MAP_OPTIONS, *extra]),
                                "exit_status": done.returncode, "wall_s": wall,
                                "user_s": after.ru_utime - before.ru_utime, "system_s": after.ru_stime - before.ru_stime,
                                "peak_rss_kb": float(after.ru_maxrss)}
@@ -533,9 +570,13 @@ def fused_row(out: Path, xy: FloatArray, n_occupied: int) -> dict[str, Any]:
             "cpu_s": time.process_time() - started, "note": ""}
 
 
-def nav2_row(out: Path, xy: FloatArray, n_occupied: int) -> dict[str, Any]:
+SCALE_ROW = "Nav2 scale map (--nav2-mode scale: map.yaml + map.png, map_server's rules)"
+
+
+def nav2_row(out: Path, xy: FloatArray, n_occupied: int,
+             model: str = "Nav2 map (map.yaml + map.pgm, map_server's rules)") -> dict[str, Any]:
     """(b): the Nav2 map as map_server loads it, and where the test points fall on it."""
-    row: dict[str, Any] = {"model": "Nav2 map (map.yaml + map.pgm, map_server's rules)"}
+    row: dict[str, Any] = {"model": model}
     if not (out / "map.yaml").is_file():
         return {**row, "auc": None, "bytes": None, "note": "not available: occtool map wrote no map.yaml"}
     nav2 = read_nav2(out / "map.yaml")
@@ -544,7 +585,7 @@ def nav2_row(out: Path, xy: FloatArray, n_occupied: int) -> dict[str, Any]:
     image = out / _yaml_scalars((out / "map.yaml").read_text(encoding="utf-8"))["image"]
     return {**row, "auc": auc(returns, free), "bytes": image.stat().st_size, "note": "",
             "returns_on_occupied": float(np.mean(returns == 1.0)), "returns_on_free": float(np.mean(returns == 0.0)),
-            "returns_on_unknown": float(np.mean((returns != 0.0) & (returns != 1.0))),
+            "returns_on_unknown": float(np.mean((returns != 0.0) & (returns != 1.0))),  # or graded (scale)
             "free_points_on_occupied": float(np.mean(free == 1.0)),
             "free_points_on_unknown": float(np.mean((free != 0.0) & (free != 1.0)))}
 
@@ -577,6 +618,10 @@ def score_log(path: str | os.PathLike[str], seed: int = 0, keep: str | os.PathLi
         rows = [fused_row(out, xy, n), nav2_row(out, xy, n)] if not command["exit_status"] else [
             {"model": name, "auc": None, "bytes": None, "note": f"not available: occtool map failed: {command['error']}"}
             for name in ("fused map (world.occmap, load_map().predict)", "Nav2 map (map.yaml + map.pgm, map_server's rules)")]
+        scale_command = run_map(train_log, scratch / "map-scale", ("--nav2-mode", "scale"))
+        rows.append(nav2_row(scratch / "map-scale", xy, n, SCALE_ROW) if not scale_command["exit_status"] else
+                    {"model": SCALE_ROW, "auc": None, "bytes": None,
+                     "note": f"not available: occtool map --nav2-mode scale failed: {scale_command['error']}"})
     finally:
         if keep is None:
             shutil.rmtree(scratch, ignore_errors=True)
@@ -606,7 +651,8 @@ def markdown(result: dict[str, Any]) -> str:
         elif "returns_on_occupied" in row:
             note = (f"returns on occupied / free / unknown {row['returns_on_occupied']:.1%} / "
                     f"{row['returns_on_free']:.1%} / {row['returns_on_unknown']:.1%}; free points on occupied "
-                    f"{row['free_points_on_occupied']:.1%}, on unknown {row['free_points_on_unknown']:.1%}; bytes: the PGM")
+                    f"{row['free_points_on_occupied']:.1%}, on unknown or graded {row['free_points_on_unknown']:.1%}; "
+                    "bytes: the image")
         else:
             note = row.get("note", "")
         lines.append(f"| {row['model']} | {value} | {size} | {note} |")
@@ -650,7 +696,7 @@ def heldout_targets(data: dict[str, Any] | None,
     """Issue 20's targets, from this scorer's figures (and the whole-log time of ``log_map``)."""
     out: list[tuple[str, str, bool | None]] = []
     for result in (data or {}).get("logs", []):
-        world, nav2 = _row(result, "fused map"), _row(result, "Nav2 map")
+        world, nav2, scale = _row(result, "fused map"), _row(result, "Nav2 map"), _row(result, "Nav2 scale map")
         grids = [r for r in result["rows"] if r["model"].endswith("tuned on the training scans")]
         grid_05 = next((r for r in grids if r["resolution"] == 0.05), None)
         grid_1 = next((r for r in grids if r["resolution"] == 0.1), None)
@@ -669,6 +715,13 @@ def heldout_targets(data: dict[str, Any] | None,
                     f"{nav2['auc']:.4f} vs {grid_05['auc']:.4f}" + (
                         f" (that grid saved as a Nav2 map: {saved_05['auc']:.4f})" if saved_05 else ""),
                     nav2["auc"] >= grid_05["auc"]))
+        if scale is not None:
+            saved_scale = next((r for r in result["rows"] if r.get("nav2_scale_of_grid") and r["resolution"] == 0.05),
+                               None)
+            out.append((f"{name}: Nav2 scale map (--nav2-mode scale) AUC >= the tuned 0.05 m textbook grid",
+                        f"{scale['auc']:.4f} vs {grid_05['auc']:.4f}" + (
+                            f" (that grid saved as a scale map: {saved_scale['auc']:.4f})" if saved_scale else ""),
+                        scale["auc"] >= grid_05["auc"]))
     for row in (log_map or {}).get("whole_log", []):
         if row.get("exit_status") or row.get("keyframe_share") is not None:
             continue

@@ -213,26 +213,39 @@ def layer_collections(run: RunMap, *, simplify: float | None = None, precision: 
     }
 
 
-def output_paths(folder: str | os.PathLike[str]) -> list[Path]:
+#: The Nav2 map's modes (map_server's): three values, or the fused occupancy graded.
+NAV2_MODES = ("trinary", "scale")
+
+
+def output_paths(folder: str | os.PathLike[str], nav2_mode: str = "trinary") -> list[Path]:
     folder = Path(folder)
-    return [folder / name for name in ("world.occmap", "map.yaml", "map.pgm", "map.mcap", "navigation.geojson",
+    image = "map.png" if nav2_mode == "scale" else "map.pgm"
+    return [folder / name for name in ("world.occmap", "map.yaml", image, "map.mcap", "navigation.geojson",
                                        "obstacles.geojson", "frontiers.geojson", "summary.json")]
 
 
 def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bool = True,
                   simplify: float | None = None, precision: int | None = None, mcap: bool = True,
-                  georeference: Any | None = None, extra_summary: dict[str, Any] | None = None) -> list[Path]:
+                  georeference: Any | None = None, extra_summary: dict[str, Any] | None = None,
+                  nav2_mode: str = "trinary") -> list[Path]:
     """Write the world map (``world.occmap``), the Nav2 map, the Foxglove MCAP, the GeoJSON
     layers and ``summary.json`` into ``folder`` (created if missing). Every file is written
-    completely or not at all, and everything is computed before the first file is written."""
-    from occtool.fuse._occmap import encode
-    from occtool.io.nav2 import write_nav2
+    completely or not at all, and everything is computed before the first file is written.
 
+    ``nav2_mode``: ``"trinary"`` writes ``map.pgm`` (free / occupied / unknown), ``"scale"``
+    ``map.png`` with the fused occupancy graded (needs Pillow)."""
+    from occtool.fuse._occmap import encode
+    from occtool.io.nav2 import _pillow, write_nav2, write_nav2_scale
+
+    if nav2_mode not in NAV2_MODES:
+        raise InputError(f"nav2_mode must be one of {', '.join(NAV2_MODES)}, got {nav2_mode!r}")
+    if nav2_mode == "scale":
+        _pillow("nav2_mode='scale' (a PNG map)")  # reported before any file is written
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{folder} exists and is not a folder")
     if not overwrite:
-        for path in output_paths(folder):
+        for path in output_paths(folder, nav2_mode):
             if path.exists():
                 raise FileExistsError(f"{path} exists already (pass overwrite=True to replace it)")
     layers = layer_collections(run, simplify=simplify, precision=precision, georeference=georeference)
@@ -248,8 +261,12 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
     with atomic_write(folder / "world.occmap", "wb", overwrite=overwrite) as handle:
         handle.write(world_bytes)
     written = [folder / "world.occmap"]
-    written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, folder / "map.yaml",
-                              overwrite=overwrite))
+    if nav2_mode == "scale":
+        written += list(write_nav2_scale(run.raster.graded(), run.raster.resolution, run.raster.origin,
+                                         folder / "map.yaml", overwrite=overwrite))
+    else:
+        written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, folder / "map.yaml",
+                                  overwrite=overwrite))
     if mcap_bytes is not None:
         with atomic_write(folder / "map.mcap", "wb", overwrite=overwrite) as handle:
             handle.write(mcap_bytes)
@@ -266,4 +283,5 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
     return written
 
 
-__all__ = ["LAYERS", "PlacedMap", "RunMap", "layer_collections", "map_of_run", "output_paths", "write_run_map"]
+__all__ = ["LAYERS", "NAV2_MODES", "PlacedMap", "RunMap", "layer_collections", "map_of_run", "output_paths",
+           "write_run_map"]

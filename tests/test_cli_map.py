@@ -63,6 +63,45 @@ def test_nav2_map_puts_walls_where_they_are(mapped):
     assert cell(1.0, y1 + 1.5) == CELL_UNKNOWN
 
 
+def test_scale_nav2_map_grades_what_the_trinary_map_rounds(mapped, tmp_path):
+    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
+
+    log, trinary_out = mapped
+    out = tmp_path / "scale"
+    result = run("map", log, "-o", out, *LASER, "--nav2-mode", "scale", "--no-mcap")
+    assert result.exit_code == 0, result.output
+    assert (out / "map.png").is_file() and not (out / "map.pgm").exists()
+    scale, trinary = read_nav2(out / "map.yaml"), read_nav2(trinary_out / "map.yaml")
+    assert scale.mode == "scale" and scale.cells.shape == trinary.cells.shape and scale.origin == trinary.origin
+    # Unknown only where nothing observed: never where the trinary map says free or occupied.
+    assert not (scale.cells == CELL_UNKNOWN)[trinary.cells != CELL_UNKNOWN].any()
+    # Graded cells between free and occupied (a wall's edge, free space far from positions).
+    assert ((scale.cells > 0) & (scale.cells < 100)).any()
+
+    def cell(x, y):
+        i = int(np.floor((x - scale.origin[0]) / scale.resolution))
+        j = int(np.floor((y - scale.origin[1]) / scale.resolution))
+        inside = 0 <= j < scale.cells.shape[0] and 0 <= i < scale.cells.shape[1]
+        return scale.cells[j, i] if inside else CELL_UNKNOWN
+
+    _x0, _y0, _x1, y1 = ROOM
+    assert CELL_OCCUPIED in (cell(1.0, y1 - 0.02), cell(1.0, y1 + 0.02))
+    assert cell(1.0, 0.25) == CELL_FREE and cell(1.0, y1 + 0.15) != CELL_FREE
+
+
+def test_scale_mode_without_pillow_is_one_line_before_any_work(mapped, tmp_path, monkeypatch):
+    import sys
+
+    log, _ = mapped
+    monkeypatch.setitem(sys.modules, "PIL", None)  # import PIL now raises ImportError
+    result = CliRunner().invoke(cli, ["-q", "map", str(log), "-o", str(tmp_path / "out"), *LASER,
+                                      "--nav2-mode", "scale"])
+    assert result.exit_code != 0
+    message = result.output.strip()
+    assert len(message.splitlines()) == 1 and "--nav2-mode scale" in message and "occtool[png]" in message
+    assert not (tmp_path / "out").exists()
+
+
 def test_geojson_layers_hold_one_geometry_type_each(mapped):
     _, out = mapped
     for name, kind in (("navigation", "Polygon"), ("obstacles", "Point"), ("frontiers", "Point")):
@@ -221,3 +260,21 @@ def test_plot_map_draws_the_folder(mapped, tmp_path):
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["path"]) == summary["positions"]
+
+
+def test_plot_map_draws_a_scale_map_in_greys(mapped, tmp_path):
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    log, _ = mapped
+    out = tmp_path / "scale"
+    assert run("map", log, "-o", out, *LASER, "--nav2-mode", "scale", "--no-mcap").exit_code == 0
+    picture = tmp_path / "picture.png"
+    result = run("plot", "map", out, "-o", picture, "--size", "400,400px")
+    assert result.exit_code == 0, result.output
+    with Image.open(picture) as image:
+        pixels = np.asarray(image.convert("RGB")).reshape(-1, 3).astype(int)
+    grey = (pixels[:, 0] == pixels[:, 1]) & (pixels[:, 1] == pixels[:, 2])
+    # Graded cells in greys other than black and white; unknown in pale blue, not grey.
+    assert (grey & (pixels[:, 0] > 20) & (pixels[:, 0] < 235)).any()
+    assert (np.abs(pixels - [199, 217, 237]).max(axis=1) <= 3).any()

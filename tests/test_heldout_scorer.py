@@ -49,6 +49,19 @@ def test_nav2_reader_against_occtools_writer(tmp_path):
     np.testing.assert_array_equal(loaded.lookup(points), [1.0, 0.0, 0.5, 0.5])
 
 
+def test_nav2_reader_of_a_scale_png_against_occtools_writer(tmp_path):
+    from occtool.io.nav2 import write_nav2_scale
+
+    occupancy = np.array([[0.1, 0.45, 0.9], [np.nan, 0.2, 0.3]])
+    write_nav2_scale(occupancy, 0.5, (0.0, 0.0), tmp_path / "map.yaml")
+    loaded = heldout.read_nav2(tmp_path / "map.yaml")
+    # map_server's cell / 100: free below 0.25, occupied above 0.65, between graded in
+    # hundredths of the way (the PNG holds p to 1/255), transparent unknown.
+    assert loaded.value[0, 0] == 0.0 and loaded.value[0, 2] == 1.0 and loaded.value[1, 0] == 0.5
+    assert loaded.value[0, 1] == pytest.approx(0.5, abs=0.011) and loaded.value[1, 1] == 0.0
+    assert loaded.value[1, 2] == pytest.approx(0.125, abs=0.011)
+
+
 def test_nav2_reader_follows_negate_and_thresholds(tmp_path):
     (tmp_path / "m.pgm").write_bytes(b"P5\n# c\n3 1\n255\n" + bytes([0, 128, 255]))
     (tmp_path / "m.yaml").write_text("image: m.pgm\nresolution: 1\norigin: [0, 0, 0]\nnegate: 1\n"

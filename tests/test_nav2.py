@@ -81,3 +81,100 @@ def test_a_pgm_of_the_wrong_size_is_an_input_error(tmp_path_factory, width, heig
         assert width * height == 0 or len(body) < width * height
         return
     assert loaded.cells.shape == (height, width)
+
+
+def test_scale_map_by_map_server_rules(tmp_path):
+    from occtool.io.nav2 import write_nav2_scale
+
+    occupancy = np.array([[0.1, 0.3, 0.45], [0.9, np.nan, 1.0]], dtype=np.float32)
+    yaml_path, image = write_nav2_scale(occupancy, 0.05, (-1.0, 0.5), tmp_path / "map.yaml")
+    assert image.name == "map.png"
+    loaded = read_nav2(yaml_path)
+    assert (loaded.mode, loaded.occupied_thresh, loaded.free_thresh) == ("scale", 0.65, 0.25)
+    # map_server: p < 0.25 free, p > 0.65 occupied, between rint(100 (p - 0.25) / 0.4); the
+    # PNG holds p to 1/255, so a graded cell may move by one.
+    assert loaded.cells[0, 0] == CELL_FREE
+    assert abs(int(loaded.cells[0, 1]) - 12.5) <= 1.5 and abs(int(loaded.cells[0, 2]) - 50) <= 1
+    assert loaded.cells[1, 0] == CELL_OCCUPIED and loaded.cells[1, 2] == CELL_OCCUPIED
+    assert loaded.cells[1, 1] == CELL_UNKNOWN
+
+
+def test_scale_map_is_rgba_with_the_origin_in_the_last_row(tmp_path):
+    from PIL import Image
+
+    from occtool.io.nav2 import write_nav2_scale
+
+    occupancy = np.zeros((3, 2), dtype=np.float32)
+    occupancy[0, 0] = 1.0  # the cell at the origin (lower left)
+    occupancy[2, 1] = np.nan
+    write_nav2_scale(occupancy, 0.1, (0.0, 0.0), tmp_path / "map.yaml")
+    with Image.open(tmp_path / "map.png") as image:
+        # map_saver writes scale maps as true colour with alpha (GraphicsMagick's grey + alpha
+        # loads badly), its first row the top of the map.
+        assert image.mode == "RGBA"
+        pixels = np.asarray(image)
+    assert tuple(pixels[-1, 0]) == (0, 0, 0, 255) and tuple(pixels[0, 1])[3] == 0
+    assert tuple(pixels[0, 0]) == (255, 255, 255, 255)
+
+
+@given(st.lists(st.one_of(st.floats(0.0, 1.0), st.just(float("nan"))), min_size=1, max_size=30))
+def test_scale_map_keeps_occupied_free_and_unknown(tmp_path_factory, values):
+    from occtool.io.nav2 import write_nav2_scale
+
+    folder = tmp_path_factory.mktemp("scale")
+    occupancy = np.array(values, dtype=np.float64).reshape(1, -1)
+    write_nav2_scale(occupancy, 0.05, (0.0, 0.0), folder / "map.yaml")
+    cells = read_nav2(folder / "map.yaml").cells[0]
+    # Within the PNG's 1/255 of the thresholds a cell may load either way; past it, never.
+    assert (cells[occupancy[0] > 0.65 + 1 / 255] == CELL_OCCUPIED).all()
+    assert (cells[occupancy[0] < 0.25 - 1 / 255] == CELL_FREE).all()
+    assert ((cells == CELL_UNKNOWN) == np.isnan(occupancy[0])).all()
+
+
+def test_scale_writer_refuses_bad_occupancy(tmp_path):
+    from occtool.io.nav2 import write_nav2_scale
+
+    with pytest.raises(InputError, match=r"\[0, 1\]"):
+        write_nav2_scale(np.full((2, 2), 1.5), 0.05, (0, 0), tmp_path / "map.yaml")
+    with pytest.raises(InputError):
+        write_nav2_scale(np.zeros((2, 2), dtype=np.uint8), 0.05, (0, 0), tmp_path / "map.yaml")
+    assert not list(tmp_path.iterdir())
+
+
+def test_an_unread_mode_is_an_input_error(tmp_path):
+    write_nav2(np.full((2, 2), 254, dtype=np.uint8), 0.05, (0.0, 0.0), tmp_path / "map.yaml")
+    text = (tmp_path / "map.yaml").read_text().replace("mode: trinary", "mode: raw")
+    (tmp_path / "map.yaml").write_text(text)
+    with pytest.raises(InputError, match="raw"):
+        read_nav2(tmp_path / "map.yaml")
+
+
+@given(st.binary(max_size=80))
+def test_any_broken_png_is_an_input_error(tmp_path_factory, data):
+    folder = tmp_path_factory.mktemp("fuzz")
+    (folder / "map.yaml").write_text("image: map.png\nmode: scale\nresolution: 0.05\norigin: [0, 0, 0]\n"
+                                     "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
+    # Behind PNG's signature, so that the bytes reach the decoder.
+    (folder / "map.png").write_bytes(b"\x89PNG\r\n\x1a\n" + data)
+    try:
+        loaded = read_nav2(folder / "map.yaml")
+    except InputError:
+        return
+    assert loaded.cells.dtype == np.int8
+
+
+def test_a_png_too_large_to_decode_is_refused_from_its_header(tmp_path):
+    import struct
+    import zlib
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    # A header and a sliver of data: 8,000 x 8,000 RGBA pixels would inflate to 256 MB.
+    header = struct.pack(">IIBBBBB", 8_000, 8_000, 8, 6, 0, 0, 0)
+    (tmp_path / "map.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+                                       + chunk(b"IDAT", zlib.compress(b"\0" * 64)))
+    (tmp_path / "map.yaml").write_text("image: map.png\nmode: scale\nresolution: 0.05\norigin: [0, 0, 0]\n"
+                                       "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
+    with pytest.raises(InputError, match="over 50,000,000 cells"):
+        read_nav2(tmp_path / "map.yaml")

@@ -28,6 +28,10 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
               help="Output folder (created if missing).")
 @click.option("--resolution", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.05,
               show_default=True, help="Cell size of the Nav2 map and the Foxglove grid, metres.")
+@click.option("--nav2-mode", type=click.Choice(["trinary", "scale"]), default="trinary", show_default=True,
+              help="The Nav2 map's mode: trinary writes map.pgm (free / occupied / unknown); scale writes "
+                   "map.png with the fused occupancy graded between free and occupied, unknown transparent "
+                   "(needs Pillow: the png extra).")
 @click.option("--threshold", type=float, default=0.6, show_default=True, callback=_occupancy,
               help="Fused occupancy at or above which a cell is occupied, in (0, 1).")
 @click.option("--keyframe-share", type=click.FloatRange(min=0.0, max=1.0), default=0.05, show_default=True,
@@ -52,14 +56,15 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 @seed_option
 @overwrite_option
 @config_option
-def map_command(source: str, output: str, resolution: float, threshold: float, keyframe_share: float,
+def map_command(source: str, output: str, resolution: float, nav2_mode: str, threshold: float, keyframe_share: float,
                 combination: str, max_range: float,
                 simplify: float | None, precision: int | None, origin: str | None, mcap: bool, seed: int,
                 overwrite: bool,
                 **kwargs: Any) -> None:
     """Fuse every robot position of LOG (fitted here with the fit options) or of MODELS (a
     folder written by `occtool fit LOG -o MODELS/`) into one world-frame map and write, in
-    the output folder: map.yaml + map.pgm (Nav2 map_server, trinary), map.mcap (Foxglove:
+    the output folder: map.yaml + map.pgm (Nav2 map_server, trinary; map.png with --nav2-mode
+    scale), world.occmap (the world map, for occtool query), map.mcap (Foxglove:
     foxglove.Grid on /map, foxglove.SceneUpdate per position on /positions), the GeoJSON
     layers navigation.geojson (polygons), obstacles.geojson and frontiers.geojson (points),
     and summary.json.
@@ -88,8 +93,14 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
         except InputError as exc:
             raise click.BadParameter(str(exc), param_hint="--origin") from None
         georeference.to_lonlat([[0.0, 0.0]])  # a missing pyproj is reported before any work
+    if nav2_mode == "scale":
+        try:
+            import PIL  # noqa: F401  (checked before the fit, not after it)
+        except ImportError:
+            raise click.ClickException("--nav2-mode scale writes a PNG and needs Pillow: "
+                                       "pip install 'occtool[png]'") from None
     if not overwrite:
-        for path in output_paths(output):
+        for path in output_paths(output, nav2_mode):
             if path.exists():
                 raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
     if Path(output).exists() and not Path(output).is_dir():
@@ -125,7 +136,7 @@ def map_command(source: str, output: str, resolution: float, threshold: float, k
     if registration is not None:
         extra["registration"] = registration.to_dict()
     written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
-                            georeference=georeference, extra_summary=extra)
+                            georeference=georeference, extra_summary=extra, nav2_mode=nav2_mode)
     written += [p for p in [write_map_poses(registration, output, overwrite)] if p is not None]
     summary = run.summary()
     logger.info("fused map: %d positions, %.1f KB; world map %s: %d wall segments, %.1f KB; raster %dx%d: %s",

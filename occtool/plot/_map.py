@@ -43,26 +43,26 @@ def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndar
 
 def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SIZE, dpi: float = 100.0,
                title: str | None = None, path: bool = True, frontiers: bool = True, walls: bool = False) -> Any:
-    """Free (white), occupied (black) and unknown (grey) cells in the map frame, the run's
+    """Free (white), occupied (black) and unknown (grey; pale blue in a scale map, whose graded
+    cells are greys) cells in the map frame, the run's
     path (blue), the frontier points (green) and (``walls``) the world map's wall
     segments, from ``world.occmap``, red where every position that saw them returned from
     them and paler as more saw through them."""
-    from matplotlib.colors import ListedColormap
-
-    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED
+    from occtool.io.nav2 import CELL_UNKNOWN
     from occtool.plot import new_figure
 
     nav2, run_path, frontier_points = read_map_folder(folder)
     figure = new_figure(size, dpi)
     axes = figure.add_subplot(1, 1, 1)
     rows, cols = nav2.cells.shape
-    shade = np.full(nav2.cells.shape, 1, dtype=np.int8)
-    shade[nav2.cells == CELL_FREE] = 2
-    shade[nav2.cells == CELL_OCCUPIED] = 0
+    # Grey from white (free, 0) to black (occupied, 100); a scale map's graded cells between.
+    # Unknown: mid grey in a trinary map, pale blue in a scale map, whose greys are taken.
+    grey = 1.0 - np.clip(nav2.cells, 0, 100).astype(np.float32) / 100.0
+    rgb = np.repeat(grey[:, :, None], 3, axis=2)
+    rgb[nav2.cells == CELL_UNKNOWN] = (0.75, 0.75, 0.75) if nav2.mode != "scale" else (0.78, 0.85, 0.93)
     x0, y0 = nav2.origin[0], nav2.origin[1]
     extent = (x0, x0 + cols * nav2.resolution, y0, y0 + rows * nav2.resolution)
-    axes.imshow(shade, origin="lower", extent=extent, interpolation="nearest",
-                cmap=ListedColormap(["black", "0.75", "white"]), vmin=0, vmax=2)
+    axes.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
     if path and run_path:
         xy = np.asarray(run_path, dtype=np.float64).reshape(-1, 2)
         axes.plot(xy[:, 0], xy[:, 1], color="tab:blue", linewidth=0.8, label="path")
