@@ -84,7 +84,8 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     axes.set_xlabel("x (m, map)")
     axes.set_ylabel("y (m, map)")
     axes.set_title(title if title is not None else
-                   f"{Path(folder).name}: free / occupied / unknown at {nav2.resolution:g} m")
+                   f"{Path(folder).name}: free / occupied / unknown at {nav2.resolution:g} m"
+                   + (", graded (scale)" if nav2.mode == "scale" else ""))
     if axes.get_legend_handles_labels()[0]:
         axes.legend(loc="upper right", fontsize="small")
     return figure
