@@ -26,11 +26,16 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
-#: Most candidate pairs (query, point) looked at in one block. A block's dozen temporaries
-#: of this many entries stay within the core's cache and are reused from the heap block
-#: after block (narrow aisle, 10k features: 1 << 20 pairs touched 8,200 fresh pages in the
-#: first fit of a process, 1 << 15 3,600; that fit took 134 -> 108 ms CPU, median of 6).
+#: Candidate pairs (query, point) looked at in one block: at least PAIR_BLOCK, more when
+#: there would be over MAX_BLOCKS blocks, at most PAIR_BLOCK_MAX. Small blocks' dozen
+#: temporaries stay within the core's cache and are reused from the heap block after
+#: block (narrow aisle, 10k features, 304k pairs: 1 << 20 a block touched 8,200 fresh
+#: pages in the first fit of a process, 1 << 15 3,600; that fit took 134 -> 108 ms CPU,
+#: median of 6); a million features' tens of millions of pairs take large blocks, whose
+#: per-block overhead 1 << 15 made 5-15 % of the fit.
 PAIR_BLOCK = 1 << 15
+PAIR_BLOCK_MAX = 1 << 20
+MAX_BLOCKS = 32
 #: Most pairs (point, point) :func:`nearest_other_distance` compares all at once.
 BRUTE_FORCE_PAIRS = 1 << 18
 #: Most queries in one block.
@@ -103,12 +108,13 @@ class NeighbourIndex:
         order, first, last = self._candidates(x)
         x = x[order]
         per_query = (last - first).sum(axis=1)
-        # Blocks of queries with at most PAIR_BLOCK candidates (one query alone may have more).
+        # Blocks of queries with at most `pairs` candidates (one query alone may have more).
         running = np.cumsum(per_query)
+        pairs = min(PAIR_BLOCK_MAX, max(PAIR_BLOCK, int(running[-1]) // MAX_BLOCKS))
         start = 0
         while start < m:
             before = running[start - 1] if start else 0
-            stop = max(start + 1, int(np.searchsorted(running, before + PAIR_BLOCK, side="right")))
+            stop = max(start + 1, int(np.searchsorted(running, before + pairs, side="right")))
             stop = min(stop, start + ROW_BLOCK)
             self._query_block(x[start:stop], order[start:stop], first[start:stop], last[start:stop], k,
                               bound * bound, distance, index)

@@ -29,8 +29,10 @@ SIGHT_HEIGHT_SHARE = 0.02
 #: Rays per bin tested against each feature at most (an even subsample beyond that), so
 #: the test stays linear in the number of features.
 SIGHT_MAX_RAYS = 128
-#: Features of the line-of-sight test evaluated at once.
-SIGHT_BLOCK = 1 << 16
+#: Features of the line-of-sight test evaluated at once: their pairs' temporaries stay in
+#: the cache and are reused from the heap block after block (1 << 16 made them fresh pages
+#: every fit: the narrow aisle's first fit touched 540 more, of 3,800).
+SIGHT_BLOCK = 1 << 10
 
 
 #: Buckets per key of :class:`SortedRays`' search table: at least SEARCH_BUCKETS, up to
