@@ -14,7 +14,6 @@ import inspect
 import logging
 import math
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -351,7 +350,7 @@ class OccupancyRegressor:
                                 self.level, reach=SPREAD_SHARE * spacing)
         # The line-of-sight index served the screen and the guard; the samples need none of
         # it (at 10M features it holds 250 MB).
-        screen = replace(screen, sight=None)
+        screen = screen.without_sight()
         origin = screen.origin
         keep: NDArray[np.intp] | None = None
         if step > 1:
