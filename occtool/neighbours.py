@@ -38,7 +38,7 @@ PAIR_BLOCK_MAX = 1 << 20
 MAX_BLOCKS = 32
 #: Most pairs (point, point) :func:`nearest_other_distance` compares all at once.
 BRUTE_FORCE_PAIRS = 1 << 18
-#: Most queries in one block.
+#: Most queries in one block: at most 1 << 16, a block's query numbers are sorted as 16-bit keys.
 ROW_BLOCK = 1 << 16
 #: Cells per dimension at most (wider cells beyond: the keys stay within 64 bits).
 MAX_CELLS = 1 << 14
