@@ -288,39 +288,35 @@ class Support:
         share = steep and int(needed.max()) <= STEEP_CANDIDATES and points.shape[0] <= SHARED_QUERY_POINTS
         k = int(min(STEEP_CANDIDATES if share else needed.max(), self.tree.n))
         if share:
-            order, distance, index = self._query(points, k)
-            within = np.empty(points.shape[0], dtype=np.intp)
-            within[order] = np.isfinite(distance).sum(axis=1)
-            return within >= needed, _rows_back(order, distance, index)
+            distance, index = self._query(points, k)
+            within = np.isfinite(distance).sum(axis=1)
+            return within >= needed, (distance, index)
         # Only the counts are kept: a block at a time bounds the (n, k) answers (10M
         # features asked 1.1M points for 21 neighbours at once: 370 MB).
         within = np.empty(points.shape[0], dtype=np.intp)
         for first in range(0, points.shape[0], SUPPORT_QUERY_BLOCK):
             block = slice(first, first + SUPPORT_QUERY_BLOCK)
-            order, distance, _ = self._query(points[block], k)
-            within[block][order] = np.isfinite(distance).sum(axis=1)
+            distance, _ = self._query(points[block], k)
+            within[block] = np.isfinite(distance).sum(axis=1)
         return within >= needed, None
 
-    def _query(self, points: FloatArray, k: int) -> tuple[NDArray[np.intp], FloatArray, NDArray[np.intp]]:
-        """Each of ``points``' ``k`` nearest support points within reach: the order the
-        points were asked in, and for ``points[order]`` the ``(n, k)`` distances (``inf``
-        beyond reach) and indices.
+    def _query(self, points: FloatArray, k: int) -> tuple[FloatArray, NDArray[np.intp]]:
+        """Each of ``points``' ``k`` nearest support points within reach: the ``(n, k)``
+        distances (``inf`` beyond reach) and indices, a row per point in the points' order.
 
-        The index asks them in the order of its cells itself (:mod:`occtool.neighbours`);
-        they are taken in their own order (the strips of pan angle they were sorted into
-        served cKDTree's walk of its tree), and each point's answer is its own whatever
-        the order.
+        The index asks them in the order of its cells itself (:mod:`occtool.neighbours`),
+        and each point's answer is its own whatever the order. (The rows were once copied
+        back from an order of strips of pan angle that served cKDTree's walk of its tree:
+        with the points' own order that copy was two fresh (n, k) arrays a fit.)
         """
-        order = np.arange(points.shape[0])
-        distance, index = self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
-        return order, distance, index
+        return self.tree.query(self._embedded(points), k=k, distance_upper_bound=1.0)
 
     def steep_neighbours(self, points: ArrayLike) -> tuple[FloatArray, NDArray[np.intp]]:
         """The query :meth:`seen_from_above` makes of ``points`` (a nonempty support):
         their :data:`STEEP_CANDIDATES` nearest support points within reach, ``(n, k)``
         distances (``inf`` beyond reach) and indices."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return _rows_back(*self._query(points, int(min(STEEP_CANDIDATES, self.tree.n))))
+        return self._query(points, int(min(STEEP_CANDIDATES, self.tree.n)))
 
     def seen_from_above(self, points: ArrayLike,
                         neighbours: tuple[FloatArray, NDArray[np.intp]] | None = None) -> NDArray[np.bool_]:
@@ -350,15 +346,6 @@ class Support:
         row = 0.5 * self.spacing * np.linalg.norm(points, axis=1)
         steep = found & (rise >= row[:, None]) & (run <= STEEP_SLOPE * rise)
         return steep.sum(axis=1) < STEEP_NEIGHBOURS
-
-
-def _rows_back(order: NDArray[np.intp], distance: FloatArray,
-               index: NDArray[np.intp]) -> tuple[FloatArray, NDArray[np.intp]]:
-    """A :meth:`Support._query` answer with its rows in the points' own order."""
-    back_distance, back_index = np.empty_like(distance), np.empty_like(index)
-    back_distance[order] = distance
-    back_index[order] = index
-    return back_distance, back_index
 
 
 #: Neighbours searched for returns of the same steep surface (:meth:`Support.seen_from_above`).

@@ -49,17 +49,17 @@ SAMPLE_KINDS: dict[str, int] = {"hit": 0, "near": 1, "robot": 2, "floor": 3, "fo
 FLOOR_MODES = ("free", "drop", "obstacle")
 
 
-@dataclass(frozen=True, eq=False)
 class SampleBlock:
     """Samples of one origin (:meth:`SensorModel._sample_blocks`): pan angle, height and
     range per sample; value, weight and kind per sample or one for the whole block."""
 
-    alpha: FloatArray
-    h: FloatArray
-    r: FloatArray
-    m: FloatArray | float
-    weight: FloatArray | float
-    kind: NDArray[np.integer[Any]] | int
+    # A plain class, not a dataclass: each dataclass made was about 1 ms of a fresh
+    # process's import, for a record only the fit builds and reads.
+    __slots__ = ("alpha", "h", "r", "m", "weight", "kind")
+
+    def __init__(self, alpha: FloatArray, h: FloatArray, r: FloatArray, m: FloatArray | float,
+                 weight: FloatArray | float, kind: NDArray[np.integer[Any]] | int) -> None:
+        self.alpha, self.h, self.r, self.m, self.weight, self.kind = alpha, h, r, m, weight, kind
 
     def __len__(self) -> int:
         return int(self.alpha.shape[0])

@@ -46,6 +46,7 @@ def test_a_nearer_bound_and_small_blocks_change_nothing(monkeypatch):
     index = NeighbourIndex(points, reach=2.0)
     whole = index.query(queries, k=8, distance_upper_bound=1.5)
     monkeypatch.setattr(neighbours, "PAIR_BLOCK", 50)  # a block per query, or a few
+    monkeypatch.setattr(neighbours, "MAX_BLOCKS", 1 << 30)  # (no wider blocks for many pairs)
     blocked = index.query(queries, k=8, distance_upper_bound=1.5)
     np.testing.assert_array_equal(whole[0], blocked[0])
     np.testing.assert_array_equal(whole[0], cKDTree(points).query(queries, k=8, distance_upper_bound=1.5)[0])

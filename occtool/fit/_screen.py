@@ -8,7 +8,6 @@ the pan origin the fit's angle bins start at, and which returns the return guard
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,16 +37,22 @@ GUARD_TEST_CHUNK = 16
 SUPPORT_HEIGHT_REACH = 0.5
 
 
-@dataclass(frozen=True)
 class Screen:
     """What the fit and the return guard know of the features before any sample is made."""
 
-    obstacle: NDArray[np.bool_]
-    origin: float
-    planar: bool
-    mismatch: NDArray[np.bool_]
-    #: The line-of-sight test's index of the features (built by the first test that needs it).
-    sight: SightIndex | None = None
+    # A plain class, not a dataclass: each dataclass made was about 1 ms of a fresh
+    # process's import, for a record only the fit builds and reads.
+    __slots__ = ("obstacle", "origin", "planar", "mismatch", "sight")
+
+    def __init__(self, obstacle: NDArray[np.bool_], origin: float, planar: bool, mismatch: NDArray[np.bool_],
+                 sight: SightIndex | None = None) -> None:
+        self.obstacle, self.origin, self.planar, self.mismatch = obstacle, origin, planar, mismatch
+        #: The line-of-sight test's index of the features (built by the first test that needs it).
+        self.sight = sight
+
+    def without_sight(self) -> Screen:
+        """The same screen without its line-of-sight index."""
+        return Screen(self.obstacle, self.origin, self.planar, self.mismatch)
 
 
 def screen_features(features: Features, sensor: SensorModel, robot: Robot, *, basis: str, focus: bool,

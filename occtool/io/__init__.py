@@ -33,9 +33,7 @@ GeoJSON writers.
 
 from __future__ import annotations
 
-import bz2
 import contextlib
-import gzip
 import os
 import zlib
 from collections.abc import Iterator, Sequence
@@ -66,10 +64,15 @@ def _head(path: Path, size: int = 4096) -> bytes:
     with open(path, "rb") as raw:
         start = raw.read(4)
     try:
+        # gzip and bz2 imported for a compressed file only (a few ms of every fresh fit).
         if start[:2] == b"\x1f\x8b":
+            import gzip
+
             with gzip.open(path, "rb") as handle:
                 return handle.read(size)
         if start[:3] == b"BZh":
+            import bz2
+
             with bz2.open(path, "rb") as handle:
                 return handle.read(size)
     except (OSError, EOFError) as exc:
@@ -89,12 +92,15 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     FileNotFoundError
         If the file does not exist.
     """
-    from occtool.io.depth_folders import depth_layout
-
     target = Path(path)
-    layout = depth_layout(target)  # a folder of depth frames, or its depth.txt / camera-intrinsics.txt
-    if layout is not None:
-        return layout
+    # A folder of depth frames, or its depth.txt / camera-intrinsics.txt: only those names
+    # and folders are looked at (depth_folders' import is a few ms of every fresh fit).
+    if target.name in ("depth.txt", "camera-intrinsics.txt") or target.is_dir():
+        from occtool.io.depth_folders import depth_layout
+
+        layout = depth_layout(target)
+        if layout is not None:
+            return layout
     if target.is_dir():
         raise InputError(f"{target} is a folder, not a range log")
     head = _head(target)
@@ -316,7 +322,7 @@ def _checked_options(
     if topics and fmt not in ("mcap", "rosbag"):
         raise InputError(f"topics= applies to MCAP logs only, and {path} is {fmt}")
     no_return_range = check_no_return_range(no_return_range)
-    from occtool.io.depth import check_depth_features, check_depth_max_range, check_depth_noise
+    from occtool.io.read_options import check_depth_features, check_depth_max_range, check_depth_noise
 
     options: ReadOptions = dict(
         topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import secrets
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -63,7 +62,9 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "w", *, overwrite: bo
         # arriving just after the file exists (between mkstemp's return and a try, as a
         # loaded machine showed once) still finds its name and removes it.
         for _ in range(TEMP_ATTEMPTS):
-            tmp_name = str(directory / f"{prefix}{secrets.token_hex(4)}.tmp")
+            # os.urandom is what secrets.token_hex reads (whose import, with random and hmac, is
+            # a few ms of every fresh command that writes a file).
+            tmp_name = str(directory / f"{prefix}{os.urandom(4).hex()}.tmp")
             try:
                 fd = os.open(tmp_name, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
                 break

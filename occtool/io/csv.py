@@ -18,7 +18,6 @@ import logging
 import os
 import warnings
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
 from typing import IO
 
 import numpy as np
@@ -48,17 +47,17 @@ def _content(line: str) -> str:
     return line.split("#", 1)[0].strip()
 
 
-@dataclass(frozen=True)
 class _Layout:
     """Which column holds what, found from the header row."""
 
-    header_line: int
-    names: tuple[str, ...]
-    xyz: tuple[int, int, int]
-    evidence: int | None
-    position: int | None
-    pose: tuple[int, int, int | None, int] | None
-    stamp: int | None
+    # A plain class, not a dataclass: each dataclass made was about 1 ms of a fresh
+    # process's import, for a record only this module builds and reads.
+    __slots__ = ("header_line", "names", "xyz", "evidence", "position", "pose", "stamp")
+
+    def __init__(self, header_line: int, names: tuple[str, ...], xyz: tuple[int, int, int], evidence: int | None,
+                 position: int | None, pose: tuple[int, int, int | None, int] | None, stamp: int | None) -> None:
+        self.header_line, self.names, self.xyz = header_line, names, xyz
+        self.evidence, self.position, self.pose, self.stamp = evidence, position, pose, stamp
 
     @property
     def used(self) -> tuple[int, ...]:

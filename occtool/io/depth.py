@@ -49,7 +49,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.io.read_options import DEFAULT_DEPTH_FEATURES, DEFAULT_DEPTH_MAX_RANGE, DEFAULT_DEPTH_NOISE
+from occtool.io.read_options import (  # the checks live with the defaults: read_log needs them, not this module
+    DEFAULT_DEPTH_FEATURES,
+    DEFAULT_DEPTH_MAX_RANGE,
+    DEFAULT_DEPTH_MIN_RANGE,
+    DEFAULT_DEPTH_NOISE,
+    check_depth_features,
+    check_depth_max_range,
+    check_depth_noise,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -58,7 +66,6 @@ FloatArray = NDArray[np.float64]
 #: ``camera_optical_frame``.
 OPTICAL_TO_BODY = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 #: Nearest depth taken as a measurement, metres (below: invalid).
-DEFAULT_DEPTH_MIN_RANGE = 0.1
 #: The sensor model's relative hit band (``SensorModel.depth_error``'s default).
 HIT_BAND = 0.03
 #: Lowest evidence a depth return gets (evidence 0 is a free-only ray).
@@ -148,40 +155,6 @@ def noise_evidence(depth: ArrayLike, noise: float = DEFAULT_DEPTH_NOISE) -> Floa
     with np.errstate(divide="ignore"):
         m = erf(HIT_BAND / (math.sqrt(2.0) * noise * z))
     return np.clip(m, MIN_EVIDENCE, 1.0)
-
-
-def check_depth_noise(value: float) -> float:
-    """``noise`` of :func:`noise_evidence`: a finite number of metres per square metre in [0, 1]."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"depth noise must be a number in [0, 1] (metres per square metre), got {value!r}") from None
-    if not 0.0 <= number <= 1.0:
-        raise InputError(f"depth noise must be a number in [0, 1] (metres per square metre), got {value!r}")
-    return number
-
-
-def check_depth_max_range(value: float) -> float:
-    """The farthest depth taken as a return: a finite number of metres > the minimum range, bounded."""
-    from occtool.limits import MAX_DISTANCE
-
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"depth max range must be a number of metres, got {value!r}") from None
-    if not DEFAULT_DEPTH_MIN_RANGE < number <= MAX_DISTANCE:
-        raise InputError(f"depth max range must lie in ({DEFAULT_DEPTH_MIN_RANGE:g}, {MAX_DISTANCE:g}] metres, "
-                         f"got {value!r}")
-    return number
-
-
-def check_depth_features(value: int) -> int:
-    """The per-frame feature budget: a whole number in [1, MAX_FEATURES]."""
-    from occtool.limits import MAX_FEATURES
-
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 1 <= int(value) <= MAX_FEATURES:
-        raise InputError(f"depth features must be a whole number in [1, {MAX_FEATURES:,}] a frame, got {value!r}")
-    return int(value)
 
 
 @dataclass

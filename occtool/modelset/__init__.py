@@ -25,23 +25,55 @@ match, so a killed run resumes where it stopped.
 """
 
 
-from occtool.modelset._common import (
-    Failure,
-    ProgressEvent,
-    SetSummary,
-    find_model_sets,
-    log_set_name,
-    read_set_state,
-)
-from occtool.modelset._extract import extract_model_set, navigation_map_of_file
-from occtool.modelset._fit import (
-    estimator_for_log,
-    fit_model_set,
-    settings_digest,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+# public name -> module that defines it, imported on first use (PEP 562): a single fit
+# needs estimator_for_log and settings_digest alone, not the model sets' machinery.
+_LAZY: dict[str, str] = {
+    "Failure": "occtool.modelset._common",
+    "ProgressEvent": "occtool.modelset._common",
+    "SetSummary": "occtool.modelset._common",
+    "find_model_sets": "occtool.modelset._common",
+    "log_set_name": "occtool.modelset._common",
+    "read_set_state": "occtool.modelset._common",
+    "extract_model_set": "occtool.modelset._extract",
+    "navigation_map_of_file": "occtool.modelset._extract",
+    "fit_model_set": "occtool.modelset._fit",
+    "estimator_for_log": "occtool.modelset._settings",
+    "settings_digest": "occtool.modelset._settings",
+}
 
 __all__ = [
     "Failure", "ProgressEvent", "SetSummary", "estimator_for_log", "extract_model_set", "find_model_sets",
     "fit_model_set",
     "log_set_name", "navigation_map_of_file", "read_set_state", "settings_digest",
 ]
+
+if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checkers and IDEs
+    from occtool.modelset._common import (
+        Failure,
+        ProgressEvent,
+        SetSummary,
+        find_model_sets,
+        log_set_name,
+        read_set_state,
+    )
+    from occtool.modelset._extract import extract_model_set, navigation_map_of_file
+    from occtool.modelset._fit import fit_model_set
+    from occtool.modelset._settings import estimator_for_log, settings_digest
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'occtool.modelset' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

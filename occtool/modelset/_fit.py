@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import json
 import os
 import stat
 import time
@@ -25,27 +23,9 @@ from occtool.modelset._common import (
     log,
     log_set_name,
 )
+from occtool.modelset._settings import _GeometrySurvey, estimator_for_log, settings_digest  # noqa: F401 - estimator_for_log re-exported
 
 # --- settings and reuse -------------------------------------------------------------------
-
-def settings_digest(estimator: Any) -> str:
-    """sha256 of everything besides the features that decides a model's bytes: the fit
-    parameters, sensor model, robot and occtool's version."""
-    from occtool import __version__
-    from occtool.robot import Robot
-    from occtool.sensor import SensorModel
-
-    params = {k: v for k, v in estimator.get_params().items() if k not in ("progress", "sensor", "robot")}
-    sensor = estimator.sensor if estimator.sensor is not None else SensorModel()
-    robot = estimator.robot if estimator.robot is not None else Robot()
-    content = {
-        "fit": params,
-        "sensor": sensor.to_dict(),
-        "robot": {k: float(getattr(robot, k)) for k in ("radius", "sensor_height", "body_height", "ground_clearance")},
-        "occtool": __version__,
-    }
-    return hashlib.sha256(json.dumps(content, sort_keys=True, default=repr).encode()).hexdigest()
-
 
 def _reusable(target: Path, digest: str, settings: str) -> bool:
     """Whether ``target`` is a readable model of these features fitted with these settings."""
@@ -130,87 +110,6 @@ class _HeldLog:
 
     def __iter__(self) -> Iterator[Any]:
         return iter(self.positions)
-
-
-class _GeometrySurvey:
-    """What :func:`estimator_for_log` needs to know of a log's positions, gathered one
-    position at a time: their count, whether all are planar, and for the estimator's robot
-    and a planar laser's the first position with geometry findings and how many have some."""
-
-    def __init__(self, estimator: Any, planar_defaults: bool) -> None:
-        from dataclasses import replace
-
-        from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
-
-        self.estimator = estimator
-        self.planar_defaults = planar_defaults
-        robot = estimator.robot if estimator.robot is not None else Robot()
-        self.robots = {"given": robot}
-        if planar_defaults:
-            self.robots["planar"] = replace(robot, sensor_height=PLANAR_LASER_SENSOR_HEIGHT,
-                                            body_height=PLANAR_LASER_BODY_HEIGHT)
-        self.count = 0
-        self.all_planar = True
-        self.first: dict[str, tuple[int, list[str]] | None] = dict.fromkeys(self.robots)
-        self.flagged: dict[str, int] = dict.fromkeys(self.robots, 0)
-
-    def add(self, position: Any) -> None:
-        from occtool.sensor import geometry_findings, is_planar
-
-        self.count += 1
-        if self.planar_defaults and self.all_planar:
-            self.all_planar = is_planar(position.features)
-        for name, robot in self.robots.items():
-            if name == "planar" and not self.all_planar:
-                continue  # its findings are read only for a log planar throughout
-            findings = geometry_findings(position.features, robot)
-            if findings:
-                self.flagged[name] += 1
-                if self.first[name] is None:
-                    self.first[name] = (position.index, findings)
-
-    def result(self) -> Any:
-        """The estimator for the log (logging what :func:`estimator_for_log` logs)."""
-        from occtool.fit import DEFAULT_FOCUS_RANGE, PLANAR_FOCUS_RANGE
-
-        estimator = self.estimator
-        name = "given"
-        if self.planar_defaults and self.count and self.all_planar:
-            name = "planar"
-            robot = self.robots[name]
-            params = {**estimator.get_params(deep=False), "robot": robot}
-            if params.get("focus_range") == DEFAULT_FOCUS_RANGE:
-                params["focus_range"] = PLANAR_FOCUS_RANGE
-            estimator = type(estimator)(**params)
-            log.info("a planar laser log: sensor height %g m, body height %g m, focus range %g m",
-                     robot.sensor_height, robot.body_height, estimator.focus_range)
-        first, flagged = self.first[name], self.flagged[name]
-        if first is not None:
-            index, findings = first
-            where = f"position {index}: " if self.count > 1 else ""
-            more = f" (and {flagged - 1} more position(s))" if flagged > 1 else ""
-            for finding in findings:
-                log.warning("%s%s%s", where, finding, more)
-        return estimator
-
-
-def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False) -> Any:
-    """The estimator a log's positions are fitted with, and a warning for each place the
-    data and the sensor geometry disagree.
-
-    With ``planar_defaults``, a log whose returns all lie in one plane (a 2D laser, as
-    CARMEN logs) gets a planar scanner's robot (:data:`occtool.robot.PLANAR_LASER_SENSOR_HEIGHT`,
-    ``..._BODY_HEIGHT``) instead of the estimator's, and, unless the estimator's focus range
-    is other than the default, a laser's (:data:`occtool.fit.PLANAR_FOCUS_RANGE`): the
-    command line does so unless the user gave a sensor or body height. Each finding of
-    :func:`occtool.sensor.geometry_findings` is logged as one warning (the first position's,
-    with a count of the others that have findings too). ``positions`` may be any iterable
-    read once (a :func:`occtool.io.iter_positions` stream): nothing of it is held.
-    """
-    survey = _GeometrySurvey(estimator, planar_defaults)
-    for position in positions:
-        survey.add(position)
-    return survey.result()
 
 
 def _chosen(stream: Any, positions: Sequence[int] | None) -> Iterator[Any]:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,24 +41,25 @@ def _scratch_buffers(count: int, shape: tuple[int, ...]) -> list[FloatArray]:
     return [buffer[:size].reshape(shape) for buffer in pool[:count]]
 
 
-@dataclass(frozen=True)
 class _Leaves:
     """Step of a compiled inverse tree: the MIN or MAX (``op``) of the sibling pieces
     ``pieces``, which share their ``h``/``m`` part ``rest``, written into ``buffer``."""
 
-    pieces: NDArray[np.intp]
-    op: str
-    rest: int
-    buffer: int
+    # A plain class, not a dataclass, as the other steps: each dataclass made was about
+    # 1 ms of a fresh process's import (four here), for records only this module reads.
+    __slots__ = ("pieces", "op", "rest", "buffer")
+
+    def __init__(self, pieces: NDArray[np.intp], op: str, rest: int, buffer: int) -> None:
+        self.pieces, self.op, self.rest, self.buffer = pieces, op, rest, buffer
 
 
-@dataclass(frozen=True)
 class _Reduce:
     """Step of a compiled inverse tree: ``buffers[target] = op(buffers[target], buffers[source])``."""
 
-    op: str
-    target: int
-    source: int
+    __slots__ = ("op", "target", "source")
+
+    def __init__(self, op: str, target: int, source: int) -> None:
+        self.op, self.target, self.source = op, target, source
 
 
 
@@ -136,28 +136,24 @@ def _within_turn(angle: FloatArray, start: FloatArray, width: FloatArray) -> NDA
     return within
 
 
-@dataclass(frozen=True)
 class _Rows:
     """Step of a :class:`_RowProgram`: ``buffers[buffer] = op`` over the piece rows ``start:stop``."""
 
-    op: str
-    start: int
-    stop: int
-    buffer: int
+    __slots__ = ("op", "start", "stop", "buffer")
+
+    def __init__(self, op: str, start: int, stop: int, buffer: int) -> None:
+        self.op, self.start, self.stop, self.buffer = op, start, stop, buffer
 
 
-@dataclass(frozen=True)
 class _Groups:
     """Step of a :class:`_RowProgram`: ``buffers[buffer] = op`` over ``groups`` groups of
     ``size`` consecutive piece rows from ``start``, each reduced by ``inner`` first (into
     ``buffers[buffer + 1]``)."""
 
-    op: str
-    inner: str
-    start: int
-    groups: int
-    size: int
-    buffer: int
+    __slots__ = ("op", "inner", "start", "groups", "size", "buffer")
+
+    def __init__(self, op: str, inner: str, start: int, groups: int, size: int, buffer: int) -> None:
+        self.op, self.inner, self.start, self.groups, self.size, self.buffer = op, inner, start, groups, size, buffer
 
 
 def _consecutive_runs(pieces: list[int]) -> list[tuple[int, int]]:
