@@ -242,3 +242,48 @@ def test_points_are_judged_by_their_direction() -> None:
     assert result.exploration_accuracy == pytest.approx(2 / 3)
     plain = evaluate_navigation(shapely.Polygon(), scene, max_range=1.5)
     assert plain.obstacle_accuracy is None and "obstacle_accuracy" not in plain.to_dict()
+
+
+def test_the_blind_radius_is_where_the_lowest_ray_meets_the_obstacles_top():
+    from occtool.evaluate import blind_radius
+
+    robot = Robot()  # sensor 1 m up, body 0.05-1.0 m
+    down, up = math.radians(-50.0), math.radians(30.0)
+    pallet = box("pallet", 0.5, -0.2, 1.0, 0.2, 0.0, 0.15)
+    assert blind_radius(pallet, robot, tilt_range=(down, up)) == pytest.approx(0.85 / math.tan(math.radians(50.0)))
+    # Taller than the sensor: the horizontal ray sees it at any distance, beyond the minimum range.
+    wall = box("wall", 0.5, -1.0, 0.6, 1.0, 0.0, 2.5)
+    assert blind_radius(wall, robot, tilt_range=(down, up)) == 0.0
+    assert blind_radius(wall, robot, tilt_range=(down, up), min_range=0.2) == 0.0
+    # Hanging above the sensor, it is seen by rays tilted up only.
+    lamp = box("lamp", 0.5, -0.1, 0.7, 0.1, 1.2, 1.5)
+    tall = Robot(body_height=1.6)
+    assert blind_radius(lamp, tall, tilt_range=(down, up)) == pytest.approx(0.2 / math.tan(up))
+    assert blind_radius(lamp, tall, tilt_range=(down, 0.0)) == math.inf
+
+
+def test_the_violation_splits_into_what_the_sensor_could_see_and_its_blind_zone():
+    from occtool.evaluate import observable_footprints, violation_by_observability
+
+    # A pallet 0.15 m high from 0.55 to 1.0 m ahead: a camera tilting down to -50 degrees
+    # from 1 m sees its top from 0.713 m on; the 0.16 m in front of that are blind.
+    robot = Robot()
+    scene = Scene((box("pallet", 0.55, -0.1, 1.0, 0.1, 0.0, 0.15),), robot, "pallet", "")
+    field = {"tilt_range": (math.radians(-50.0), math.radians(30.0)), "min_range": 0.2}
+    (_, seen), = observable_footprints(scene, **field)
+    reach = 0.85 / math.tan(math.radians(50.0))  # 0.713 m
+    # The disk's edge meets the pallet's sides (y = +-0.1) nearest.
+    assert seen.bounds[0] == pytest.approx(math.sqrt(reach**2 - 0.1**2), abs=1e-4) and seen.bounds[2] == 1.0
+    # Within the radius of the blind front only, more than the radius from the seen part.
+    blind = shapely.box(0.31, -0.05, 0.41, 0.05)
+    assert violation_by_observability(blind, scene, **field) == pytest.approx(
+        {"violation": 1.0, "observable": 0.0, "unobservable": 1.0})
+    # Beside the seen part, 2-12 cm from it.
+    beside = shapely.box(0.75, 0.12, 0.85, 0.22)
+    assert violation_by_observability(beside, scene, **field) == pytest.approx(
+        {"violation": 1.0, "observable": 1.0, "unobservable": 0.0})
+    # A third of each and a third clear; the full violation is evaluate_navigation's.
+    both = shapely.union_all([blind, beside, shapely.box(-0.5, -0.05, -0.4, 0.05)])
+    split = violation_by_observability(both, scene, **field)
+    assert split["observable"] == pytest.approx(1 / 3) and split["unobservable"] == pytest.approx(1 / 3)
+    assert split["violation"] == pytest.approx(evaluate_navigation(both, scene, max_range=1.5).violation)
