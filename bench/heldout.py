@@ -26,7 +26,8 @@ Protocol:
   both exist; (b) ``DIR/map.yaml`` + its PGM as ``map_server`` loads them (occupied 1,
   free 0, unknown 0.5), with where the returns and free points fall, and the same for a
   second run with ``--nav2-mode scale`` (its PNG's graded cells read as map_server's
-  ``cell / 100``, transparent unknown 0.5); (c) textbook 2D
+  ``cell / 100``, transparent unknown 0.5; and, as a diagnostic of what map_server's
+  saturation at its thresholds costs, the PNG's pixels read as occupancy before them); (c) textbook 2D
   log-odds grids of the training scans at 0.05 and 0.1 m (each cell updated once a scan:
   ``l_occ`` where a beam of the scan returns, else ``l_free`` where one crosses; clamped
   after every scan; free rays to 5 m as ``--no-return-range 5``; unseen 0.5), with the
@@ -311,10 +312,12 @@ def read_pgm(path: Path) -> NDArray[np.float64]:
     return (grey * (255.0 / maxval)).reshape(height, width)
 
 
-def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2:
+def read_nav2(yaml_path: str | os.PathLike[str], thresholds: bool = True) -> Nav2:
     """``map.yaml`` and its image with map_server's rules: ``p = (255 - v) / 255`` (``v / 255``
     with ``negate``), occupied where ``p > occupied_thresh``, free where ``p < free_thresh``;
-    between: unknown (``trinary``) or ``(p - free) / (occupied - free)`` (``scale``)."""
+    between: unknown (``trinary``) or ``(p - free) / (occupied - free)`` (``scale``).
+    ``thresholds=False``: ``p`` itself (a scale map's transparent pixels 0.5), what the image
+    holds before map_server's thresholds saturate it."""
     yaml_path = Path(yaml_path)
     try:
         fields = _yaml_scalars(yaml_path.read_text(encoding="utf-8"))
@@ -341,7 +344,7 @@ def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2:
     p = grey / 255.0 if negate else (255.0 - grey) / 255.0
     between = 0.5 if mode == "trinary" else np.rint(
         100.0 * (p - free_thresh) / (occupied_thresh - free_thresh)) / 100.0
-    value = np.where(p > occupied_thresh, 1.0, np.where(p < free_thresh, 0.0, between))
+    value = np.where(p > occupied_thresh, 1.0, np.where(p < free_thresh, 0.0, between)) if thresholds else p
     if opaque is not None:
         value = np.where(opaque, value, 0.5)  # scale mode: a transparent pixel is unknown
     return Nav2(np.ascontiguousarray(value[::-1]), resolution, (origin[0], origin[1], origin[2]))
@@ -583,6 +586,9 @@ def nav2_row(out: Path, xy: FloatArray, n_occupied: int,
     v = nav2.lookup(xy)
     returns, free = v[:n_occupied], v[n_occupied:]
     image = out / _yaml_scalars((out / "map.yaml").read_text(encoding="utf-8"))["image"]
+    if image.suffix.lower() == ".png":  # a scale map: what its pixels rank before the thresholds
+        pixels = read_nav2(out / "map.yaml", thresholds=False).lookup(xy)
+        row["pixel_auc"] = auc(pixels[:n_occupied], pixels[n_occupied:])
     return {**row, "auc": auc(returns, free), "bytes": image.stat().st_size, "note": "",
             "returns_on_occupied": float(np.mean(returns == 1.0)), "returns_on_free": float(np.mean(returns == 0.0)),
             "returns_on_unknown": float(np.mean((returns != 0.0) & (returns != 1.0))),  # or graded (scale)
@@ -652,7 +658,8 @@ def markdown(result: dict[str, Any]) -> str:
             note = (f"returns on occupied / free / unknown {row['returns_on_occupied']:.1%} / "
                     f"{row['returns_on_free']:.1%} / {row['returns_on_unknown']:.1%}; free points on occupied "
                     f"{row['free_points_on_occupied']:.1%}, on unknown or graded {row['free_points_on_unknown']:.1%}; "
-                    "bytes: the image")
+                    "bytes: the image" + (f"; its pixels read as occupancy before map_server's thresholds: AUC "
+                                          f"{row['pixel_auc']:.4f}" if row.get("pixel_auc") is not None else ""))
         else:
             note = row.get("note", "")
         lines.append(f"| {row['model']} | {value} | {size} | {note} |")
@@ -720,7 +727,9 @@ def heldout_targets(data: dict[str, Any] | None,
                                None)
             out.append((f"{name}: Nav2 scale map (--nav2-mode scale) AUC >= the tuned 0.05 m textbook grid",
                         f"{scale['auc']:.4f} vs {grid_05['auc']:.4f}" + (
-                            f" (that grid saved as a scale map: {saved_scale['auc']:.4f})" if saved_scale else ""),
+                            f" (that grid saved as a scale map: {saved_scale['auc']:.4f})" if saved_scale else "") + (
+                            f"; its pixels before map_server's thresholds {scale['pixel_auc']:.4f}"
+                            if scale.get("pixel_auc") is not None else ""),
                         scale["auc"] >= grid_05["auc"]))
     for row in (log_map or {}).get("whole_log", []):
         if row.get("exit_status") or row.get("keyframe_share") is not None:

@@ -60,6 +60,10 @@ def test_nav2_reader_of_a_scale_png_against_occtools_writer(tmp_path):
     assert loaded.value[0, 0] == 0.0 and loaded.value[0, 2] == 1.0 and loaded.value[1, 0] == 0.5
     assert loaded.value[0, 1] == pytest.approx(0.5, abs=0.011) and loaded.value[1, 1] == 0.0
     assert loaded.value[1, 2] == pytest.approx(0.125, abs=0.011)
+    # Before the thresholds: the pixels' own occupancy (to 1/255), transparent still 0.5.
+    pixels = heldout.read_nav2(tmp_path / "map.yaml", thresholds=False).value
+    assert pixels[0] == pytest.approx([0.1, 0.45, 0.9], abs=0.003)
+    assert pixels[1] == pytest.approx([0.5, 0.2, 0.3], abs=0.003)
 
 
 def test_nav2_reader_follows_negate_and_thresholds(tmp_path):
