@@ -17,8 +17,9 @@ so ``import occtool`` (and ``occtool --help``) loads neither numpy nor scipy::
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from occtool._lazy import lazy_attributes
 
 # The one version source: pyproject.toml reads it ([tool.setuptools.dynamic]).
 __version__ = "0.1.0"
@@ -73,14 +74,4 @@ if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checke
     from occtool.robot import Robot
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'occtool' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())

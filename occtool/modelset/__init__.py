@@ -27,8 +27,9 @@ match, so a killed run resumes where it stopped.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from occtool._lazy import lazy_attributes
 
 # public name -> module that defines it, imported on first use (PEP 562): a single fit
 # needs estimator_for_log and settings_digest alone, not the model sets' machinery.
@@ -66,14 +67,4 @@ if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checke
     from occtool.modelset._settings import estimator_for_log, settings_digest
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'occtool.modelset' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
