@@ -97,7 +97,10 @@ def test_a_255_character_output_name_is_written_and_a_longer_one_is_one_line(csv
 # --- real processes: signals, ulimit, closed stdout ------------------------------------------------
 
 SLOW_WRITER = """
-import os, sys, time
+import os, signal, sys, time
+# Ctrl-C as in a terminal: a shell's background job (nohup, `&`) starts with SIGINT ignored,
+# and Python then keeps ignoring it.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 real_fsync = os.fsync
 def slow_fsync(fd):  # atomic_write syncs the temporary file before renaming it
     open(sys.argv[1], "w").close()   # the temporary file is written: tell the test
