@@ -65,6 +65,25 @@ def test_seen_through_counts_positions_whose_beams_passed_in_front_of_their_retu
     assert seen_through(middle, poses, ranges, margin=0.1, reach=0.5).tolist() == [0, 0, 0, 0]
 
 
+def test_a_wall_seen_from_one_side_faces_it():
+    rng = np.random.default_rng(1)
+    x = rng.uniform(0.0, 0.6, 300)
+    wall = np.column_stack([x, rng.normal(0, 0.004, x.size)])
+    above = np.column_stack([rng.uniform(-1, 1, x.size), np.full(x.size, 2.0)])
+    owner = np.zeros(x.size, dtype=np.int64)
+
+    def left_of_line_is_up(seg):
+        d = (seg.end - seg.start)[0]
+        return -d[0] > 0 if abs(d[0]) < abs(d[1]) else d[0] > 0  # the normal (-dy, dx) points to +y
+
+    one = fit_segments(wall, owner, viewpoints=above, cell=2.0)
+    assert len(one) == 1 and one.facing[0] == (1 if left_of_line_is_up(one) else -1)
+    below = above * [1, -1]
+    mixed = np.where(np.arange(x.size)[:, None] % 2 == 0, above, below)
+    assert fit_segments(wall, owner, viewpoints=mixed, cell=2.0).facing.tolist() == [0]
+    assert fit_segments(wall, owner, cell=2.0).facing.tolist() == [0]  # no viewpoints: both sides
+
+
 def _square_map(**kwargs):
     """A 2 m x 2 m observed square with one trusted wall along its right side."""
     region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 2.0, 2.0)])
@@ -82,6 +101,35 @@ def test_a_wall_is_a_min_of_linear_pieces_over_the_free_level():
     # Past the end of the wall the ridge falls along it too.
     assert world.predict([[2.0, 2.1, z]])[0] == pytest.approx(0.5, abs=1e-9)  # outside the region: unknown
     assert world.predict([[1.99, 2.05, z]])[0] == pytest.approx(0.75, abs=1e-9)
+
+
+def test_a_one_sided_wall_falls_steeply_in_front_and_slowly_behind():
+    # The wall x = 2 runs from y = 0 to 2: its left, the normal (-1, 0), is the observed square.
+    front = _square_map(width=0.2, front_width=0.125, back_width=0.6, free_level=0.2, facing=[1])
+    across = np.array([0.05, 0.1])
+    inside = np.column_stack([2.0 - across, np.ones(2), np.zeros(2)])
+    outside = np.column_stack([2.0 + across, np.ones(2), np.zeros(2)])
+    assert np.allclose(front.predict(inside), np.maximum(0.2, 1.0 - (across - 0.01) / 0.125))
+    assert np.allclose(front.predict(outside), np.maximum(0.5, 1.0 - (across - 0.01) / 0.6))
+    # Facing the other way the slopes swap sides; facing both, the wall is symmetric.
+    back = _square_map(width=0.2, front_width=0.125, back_width=0.6, free_level=0.2, facing=[-1])
+    assert np.allclose(back.predict(inside), np.maximum(0.2, 1.0 - (across - 0.01) / 0.6))
+    both = _square_map(width=0.2, free_level=0.2)
+    assert np.allclose(both.predict(inside), np.maximum(0.2, 1.0 - (across - 0.01) / 0.2))
+    with pytest.raises(InputError, match="facing must hold -1, 0 or \\+1"):
+        _square_map(facing=[2])
+
+
+def test_a_segment_turned_round_by_the_file_keeps_the_side_it_faces():
+    """The file stores directions in [0, pi): a segment from +x to -x is stored turned round,
+    its facing with it, so that it answers as before."""
+    region = shapely.MultiPolygon([shapely.box(-2, -2, 2, 2)])
+    world = WorldMap([[0.5, 0.0]], [[-0.5, 0.0]], [0.01], [1.0], region, band=BAND, facing=[1])
+    coded = quantise(world)
+    assert (coded.end - coded.start)[0, 0] > 0 and coded.facing.tolist() == [-1]
+    points = np.array([[0.0, -0.15, 0.0], [0.0, 0.15, 0.0], [0.3, 0.3, 0.0]])
+    assert np.allclose(coded.predict(points), world.predict(points))
+    assert np.array_equal(decode(encode(coded)).facing, coded.facing)
 
 
 def test_free_space_reads_less_sure_away_from_the_positions():
@@ -154,7 +202,8 @@ def test_quantised_map_round_trips_bit_for_bit(tmp_path):
     start = rng.uniform(-5, 5, (50, 2))
     end = start + rng.normal(0, 0.2, (50, 2))
     region = shapely.MultiPolygon([shapely.box(-4, -4, 0, 0), shapely.Point(2, 2).buffer(1.5)])
-    world = quantise(WorldMap(start, end, rng.uniform(0, 0.03, 50), rng.uniform(0, 1, 50), region, band=BAND))
+    world = quantise(WorldMap(start, end, rng.uniform(0, 0.03, 50), rng.uniform(0, 1, 50), region, band=BAND,
+                              facing=rng.integers(-1, 2, 50)))
     path = tmp_path / "world.occmap"
     size = world.save(path)
     assert size == path.stat().st_size
@@ -162,14 +211,16 @@ def test_quantised_map_round_trips_bit_for_bit(tmp_path):
     points = np.column_stack([rng.uniform(-6, 6, 5000), rng.uniform(-6, 6, 5000), np.zeros(5000)])
     assert np.array_equal(world.predict(points), loaded.predict(points))
     assert np.array_equal(loaded.start, world.start) and loaded.params() == world.params()
+    assert np.array_equal(loaded.facing, world.facing) and (world.facing != 0).any()
     # The header and checksum are all the file adds to what predict needs.
     assert size - world.nbytes < 1000
     assert encode(loaded) == path.read_bytes()
 
 
-def test_segments_keep_their_geometry_in_eight_bytes():
+def test_segments_keep_their_geometry_in_eight_bytes_and_two_bits():
     """Middle, direction and half-length codes: ends within a few millimetres of the fitted
-    ones, a segment longer than a byte of 2 mm widens the unit instead of being cut."""
+    ones, a segment longer than a byte of 2 mm widens the unit instead of being cut; the
+    facings four to a byte."""
     rng = np.random.default_rng(5)
     start = rng.uniform(-5, 5, (200, 2))
     end = start + rng.normal(0, 0.3, (200, 2))
@@ -181,7 +232,7 @@ def test_segments_keep_their_geometry_in_eight_bytes():
     same = np.minimum(np.hypot(*(coded.start - start).T) + np.hypot(*(coded.end - end).T),
                       np.hypot(*(coded.start - end).T) + np.hypot(*(coded.end - start).T))
     assert same.max() < 0.02
-    assert coded.nbytes == 8 * 200 + 5 * 4 + 3 * 2 * 4  # a box: 5 vertices; ring, part, geometry offsets
+    assert coded.nbytes == 8 * 200 + 200 // 4 + 5 * 4 + 3 * 2 * 4  # a box: 5 vertices; ring, part, geometry offsets
     assert np.array_equal(decode(encode(coded)).end, coded.end)
 
 
@@ -208,12 +259,12 @@ def test_version_1_files_still_load_and_later_ones_are_refused():
     world = quantise(WorldMap([[0.0, 0.0]], [[1.0, 0.0]], [0.01], [1.0], shapely.MultiPolygon(), band=BAND))
     old = decode(_version_1(world), "old.occmap")
     assert np.allclose(old.start, world.start, atol=0.003) and np.allclose(old.end, world.end, atol=0.003)
-    assert old.half_unit is None and decode(encode(old)).half_unit is not None  # rewritten as version 2
+    assert old.half_unit is None and decode(encode(old)).half_unit is not None  # rewritten as version 3
     newer = _version_1(world).replace(b'"version": 1', b'"version": 9')
     import struct
     import zlib
     newer = newer[:-4] + struct.pack("<I", zlib.crc32(newer[:-4]))
-    with pytest.raises(InputError, match="format version 9, this occtool reads 1 and 2"):
+    with pytest.raises(InputError, match="format version 9, this occtool reads 1, 2 and 3"):
         decode(newer, "new.occmap")
 
 
@@ -238,6 +289,10 @@ def test_the_room_log_walls_free_inside_unknown_behind(room_map):
     assert np.allclose(p[4:7], world.free_level + world.free_slope * nearest)
     assert world.free_level == 0.1 and world.free_slope == 0.01 and len(world.positions) == len(fused)
     assert np.allclose(p[7:], 0.5)
+    # The room's walls were seen from inside only: they fall steeply into the room, slowly behind.
+    assert (world.facing != 0).mean() > 0.9
+    near = np.array([[x1 - 0.08, 0.3, 0.0], [x1 + 0.08, 0.3, 0.0]])
+    assert np.diff(world.predict(near))[0] > 0.2
     # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.
     assert world.nbytes < fused.nbytes / 10 and world.nbytes < world.grid_bytes(0.1)
     raster = world.rasterise(0.05)
@@ -260,6 +315,16 @@ def test_damaged_files_are_one_line_errors(room_map, tmp_path):
         decode(bytes(flipped))
     with pytest.raises(InputError, match="cannot read"):
         load_map(tmp_path / "absent.occmap")
+    # A facing code no writer makes, under a valid checksum.
+    import struct
+    import zlib
+
+    (header,) = struct.unpack("<I", data[8:12])
+    coded = bytearray(data[:-4])
+    coded[12 + header + 8 * len(world)] = 0xFF
+    coded += struct.pack("<I", zlib.crc32(coded))
+    with pytest.raises(InputError, match="segment arrays missing or misshapen: facing code 3"):
+        decode(bytes(coded), "world.occmap")
 
 
 @settings(max_examples=60, deadline=None)

@@ -9,12 +9,15 @@ Layout (little-endian)::
     ...       the arrays' bytes, back to back
     4 bytes   uint32 CRC-32 of everything before it
 
-Arrays (version 2): ``middles`` uint16 ``(S, 2)``, each segment's middle in units from
+Arrays (version 3): ``middles`` uint16 ``(S, 2)``, each segment's middle in units from
 ``origin``; ``directions`` uint8 ``(S,)``, its direction in [0, pi) in steps of pi/256;
 ``half_lengths`` uint8 ``(S,)`` in the header's ``half_unit`` (2 mm unless a segment is
 longer than 1.02 m); ``thickness`` and ``trust`` uint8 ``(S,)`` (millimetres,
 1/255ths): 8 bytes a segment, where its two end points took 10 in version 1 (``segments``
-uint16 ``(S, 4)``, still read); ``positions`` uint16 ``(P, 2)`` in units, the run's
+uint16 ``(S, 4)``, still read); ``facing`` uint8 ``(ceil(S / 4),)``, the side each segment
+was seen from in two bits (0 both, 1 the left of its direction, 2 the right; segment ``i``
+in bits ``2 (i mod 4)`` of byte ``i // 4``; absent in versions 1 and 2: every segment
+faces both); ``positions`` uint16 ``(P, 2)`` in units, the run's
 positions (the free level rises away from them; absent in version 1). The observed region
 as shapely's ragged arrays: ``region_coords`` uint16 ``(V, 2)`` in units and its
 ``region_offsets_*`` uint32. A map is quantised to this precision when it is built
@@ -37,9 +40,9 @@ import numpy as np
 from occtool.errors import InputError
 
 MAGIC = b"\x89OCCMAP\n"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 #: Versions :func:`decode` reads.
-READS = (1, 2)
+READS = (1, 2, 3)
 #: A segment's half-length in this unit (metres) unless one is longer than 255 of them.
 HALF_UNIT = 0.002
 #: Direction steps over [0, pi).
@@ -100,6 +103,9 @@ def quantise(world: Any, unit: float | None = None) -> Any:
 
     half_unit = _half_unit(0.5 * np.hypot(*(world.end - world.start).T))
     start, end = _segment_ends(*_segment_codes(world, origin, unit, half_unit), origin, unit, half_unit)
+    # The stored direction lies in [0, pi): a segment turned round faces the other way.
+    turned = ((world.end - world.start) * (end - start)).sum(axis=1)
+    facing = np.where(np.hypot(*(end - start).T) > 1e-12, np.sign(turned), 0).astype(np.int8) * world.facing
     thickness = np.clip(np.round(world.thickness * 1000.0), 0, 255) / 1000.0
     trust = np.clip(np.round(world.trust * 255.0), 0, 255) / 255.0
     region = world.region
@@ -109,9 +115,27 @@ def quantise(world: Any, unit: float | None = None) -> Any:
         region = _areal(shapely.transform(_areal(shapely.set_precision(region, unit)), snap))
     params = world.params()
     band = params.pop("band")
-    quantised = WorldMap(start, end, thickness, trust, region, band=band, positions=snap(world.positions), **params)
+    quantised = WorldMap(start, end, thickness, trust, region, band=band, positions=snap(world.positions),
+                         facing=facing, **params)
     quantised.unit, quantised.origin, quantised.half_unit = unit, origin, half_unit
     return quantised
+
+
+def _pack_facing(facing: np.ndarray) -> np.ndarray:
+    """Facings -1 / 0 / +1 as two-bit codes 2 / 0 / 1, four to a byte."""
+    codes = np.where(facing > 0, 1, np.where(facing < 0, 2, 0)).astype(np.uint8)
+    codes = np.concatenate([codes, np.zeros(-codes.size % 4, dtype=np.uint8)]).reshape(-1, 4)
+    return (codes << np.array([0, 2, 4, 6], dtype=np.uint8)).sum(axis=1, dtype=np.uint8)
+
+
+def _unpack_facing(packed: np.ndarray, n: int) -> np.ndarray:
+    """The inverse of :func:`_pack_facing` for ``n`` segments; ``ValueError`` on a code 3."""
+    if packed.size != -(-n // 4):
+        raise ValueError(f"{packed.size} facing bytes for {n} segments")
+    codes = ((packed[:, None] >> np.array([0, 2, 4, 6], dtype=np.uint8)) & 3).reshape(-1)[:n]
+    if (codes == 3).any():
+        raise ValueError("facing code 3")
+    return np.where(codes == 1, 1, np.where(codes == 2, -1, 0)).astype(np.int8)
 
 
 def _areal(geometry: Any) -> Any:
@@ -144,7 +168,8 @@ def _arrays(world: Any) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
     middles, steps, half = _segment_codes(world, origin, unit, half_unit)
     arrays = [("middles", middles.reshape(-1, 2)), ("directions", steps), ("half_lengths", half),
               ("thickness", np.clip(np.round(world.thickness * 1000.0), 0, 255).astype(np.uint8)),
-              ("trust", np.clip(np.round(world.trust * 255.0), 0, 255).astype(np.uint8))]
+              ("trust", np.clip(np.round(world.trust * 255.0), 0, 255).astype(np.uint8)),
+              ("facing", _pack_facing(world.facing))]
     arrays.append(("positions", units(world.positions).reshape(-1, 2)))
     region = _areal(world.region) if not world.region.is_empty else shapely.MultiPolygon()
     if not region.is_empty:
@@ -203,7 +228,7 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         raise fail("header does not name the occmap format")
     version = header.get("version")
     if version not in READS:
-        raise fail(f"format version {version!r}, this occtool reads {' and '.join(map(str, READS))}")
+        raise fail(f"format version {version!r}, this occtool reads {', '.join(map(str, READS[:-1]))} and {READS[-1]}")
     try:
         unit = float(header["unit"])
         half_unit = float(header["half_unit"]) if version >= 2 else None
@@ -237,6 +262,8 @@ def decode(data: bytes, name: str = "occmap") -> Any:
                                         arrays["half_lengths"].reshape(-1), origin, unit, half_unit)
         thickness = arrays["thickness"].astype(np.float64) / 1000.0
         trust = arrays["trust"].astype(np.float64) / 255.0
+        facing = (_unpack_facing(arrays["facing"].reshape(-1), first.shape[0]) if version >= 3
+                  else np.zeros(first.shape[0], dtype=np.int8))
     except (KeyError, ValueError) as exc:
         raise fail(f"segment arrays missing or misshapen: {exc}") from None
     region = shapely.MultiPolygon()
@@ -251,7 +278,7 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         band = settings.pop("band")
         positions = (origin + arrays["positions"].reshape(-1, 2).astype(np.float64) * unit
                      if "positions" in arrays else None)
-        world = WorldMap(first, last, thickness, trust, region, positions=positions,
+        world = WorldMap(first, last, thickness, trust, region, positions=positions, facing=facing,
                          band=(float(band[0]), float(band[1])), **{k: float(v) for k, v in settings.items()})
     except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
         raise fail(str(exc)) from None

@@ -4,8 +4,10 @@
 one line by their second moments (principal axis, its spread across the line); a cell
 whose returns do not lie on one line within ``max_thickness`` is split in four, down to
 ``min_cell``. Each segment keeps its end points (the extreme projections of its returns
-on the axis), its thickness (the returns' spread across it) and how many positions
-returned from it. Everything is done on every cell at once: a few passes of
+on the axis), its thickness (the returns' spread across it), how many positions
+returned from it and, given where each return was seen from, the side it was seen from
+(its *facing*: a wall seen from one side only hides what lies behind it, so returns
+scattered behind its line meet no free beam there). Everything is done on every cell at once: a few passes of
 ``np.unique`` and ``np.bincount``, no loop over points.
 
 :func:`seen_through` counts, per segment, the positions whose beams passed its middle
@@ -31,18 +33,23 @@ MIN_CELL = 0.04
 MAX_THICKNESS = 0.03
 #: A cell needs at least this many returns for a line; fewer at the finest side are a dot.
 MIN_RETURNS = 3
+#: A segment faces one side when at least this share of its returns were seen from it.
+FACING_SHARE = 0.9
 
 
 @dataclass
 class Segments:
     """Line pieces in the world frame: ``start``, ``end`` ``(S, 2)`` metres, ``thickness``
-    ``(S,)`` (the returns' standard deviation across the line) and ``hits`` ``(S,)`` (the
-    positions whose returns lie on it)."""
+    ``(S,)`` (the returns' standard deviation across the line), ``hits`` ``(S,)`` (the
+    positions whose returns lie on it) and ``facing`` ``(S,)``: +1 when its returns were
+    seen from the left of start -> end (the side of the normal ``(-dy, dx)``), -1 from the
+    right, 0 from both or unknown."""
 
     start: FloatArray
     end: FloatArray
     thickness: FloatArray
     hits: NDArray[np.int64]
+    facing: NDArray[np.int8]
 
     def __len__(self) -> int:
         return int(self.start.shape[0])
@@ -70,18 +77,26 @@ def _line_moments(points: FloatArray, cell: NDArray[np.intp], n_cells: int) -> t
     return count, mx, my, np.cos(theta), np.sin(theta), np.sqrt(minor)
 
 
-def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, cell: float = CELL, min_cell: float = MIN_CELL,
-                 max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS) -> Segments:
+def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: FloatArray | None = None,
+                 cell: float = CELL, min_cell: float = MIN_CELL, max_thickness: float = MAX_THICKNESS,
+                 min_returns: int = MIN_RETURNS, facing_share: float = FACING_SHARE) -> Segments:
     """Segments through world returns ``(N, 2)`` of positions ``owner`` ``(N,)``.
 
     A cell of side ``cell`` (then half, down to ``min_cell``) whose returns number at least
     ``min_returns`` and lie within ``max_thickness`` (standard deviation) of their principal
     axis becomes one segment; the returns of the other cells go on to the next, finer side.
     At the finest side every cell left is a segment, however few or scattered its returns.
+    ``viewpoints`` ``(N, 2)``: where each return was seen from (its position); a segment
+    faces the side that at least ``facing_share`` of its returns were seen from (without
+    viewpoints every segment faces both).
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     owner = np.asarray(owner, dtype=np.int64).reshape(-1)
-    starts, ends, thick, hits = [], [], [], []
+    if viewpoints is not None:
+        viewpoints = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 2)
+        if viewpoints.shape[0] != points.shape[0]:
+            raise ValueError(f"{points.shape[0]} returns need as many viewpoints, got {viewpoints.shape[0]}")
+    starts, ends, thick, hits, facing = [], [], [], [], []
     if points.shape[0]:
         origin = points.min(axis=0)
         pending = np.arange(points.shape[0])
@@ -114,13 +129,32 @@ def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, cell: float = C
                 thick.append(spread[rows])
                 pairs = np.unique(c * (int(owner.max()) + 1) + owner[pending[taken]])
                 hits.append(np.bincount(pairs // (int(owner.max()) + 1), minlength=rows.size))
+                sides = _facing(q, viewpoints[pending[taken]] if viewpoints is not None else None,
+                                ux[w], uy[w], c, rows.size, facing_share)
+                sides[high - low <= 1e-9] = 0  # a dot has no line to face from
+                facing.append(sides)
             pending = pending[~taken]
             side /= 2.0
     if not starts:
         empty = np.zeros((0, 2))
-        return Segments(empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64))
+        return Segments(empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8))
     return Segments(np.concatenate(starts), np.concatenate(ends), np.concatenate(thick),
-                    np.concatenate(hits).astype(np.int64))
+                    np.concatenate(hits).astype(np.int64), np.concatenate(facing).astype(np.int8))
+
+
+def _facing(returns: FloatArray, viewpoints: FloatArray | None, ux: FloatArray, uy: FloatArray,
+            segment: NDArray[np.int64], n_segments: int, share: float) -> NDArray[np.int8]:
+    """Per segment, the side of its line (+1 left of its axis ``(ux, uy)``, -1 right, 0 both)
+    that at least ``share`` of its ``returns`` were seen from (``viewpoints``, one per return)."""
+    if viewpoints is None:
+        return np.zeros(n_segments, dtype=np.int8)
+    left = (viewpoints[:, 0] - returns[:, 0]) * -uy + (viewpoints[:, 1] - returns[:, 1]) * ux
+    from_left = np.bincount(segment, left > 0, n_segments)
+    seen = np.bincount(segment, left != 0, n_segments)
+    out = np.zeros(n_segments, dtype=np.int8)
+    out[(seen > 0) & (from_left >= share * seen)] = 1
+    out[(seen > 0) & (seen - from_left >= share * seen)] = -1
+    return out
 
 
 def seen_through(middle: FloatArray, poses: FloatArray, distances: FloatArray, *, margin: float,

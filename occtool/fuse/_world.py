@@ -12,7 +12,9 @@ models observed into one world-frame function of a few kilobytes:
   ``k_s = p_s / WIDTH`` and ``p_s`` the share of positions that returned from it among
   those that returned from it or saw through it (:func:`occtool.fuse._walls.seen_through`),
   lifted to ``[0.5, 1]``: a MIN node over five linear pieces, the paper's form in world
-  coordinates;
+  coordinates. A segment seen from one side only (its *facing*) falls over
+  :data:`FRONT_WIDTH` on that side and :data:`BACK_WIDTH` behind: every free beam near it
+  came from the front, and the returns its positions' pose errors scatter lie on both;
 * **the observed region**: the union of what each local model saw (its rays up to its
   nearest return per degree, or its reach where it had none), one shapely geometry;
 * ``F = MAX(base, MAX over segments)``, ``base`` inside the observed region
@@ -42,8 +44,12 @@ from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_
 
 FloatArray = NDArray[np.float64]
 
-#: Occupancy falls from a wall's trust to 0 over this distance from it (metres, past its thickness).
+#: Occupancy falls from a wall's trust to 0 over this distance from it (metres, past its thickness) ...
 WIDTH = 0.2
+#: ... for a wall seen from one side only, over this distance on the side it was seen from ...
+FRONT_WIDTH = 0.125
+#: ... and this one behind it, where no beam of the run passed (chosen on inner splits, docs/map.md).
+BACK_WIDTH = 0.6
 #: Occupancy of the observed region away from walls, at a position of the run.
 FREE_LEVEL = 0.1
 #: ... rising by this much a metre from the nearest position (chosen on inner splits, docs/map.md),
@@ -95,6 +101,9 @@ class WorldMap:
     trust
         ``(S,)`` the share of positions that returned from the segment among those that
         returned from it or saw through it, in [0, 1].
+    facing
+        ``(S,)`` the side each segment was seen from: +1 the left of start -> end, -1 the
+        right, 0 both (or unknown; the default for every segment).
     region
         A shapely (multi)polygon: where some position observed.
     positions
@@ -102,14 +111,16 @@ class WorldMap:
         free level is flat).
     band
         World heights ``(low, high)`` the map speaks for (the robot's body band).
-    width, free_level, free_slope, unknown_level
-        See :data:`WIDTH`, :data:`FREE_LEVEL`, :data:`FREE_SLOPE`, :data:`UNKNOWN_LEVEL`.
+    width, front_width, back_width, free_level, free_slope, unknown_level
+        See :data:`WIDTH`, :data:`FRONT_WIDTH`, :data:`BACK_WIDTH`, :data:`FREE_LEVEL`,
+        :data:`FREE_SLOPE`, :data:`UNKNOWN_LEVEL`.
     wall_half_width, wall_share, wall_rim
         The Nav2 raster's walls and their uncertain edge (:meth:`rasterise`).
     """
 
     def __init__(self, start: ArrayLike, end: ArrayLike, thickness: ArrayLike, trust: ArrayLike, region: Any, *,
-                 band: tuple[float, float], positions: ArrayLike | None = None, width: float = WIDTH,
+                 band: tuple[float, float], positions: ArrayLike | None = None, facing: ArrayLike | None = None,
+                 width: float = WIDTH, front_width: float = FRONT_WIDTH, back_width: float = BACK_WIDTH,
                  free_level: float = FREE_LEVEL, free_slope: float = FREE_SLOPE,
                  unknown_level: float = UNKNOWN_LEVEL, wall_half_width: float = WALL_HALF_WIDTH,
                  wall_share: float = WALL_SHARE, wall_rim: float = WALL_RIM) -> None:
@@ -122,7 +133,12 @@ class WorldMap:
         n = self.start.shape[0]
         if not (self.end.shape[0] == self.thickness.size == self.trust.size == n):
             raise InputError(f"{n} segment starts need as many ends, thicknesses and trusts")
-        for name, value in (("width", width), ("wall_half_width", wall_half_width)):
+        self.facing = (np.zeros(n, dtype=np.int8) if facing is None
+                       else np.asarray(facing).astype(np.int8, casting="unsafe").reshape(-1))
+        if self.facing.size != n or not np.isin(self.facing, (-1, 0, 1)).all():
+            raise InputError(f"facing must hold -1, 0 or +1 for each of the {n} segments")
+        for name, value in (("width", width), ("front_width", front_width), ("back_width", back_width),
+                            ("wall_half_width", wall_half_width)):
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be a positive number of metres, got {value}")
         if not (math.isfinite(wall_rim) and wall_rim >= 0):
@@ -142,6 +158,8 @@ class WorldMap:
         shapely.prepare(self.region)
         self.band = (float(band[0]), float(band[1]))
         self.width = float(width)
+        self.front_width = float(front_width)
+        self.back_width = float(back_width)
         self.free_level = float(free_level)
         self.free_slope = float(free_slope)
         self._position_index: Any = None
@@ -184,8 +202,8 @@ class WorldMap:
     @property
     def nbytes(self) -> int:
         """Bytes of what :meth:`predict` needs, as the file stores it: per segment its middle
-        (two uint16 units), direction, half-length, thickness and trust (a byte each); per
-        vertex of the region two coordinates (uint16) and its rings' and parts' offsets (uint32);
+        (two uint16 units), direction, half-length, thickness and trust (a byte each) and its
+        facing (two bits); per vertex of the region two coordinates (uint16) and its rings' and parts' offsets (uint32);
         per position two coordinates (uint16)."""
         import shapely
 
@@ -194,7 +212,8 @@ class WorldMap:
         else:
             _, coords, parts = shapely.to_ragged_array([self.region])
             vertices, offsets = coords.shape[0], sum(p.size for p in parts)
-        return int(len(self) * (2 * 2 + 4) + vertices * 2 * 2 + offsets * 4 + self.positions.shape[0] * 2 * 2)
+        segments = len(self) * (2 * 2 + 4) + -(-len(self) // 4)  # the facings four to a byte
+        return int(segments + vertices * 2 * 2 + offsets * 4 + self.positions.shape[0] * 2 * 2)
 
     def grid_bytes(self, resolution: float) -> int:
         """Bytes of a one-byte-a-cell grid of the map's bounding box at ``resolution`` metres:
@@ -231,7 +250,7 @@ class WorldMap:
         best = np.full(xy.shape[0], -np.inf)
         if not len(self) or not xy.shape[0]:
             return best
-        reach = self._reach(self.width)
+        reach = self._reach(max(self.width, self.front_width, self.back_width))
         distance, index = self._neighbours(xy, reach)
         middle, axis, normal, half = self._frames
         peak = self.peak
@@ -239,11 +258,14 @@ class WorldMap:
             ok = np.isfinite(distance[:, j])
             s = index[ok, j]
             rel = xy[ok] - middle[s]
-            across = np.abs(rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1])
+            across = rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]
             along = np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1])
-            slope = peak[s] / self.width
-            value = np.minimum(peak[s], np.minimum(peak[s] - slope * (across - self.thickness[s]),
-                                                   peak[s] - slope * (along - half[s])))
+            # Across a one-sided wall the slope differs in front (the side it was seen from) and behind.
+            facing = self.facing[s]
+            width = np.where(facing == 0, self.width,
+                             np.where(across * facing >= 0, self.front_width, self.back_width))
+            value = np.minimum(peak[s], np.minimum(peak[s] - peak[s] / width * (np.abs(across) - self.thickness[s]),
+                                                   peak[s] - peak[s] / self.width * (along - half[s])))
             best[ok] = np.maximum(best[ok], value)
         return best
 
@@ -343,7 +365,8 @@ class WorldMap:
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays)."""
-        return {"band": list(self.band), "width": self.width, "free_level": self.free_level,
+        return {"band": list(self.band), "width": self.width, "front_width": self.front_width,
+                "back_width": self.back_width, "free_level": self.free_level,
                 "free_slope": self.free_slope,
                 "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
                 "wall_share": self.wall_share, "wall_rim": self.wall_rim}
@@ -503,7 +526,8 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     own = returns_of_fused(fused)
     run = own if sightings is None else sightings
     points, owner = run.return_points(reach)
-    segments: Segments = fit_segments(points, owner, cell=cell, max_thickness=max_thickness, min_returns=min_returns)
+    segments: Segments = fit_segments(points, owner, viewpoints=run.poses[owner, :2], cell=cell,
+                                      max_thickness=max_thickness, min_returns=min_returns)
     through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
     trust = segments.hits / np.maximum(segments.hits + through, 1)
     region = _observed_region(own.ranges, own.poses, region_reach)
@@ -512,7 +536,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
     world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
-                     positions=own.poses[:, :2], **params)
+                     positions=own.poses[:, :2], facing=segments.facing, **params)
     # Rounded to the file's precision now, so that the map written is the map used.
     return quantise(world)
 
