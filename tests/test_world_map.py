@@ -272,8 +272,8 @@ def test_version_1_files_still_load_and_later_ones_are_refused():
 def room_map(tmp_path_factory):
     path = tmp_path_factory.mktemp("room") / "room.log"
     write_room_log(path, scans=40)
-    fused, _, _ = fuse_log(read_log(path), OccupancyRegressor(robot=LASER_ROBOT))
-    return fused, build_world_map(fused)
+    fused, _, report = fuse_log(read_log(path), OccupancyRegressor(robot=LASER_ROBOT))
+    return fused, build_world_map(fused, sightings=report.sightings)
 
 
 def test_the_room_log_walls_free_inside_unknown_behind(room_map):
@@ -289,8 +289,10 @@ def test_the_room_log_walls_free_inside_unknown_behind(room_map):
     assert np.allclose(p[4:7], world.free_level + world.free_slope * nearest)
     assert world.free_level == 0.1 and world.free_slope == 0.01 and len(world.positions) == len(fused)
     assert np.allclose(p[7:], 0.5)
-    # The room's walls were seen from inside only: they fall steeply into the room, slowly behind.
+    # The room's walls were seen from inside only: they fall steeply into the room, slowly behind
+    # (a laser's sightings; told otherwise, or from the fused map's own returns, they face both).
     assert (world.facing != 0).mean() > 0.9
+    assert not build_world_map(fused, sightings=None).facing.any()
     near = np.array([[x1 - 0.08, 0.3, 0.0], [x1 + 0.08, 0.3, 0.0]])
     assert np.diff(world.predict(near))[0] > 0.2
     # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.
@@ -424,3 +426,5 @@ def test_a_lasers_every_beam_places_walls_a_cameras_cloud_its_nearest_per_degree
     dense = returns_of_positions([Position(cloud)], robot)
     assert dense.ranges.shape[1] == 360 and dense.returned.sum() == 180
     assert np.allclose(dense.ranges[dense.returned], 3.0, atol=1e-3)
+    # Only a laser's walls face one side by default (a depth camera's noisy clouds keep both).
+    assert run.scanning_laser and not dense.scanning_laser
