@@ -7,8 +7,8 @@ whose returns do not lie on one line within ``max_thickness`` is split in four, 
 on the axis), its thickness (the returns' spread across it), how many positions
 returned from it and, given where each return was seen from, the side it was seen from
 (its *facing*: a wall seen from one side only hides what lies behind it, so returns
-scattered behind its line meet no free beam there). Everything is done on every cell at once: a few passes of
-``np.unique`` and ``np.bincount``, no loop over points.
+scattered behind its line meet no free beam there). Everything is done on every cell at
+once: a few passes of ``np.unique`` and ``np.bincount``, no loop over points.
 
 :func:`seen_through` counts, per segment, the positions whose beams passed its middle
 well before their own return: a wall many positions saw through was not there for long

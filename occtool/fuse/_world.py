@@ -203,8 +203,8 @@ class WorldMap:
     def nbytes(self) -> int:
         """Bytes of what :meth:`predict` needs, as the file stores it: per segment its middle
         (two uint16 units), direction, half-length, thickness and trust (a byte each) and its
-        facing (two bits); per vertex of the region two coordinates (uint16) and its rings' and parts' offsets (uint32);
-        per position two coordinates (uint16)."""
+        facing (two bits); per vertex of the region two coordinates (uint16) and its rings'
+        and parts' offsets (uint32); per position two coordinates (uint16)."""
         import shapely
 
         if self.region.is_empty:
