@@ -34,6 +34,12 @@ Protocol:
   issue's setting and tuned on an inner split of the training scans (same protocol, held
   out from the training scans only), and the tuned grid saved as a trinary and as a scale
   Nav2 map (map_saver's thresholds; unseen cells unknown); bytes: the cells of the training box at a byte each;
+  (c') counting-model (reflection) grids of the same beams at 0.05 and 0.1 m, the other
+  textbook grid (Haehnel, Burgard et al.; Thrun, Burgard and Fox, *Probabilistic Robotics*,
+  ch. 9): per cell the share of the beams reaching it that returned there, ``(hits +
+  prior / 2) / (hits + misses + prior)`` over every beam (not once a scan, no clamp; unseen
+  0.5), the prior tuned on the same inner split, saved as Nav2 maps the same way; "the
+  best grid" of a target is the best of (c) and (c') at the resolution it names;
   (d) minus the distance to the nearest training return (scipy's cKDTree), bytes: the
   returns as two float32 each.
 
@@ -98,6 +104,9 @@ RESOLUTIONS = (0.05, 0.1)
 L_OCC = (0.85, 1.5, 2.5)
 L_FREE = (-0.4, -0.2, -0.1, -0.05, -0.02, -0.01)
 CLAMPS = ((-2.0, 3.5), (-1.0, 3.5), (-2.0, 6.0))
+#: The counting model's Beta prior (pseudo-beams, half of them returns) the tuner tries; 0:
+#: the maximum-likelihood reflection probability ``hits / (hits + misses)``.
+COUNTING_PRIORS = (0.0, 0.5, 1.0, 2.0)
 #: nav2_map_saver's default thresholds: a grid saved for map_server is trinary at these.
 SAVER_OCCUPIED = 0.65
 SAVER_FREE = 0.25
@@ -468,6 +477,83 @@ def scan_updates(start: FloatArray, end: FloatArray, hit: NDArray[np.bool_], sca
     return Updates(resolution, lower, (nx, ny), scan_cell % n_cells, (key % 2).astype(bool), first)
 
 
+def beam_counts(start: FloatArray, end: FloatArray, hit: NDArray[np.bool_], resolution: float,
+                lower: NDArray[np.int64], shape: tuple[int, int]) -> tuple[FloatArray, FloatArray]:
+    """The counting model's tallies over the grid at ``lower``, ``shape`` (flat, as
+    :meth:`Updates.flat_cells`): per cell, the beams that returned in it (hits) and the beams
+    that crossed it without returning there (misses). Every beam counts, not once a scan."""
+    n_cells = shape[0] * shape[1]
+    hits, misses = np.zeros(n_cells), np.zeros(n_cells)
+    for lo in range(0, len(hit), BEAMS_PER_CHUNK):
+        hi = min(len(hit), lo + BEAMS_PER_CHUNK)
+        beam, cell = _crossed_cells(start[lo:hi], end[lo:hi], resolution)
+        end_cell = np.floor(end[lo:hi] / resolution).astype(np.int64)
+        returned = hit[lo:hi]
+        is_end = np.all(cell == end_cell[beam], axis=1) & returned[beam]
+        for cells, tally in ((cell[~is_end] - lower, misses), (end_cell[returned] - lower, hits)):
+            inside = np.all((cells >= 0) & (cells < shape), axis=1)
+            tally += np.bincount(cells[inside, 0] * shape[1] + cells[inside, 1], minlength=n_cells)
+    return hits, misses
+
+
+def counting_probability(hits: FloatArray, misses: FloatArray, prior: float) -> FloatArray:
+    """The reflection probability ``(hits + prior / 2) / (hits + misses + prior)``; 0.5 where
+    no beam reached the cell."""
+    seen = hits + misses
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(seen > 0, (hits + 0.5 * prior) / (seen + prior), 0.5)
+
+
+def counting_rows(train: Scans, xy: FloatArray, n_occupied: int, seed: int) -> list[dict[str, Any]]:
+    """The counting-model (reflection) grids of ``train`` at each resolution, the prior tuned
+    on the inner split, and the tuned grid saved as a trinary and as a scale Nav2 map."""
+    start, end, hit, scan = train.beams()
+    box = (np.minimum(start.min(axis=0), end.min(axis=0)), np.maximum(start.max(axis=0), end.max(axis=0)))
+    inner = held_out(len(train), seed)
+    inner_occupied, inner_free = test_points(train.take(inner))
+    in_inner = inner[scan]
+    rows = []
+    for resolution in RESOLUTIONS:
+        started = time.process_time()
+        lower = np.floor(box[0] / resolution).astype(np.int64)
+        shape = tuple(int(v) for v in np.floor(box[1] / resolution).astype(np.int64) - lower + 1)
+        if shape[0] * shape[1] > MAX_CELLS:
+            raise InputError(f"the training box needs {shape[0]}x{shape[1]} cells at {resolution:g} m: check the poses")
+        # The inner split's training tallies, and the held-out scans' added for the final grid.
+        hits, misses = beam_counts(start[~in_inner], end[~in_inner], hit[~in_inner], resolution, lower, shape)
+        more_hits, more_misses = beam_counts(start[in_inner], end[in_inner], hit[in_inner], resolution, lower, shape)
+        cells = Updates(resolution, lower, shape, np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(1, np.int64))
+        slots = shape[0] * shape[1] + 1
+        pos = np.bincount(cells.flat_cells(inner_occupied), minlength=slots).astype(np.float64)
+        neg = np.bincount(cells.flat_cells(inner_free), minlength=slots).astype(np.float64)
+        used = np.flatnonzero(pos + neg)
+        tried = [(grouped_auc(np.append(counting_probability(hits, misses, prior), 0.5)[used], pos[used], neg[used]),
+                  prior) for prior in COUNTING_PRIORS]
+        inner_auc, prior = max(tried, key=lambda row: row[0])  # the first listed on a tie
+        p = np.append(counting_probability(hits + more_hits, misses + more_misses, prior), 0.5)[cells.flat_cells(xy)]
+        common = {"bytes": shape[0] * shape[1], "resolution": resolution, "family": "counting"}
+        rows.append({"model": f"counting-model grid {resolution:g} m, tuned on the training scans",
+                     "auc": auc(p[:n_occupied], p[n_occupied:]), "prior": prior, "inner_auc": inner_auc,
+                     "cpu_s": time.process_time() - started, **common})
+        rows += saved_grid_rows(p, n_occupied, f"counting-model grid {resolution:g} m, tuned", common)
+    return rows
+
+
+def saved_grid_rows(p: FloatArray, n_occupied: int, name: str, common: dict[str, Any]) -> list[dict[str, Any]]:
+    """A grid's probabilities ``p`` at the test points as map_saver saves them: a trinary map
+    and a scale map loaded back (unseen cells, 0.5, unknown)."""
+    trinary = np.where(p > SAVER_OCCUPIED, 1.0, np.where(p < SAVER_FREE, 0.0, 0.5))
+    # A scale map's cells between the thresholds are graded in hundredths.
+    graded = np.rint(100.0 * (p - SAVER_FREE) / (SAVER_OCCUPIED - SAVER_FREE)) / 100.0
+    scale = np.where(p == 0.5, 0.5, np.where(p > SAVER_OCCUPIED, 1.0, np.where(p < SAVER_FREE, 0.0, graded)))
+    return [{"model": f"{name}, saved as a Nav2 map", "nav2_of_grid": True,
+             "auc": auc(trinary[:n_occupied], trinary[n_occupied:]),
+             "note": f"map_saver's thresholds: occupied above {SAVER_OCCUPIED:g}, free below {SAVER_FREE:g}", **common},
+            {"model": f"{name}, saved as a scale Nav2 map", "nav2_scale_of_grid": True,
+             "auc": auc(scale[:n_occupied], scale[n_occupied:]),
+             "note": f"map_saver's scale thresholds {SAVER_OCCUPIED:g} / {SAVER_FREE:g}, unseen cells unknown", **common}]
+
+
 def textbook_rows(train: Scans, xy: FloatArray, n_occupied: int, seed: int) -> list[dict[str, Any]]:
     """The textbook grids of ``train``: the issue's setting and the tuned one per resolution."""
     start, end, hit, scan = train.beams()
@@ -496,22 +582,12 @@ def textbook_rows(train: Scans, xy: FloatArray, n_occupied: int, seed: int) -> l
                                                          ("tuned on the training scans", best[1:], best[0])):
             p = updates.read(updates.log_odds(l_occ, l_free, clamp), xy)
             rows.append({"model": f"textbook grid {resolution:g} m, {label}", "auc": auc(p[:n_occupied], p[n_occupied:]),
-                         "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution, "l_occ": l_occ,
-                         "l_free": l_free, "clamp": list(clamp), "inner_auc": inner_auc,
+                         "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution, "family": "log-odds",
+                         "l_occ": l_occ, "l_free": l_free, "clamp": list(clamp), "inner_auc": inner_auc,
                          "cpu_s": time.process_time() - started})
-        # The tuned grid as its Nav2 map: map_saver's trinary thresholds (unseen cells, 0.5, unknown).
-        trinary = np.where(p > SAVER_OCCUPIED, 1.0, np.where(p < SAVER_FREE, 0.0, 0.5))
-        rows.append({"model": f"textbook grid {resolution:g} m, tuned, saved as a Nav2 map", "nav2_of_grid": True,
-                     "auc": auc(trinary[:n_occupied], trinary[n_occupied:]),
-                     "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution,
-                     "note": f"map_saver's thresholds: occupied above {SAVER_OCCUPIED:g}, free below {SAVER_FREE:g}"})
-        # ... and as a scale map, loaded back: cells between the thresholds graded in hundredths.
-        graded = np.rint(100.0 * (p - SAVER_FREE) / (SAVER_OCCUPIED - SAVER_FREE)) / 100.0
-        scale = np.where(p == 0.5, 0.5, np.where(p > SAVER_OCCUPIED, 1.0, np.where(p < SAVER_FREE, 0.0, graded)))
-        rows.append({"model": f"textbook grid {resolution:g} m, tuned, saved as a scale Nav2 map",
-                     "nav2_scale_of_grid": True, "auc": auc(scale[:n_occupied], scale[n_occupied:]),
-                     "bytes": updates.shape[0] * updates.shape[1], "resolution": resolution,
-                     "note": f"map_saver's scale thresholds {SAVER_OCCUPIED:g} / {SAVER_FREE:g}, unseen cells unknown"})
+        rows += saved_grid_rows(p, n_occupied, f"textbook grid {resolution:g} m, tuned",
+                                {"bytes": updates.shape[0] * updates.shape[1], "resolution": resolution,
+                                 "family": "log-odds"})
     return rows
 
 
@@ -632,6 +708,7 @@ def score_log(path: str | os.PathLike[str], seed: int = 0, keep: str | os.PathLi
         if keep is None:
             shutil.rmtree(scratch, ignore_errors=True)
     rows += textbook_rows(train, xy, n, seed)
+    rows += counting_rows(train, xy, n, seed)
     rows.append(nearest_return_row(train, xy, n))
     return {"log": Path(path).name, "seed": seed, "scans": len(scans), "held_out_scans": int(test.sum()),
             "occupied_points": n, "free_points": len(free), "map_command": command, "rows": rows,
@@ -654,6 +731,8 @@ def markdown(result: dict[str, Any]) -> str:
         if "l_occ" in row:
             note = (f"l_occ {row['l_occ']:g}, l_free {row['l_free']:g}, clamp [{row['clamp'][0]:g}, {row['clamp'][1]:g}]"
                     + (f", inner AUC {row['inner_auc']:.3f}" if row["inner_auc"] is not None else ""))
+        elif "prior" in row:
+            note = f"prior {row['prior']:g} pseudo-beams, inner AUC {row['inner_auc']:.3f}"
         elif "returns_on_occupied" in row:
             note = (f"returns on occupied / free / unknown {row['returns_on_occupied']:.1%} / "
                     f"{row['returns_on_free']:.1%} / {row['returns_on_unknown']:.1%}; free points on occupied "
@@ -694,6 +773,10 @@ def heldout_section(data_dir: str | os.PathLike[str], logs: tuple[tuple[str, str
     return "\n".join(text) + "\n", {"logs": results, "notes": notes}
 
 
+def _grid_name(row: dict[str, Any]) -> str:
+    return f"{row.get('family', 'log-odds')} {row['resolution']:g} m"
+
+
 def _row(result: dict[str, Any], start: str) -> dict[str, Any] | None:
     return next((r for r in result["rows"] if r["model"].startswith(start) and r.get("auc") is not None), None)
 
@@ -705,27 +788,30 @@ def heldout_targets(data: dict[str, Any] | None,
     for result in (data or {}).get("logs", []):
         world, nav2, scale = _row(result, "fused map"), _row(result, "Nav2 map"), _row(result, "Nav2 scale map")
         grids = [r for r in result["rows"] if r["model"].endswith("tuned on the training scans")]
-        grid_05 = next((r for r in grids if r["resolution"] == 0.05), None)
-        grid_1 = next((r for r in grids if r["resolution"] == 0.1), None)
-        saved_05 = next((r for r in result["rows"] if r.get("nav2_of_grid") and r["resolution"] == 0.05), None)
+        # The best of the tuned grids (log-odds and counting model) at each resolution.
+        grid_05 = max((r for r in grids if r["resolution"] == 0.05), key=lambda r: r["auc"], default=None)
+        grid_1 = max((r for r in grids if r["resolution"] == 0.1), key=lambda r: r["auc"], default=None)
+        family = grid_05.get("family") if grid_05 is not None else None
+        saved_05 = next((r for r in result["rows"] if r.get("nav2_of_grid") and r["resolution"] == 0.05
+                         and r.get("family") == family), None)
         if world is None or nav2 is None or not grids or grid_05 is None or grid_1 is None:
             out.append((f"{result['log']}: world.occmap and the Nav2 map scored", "not available", False))
             continue
         best = max(grids, key=lambda r: r["auc"])
         name = result["log"].split("-corrected")[0]
         out.append((f"{name} (independent scorer): world.occmap AUC >= the best tuned textbook grid + 0.01",
-                    f"{world['auc']:.4f} vs {best['auc']:.4f} ({best['resolution']:g} m): {world['auc'] - best['auc']:+.4f}",
+                    f"{world['auc']:.4f} vs {best['auc']:.4f} ({_grid_name(best)}): {world['auc'] - best['auc']:+.4f}",
                     world["auc"] >= best["auc"] + 0.01))
         out.append((f"{name}: world.occmap no bigger than the 0.1 m one-byte grid",
                     f"{world['bytes'] / 1e3:.1f} KB vs {grid_1['bytes'] / 1e3:.1f} KB", world["bytes"] <= grid_1["bytes"]))
-        out.append((f"{name}: Nav2 map AUC >= the tuned 0.05 m textbook grid",
-                    f"{nav2['auc']:.4f} vs {grid_05['auc']:.4f}" + (
+        out.append((f"{name}: Nav2 map AUC >= the best tuned 0.05 m textbook grid",
+                    f"{nav2['auc']:.4f} vs {grid_05['auc']:.4f} ({_grid_name(grid_05)})" + (
                         f" (that grid saved as a Nav2 map: {saved_05['auc']:.4f})" if saved_05 else ""),
                     nav2["auc"] >= grid_05["auc"]))
         if scale is not None:
-            saved_scale = next((r for r in result["rows"] if r.get("nav2_scale_of_grid") and r["resolution"] == 0.05),
-                               None)
-            out.append((f"{name}: Nav2 scale map (--nav2-mode scale) AUC >= the tuned 0.05 m textbook grid",
+            saved_scale = next((r for r in result["rows"] if r.get("nav2_scale_of_grid") and r["resolution"] == 0.05
+                                and r.get("family") == family), None)
+            out.append((f"{name}: Nav2 scale map (--nav2-mode scale) AUC >= the best tuned 0.05 m textbook grid",
                         f"{scale['auc']:.4f} vs {grid_05['auc']:.4f}" + (
                             f" (that grid saved as a scale map: {saved_scale['auc']:.4f})" if saved_scale else "") + (
                             f"; its pixels before map_server's thresholds {scale['pixel_auc']:.4f}"

@@ -11,7 +11,9 @@ free. ROC AUC (:func:`occtool.compare.roc_auc`) with model bytes and build times
 Beside that grid, the textbook one (:func:`occtool.grid.textbook_grid`: each cell updated
 once a scan, ``l_occ`` at the return, ``l_free`` before it, clamped after every scan) at
 0.05 and 0.1 m, its settings tuned on an inner split of the training scans alone
-(:func:`occtool.grid.tune_textbook`), and with the issue's fixed ones (:func:`textbook_scores`).
+(:func:`occtool.grid.tune_textbook`), and with the issue's fixed ones; and the counting-model
+grid (:func:`occtool.grid.counting_grid`: per cell the share of the beams reaching it that
+returned there), its prior tuned the same way (:func:`textbook_scores`).
 
 :func:`nav2_agreement` checks a rasterised map against scans: each return should fall
 on an occupied cell or one of its eight neighbours, and the cells along each beam up to
@@ -281,8 +283,9 @@ class LogScore:
     octomap_s: float | None = None
     octomap_note: str = ""
     #: The textbook grids (``auc["textbook_0.05m"]`` tuned, ``auc["textbook_fixed_0.05m"]`` the
-    #: issue's setting...): per name the chosen setting, its inner AUC, bytes at one byte a
-    #: cell over the training box, and the candidates tried (:func:`textbook_scores`).
+    #: issue's setting, ``auc["counting_0.05m"]`` the counting model...): per name the chosen
+    #: setting, its inner AUC, bytes at one byte a cell over the training box, and the
+    #: candidates tried (:func:`textbook_scores`).
     textbook: dict[str, Any] | None = None
     #: Seconds to tune and build the textbook grids.
     textbook_s: float | None = None
@@ -332,7 +335,8 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
 
     The textbook grids at 0.05 and 0.1 m are always scored (:func:`textbook_scores`): tuned on
     an inner split of the training scans with the same ``holdout``, ``block`` and ``seed``,
-    and with the issue's fixed setting; :attr:`LogScore.textbook` holds their settings.
+    and with the issue's fixed setting, and the counting-model grids (prior tuned the same
+    way); :attr:`LogScore.textbook` holds their settings.
     """
     from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
@@ -435,26 +439,29 @@ def textbook_scores(train: list[Position], points: FloatArray, n_occupied: int, 
                     resolutions: tuple[float, ...] = (0.05, 0.1)) -> tuple[dict[str, float], dict[str, Any]]:
     """AUC of the textbook grids of ``train`` on the test ``points`` (the first ``n_occupied`` occupied).
 
-    The settings are tuned by :func:`occtool.grid.tune_textbook` on ``train`` alone (an inner
+    The settings are tuned by :func:`occtool.grid.tune_grids` on ``train`` alone (an inner
     split ``holdout`` / ``block`` / ``seed`` of those scans); ``points`` are read only by
-    the grids it returns. Returns ``auc`` (``textbook_0.05m``: tuned, ``textbook_fixed_0.05m``:
-    l_occ 0.85, l_free -0.4, clamp [-2, 3.5]; and so on per resolution) and per name the
+    the grids it returns. Returns ``auc`` (``textbook_0.05m``: the log-odds grid tuned,
+    ``textbook_fixed_0.05m``: l_occ 0.85, l_free -0.4, clamp [-2, 3.5], ``counting_0.05m``:
+    the counting-model grid, its prior tuned; and so on per resolution) and per name the
     setting, inner AUC and bytes at one byte a cell.
     """
     from occtool.compare import roc_auc
-    from occtool.grid import TEXTBOOK_DEFAULTS, tune_textbook
+    from occtool.grid import TEXTBOOK_DEFAULTS, tune_grids
 
-    tuned = tune_textbook(_beams(train), resolutions=resolutions, holdout=holdout, block=block, seed=seed)
+    tuned, counting = tune_grids(_beams(train), resolutions=resolutions, holdout=holdout, block=block, seed=seed)
     auc: dict[str, float] = {}
     settings: dict[str, Any] = {}
     for resolution, result in tuned.items():
         for name, grid in ((f"textbook_{resolution:g}m", result.grid),
-                           (f"textbook_fixed_{resolution:g}m", result.default_grid)):
+                           (f"textbook_fixed_{resolution:g}m", result.default_grid),
+                           (f"counting_{resolution:g}m", counting[resolution].grid)):
             p = grid.occupancy(points)
             auc[name] = roc_auc(p[:n_occupied], p[n_occupied:])
         settings[f"textbook_{resolution:g}m"] = result.as_dict()
         settings[f"textbook_fixed_{resolution:g}m"] = {**TEXTBOOK_DEFAULTS.as_dict(), "resolution": resolution,
                                                         "bytes": result.default_grid.byte_size}
+        settings[f"counting_{resolution:g}m"] = counting[resolution].as_dict()
     return auc, settings
 
 

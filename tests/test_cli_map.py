@@ -190,7 +190,7 @@ def test_evaluate_log_prints_the_figures(mapped):
     figures = json.loads(result.output)
     expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid", "textbook_0.05m", "textbook_0.1m",
                 "world", "nav2_map",
-                "textbook_fixed_0.05m", "textbook_fixed_0.1m"}
+                "textbook_fixed_0.05m", "textbook_fixed_0.1m", "counting_0.05m", "counting_0.1m"}
     from occtool.octomap import octomap_available
 
     if octomap_available():

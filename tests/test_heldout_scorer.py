@@ -119,6 +119,22 @@ def test_textbook_grid_of_one_beam():
     np.testing.assert_allclose(updates.log_odds(0.85, -0.4, (-2.0, 3.5))[:, 0], [-0.4, -0.4, -0.4, 0.85])
 
 
+def test_counting_grid_tallies_every_beam():
+    # Two beams of one scan along y = 0.5 on a 1 m grid from x 0: one returns in cell 3, one
+    # (a free ray) crosses cells 0-2 and ends in cell 2 without a return; a third beam of
+    # another scan returns in cell 2. Misses count each beam, not once a scan.
+    start = np.array([[0.5, 0.5], [0.5, 0.5], [0.5, 0.5]])
+    end = np.array([[3.5, 0.5], [2.5, 0.5], [2.5, 0.5]])
+    hit = np.array([True, False, True])
+    hits, misses = heldout.beam_counts(start, end, hit, 1.0, np.array([0, 0]), (4, 1))
+    np.testing.assert_array_equal(hits, [0, 0, 1, 1])
+    np.testing.assert_array_equal(misses, [3, 3, 2, 0])
+    p = heldout.counting_probability(np.append(hits, 0), np.append(misses, 0), prior=0.0)
+    np.testing.assert_allclose(p, [0.0, 0.0, 1 / 3, 1.0, 0.5])
+    # A prior of two beams, one of them a return, pulls every seen cell towards 0.5.
+    np.testing.assert_allclose(heldout.counting_probability(hits, misses, prior=2.0), [0.2, 0.2, 0.4, 2 / 3])
+
+
 def test_fused_row_says_not_available_without_the_map(tmp_path):
     # Either occtool.fuse has no load_map yet or the folder holds no world.occmap: a row, not an error.
     row = heldout.fused_row(tmp_path, np.zeros((3, 2)), 1)

@@ -1,4 +1,4 @@
-"""The textbook 2D log-odds grid (occtool.grid.textbook_grid) and its tuner, on hand-made beams."""
+"""The textbook 2D grids (occtool.grid.textbook_grid, counting_grid) and their tuners, on hand-made beams."""
 
 from __future__ import annotations
 
@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 
 from occtool.errors import InputError
-from occtool.grid import ScanUpdates, TextbookParams, WorldBeams, textbook_grid, tune_textbook
+from occtool.grid import (
+    ScanUpdates,
+    TextbookParams,
+    WorldBeams,
+    counting_grid,
+    textbook_grid,
+    tune_counting,
+    tune_grids,
+    tune_textbook,
+)
 
 ONE_METRE = TextbookParams(resolution=1.0)
 
@@ -76,6 +85,43 @@ def test_bad_settings_are_one_line_errors():
         WorldBeams(np.zeros((2, 2)), np.ones((2, 2)), np.ones(2, bool), np.array([1, 0]))
 
 
+def test_the_counting_grid_counts_every_beam_and_clamps_nothing():
+    # Scan 0: a beam returns in cell 1, another passes it to cell 3. Scan 1: a free ray to cell 2.
+    # Hits / misses per cell: 0: 0/3, 1: 1/2, 2: 0/2 (the free ray ends there), 3: 1/0.
+    built = beams([(1.5, 0.5, True), (3.5, 0.5, True)], [(2.5, 0.5, False)])
+    grid = counting_grid(built, resolution=1.0, prior=0.0)
+    assert grid.probability.shape == (4, 1) and grid.byte_size == 4
+    np.testing.assert_allclose(grid.probability[:, 0], [0.0, 1 / 3, 0.0, 1.0], rtol=1e-6)
+    # A prior of two pseudo-beams, one of them a return; a cell no beam reached reads 0.5.
+    np.testing.assert_allclose(counting_grid(built, 1.0, prior=2.0).probability[:, 0], [0.2, 0.4, 0.25, 2 / 3],
+                               rtol=1e-6)
+    np.testing.assert_allclose(grid.occupancy(np.array([[1.2, 0.7, 3.0], [9.0, 9.0, 0.0], [np.nan, 0.0, 0.0]])),
+                               [1 / 3, 0.5, 0.5])
+    # Twelve scans hitting a cell then twelve seeing through it: half, where the clamped
+    # log-odds grid ends wherever its bounds left it.
+    wall, through = [[(3.5, 0.5, True)]] * 12, [[(5.5, 0.5, True)]] * 12
+    assert counting_grid(beams(*wall, *through), 1.0, prior=0.0).probability[3, 0] == pytest.approx(0.5)
+    with pytest.raises(InputError, match="prior"):
+        counting_grid(built, 1.0, prior=-1.0)
+
+
+def test_the_counting_tuner_picks_on_the_training_scans_and_shares_the_traversal():
+    data = [name for name, p in inspect.signature(tune_counting).parameters.items()
+            if p.kind is not inspect.Parameter.KEYWORD_ONLY]
+    assert data == ["training"]
+    training = _room_beams(40, seed=1)
+    result = tune_counting(training, resolutions=(0.1,), priors=(0.0, 1.0, 4.0), holdout=0.2, block=5, seed=0)[0.1]
+    assert [c["prior"] for c in result.candidates] == [0.0, 1.0, 4.0]
+    assert result.inner_auc == max(c["inner_auc"] for c in result.candidates)
+    np.testing.assert_array_equal(result.grid.probability, counting_grid(training, 0.1, result.prior).probability)
+    # Both tuners from one call give what each gives alone.
+    textbook, counting = tune_grids(training, resolutions=(0.1,), l_occ=(0.85,), l_free=(-0.4,), clamps=((-2.0, 3.5),),
+                                    priors=(0.0, 1.0, 4.0), holdout=0.2, block=5, seed=0)
+    assert counting[0.1].prior == result.prior and textbook[0.1].params.l_occ == 0.85
+    with pytest.raises(InputError):
+        tune_grids(training, l_occ=(), priors=())
+
+
 def _room_beams(n_scans: int, seed: int) -> WorldBeams:
     """Scans from random places in a 4 x 3 m box, 90 beams each, returns on its walls."""
     rng = np.random.default_rng(seed)
@@ -118,13 +164,13 @@ def test_textbook_scores_hand_the_tuner_the_training_scans_only(monkeypatch):
     from occtool.log_score import textbook_scores
 
     seen = []
-    real = occtool.grid.tune_textbook
+    real = occtool.grid.tune_grids
 
     def spy(training, **kwargs):
         seen.append(training)
         return real(training, **kwargs)
 
-    monkeypatch.setattr(occtool.grid, "tune_textbook", spy)
+    monkeypatch.setattr(occtool.grid, "tune_grids", spy)
     room = _room_beams(12, seed=3)
     train = [Position(k, Features(np.column_stack([room.end[room.scan == k] - room.start[room.scan == k],
                                                     np.zeros(90)]), np.ones(90)),
@@ -133,7 +179,8 @@ def test_textbook_scores_hand_the_tuner_the_training_scans_only(monkeypatch):
     auc, settings = textbook_scores(train, held_out_points, 1, holdout=0.2, block=3, seed=0, resolutions=(0.1,))
     assert len(seen) == 1 and seen[0].n_scans == 12
     np.testing.assert_allclose(seen[0].end, room.end)
-    assert set(auc) == {"textbook_0.1m", "textbook_fixed_0.1m"} and settings["textbook_0.1m"]["bytes"] > 40 * 30
+    assert set(auc) == {"textbook_0.1m", "textbook_fixed_0.1m", "counting_0.1m"}
+    assert settings["textbook_0.1m"]["bytes"] > 40 * 30 and settings["counting_0.1m"]["prior"] >= 0
 
 
 def test_the_tuners_grouped_auc_is_the_points_auc():

@@ -30,7 +30,8 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
     """Hold out --holdout of LOG's scans in blocks of --block consecutive scans, fuse the
     local models of the rest, build a dense 2D log-odds grid (OctoMap's parameters), the
     textbook log-odds grid at 0.05 and 0.1 m (tuned on an inner split of the training
-    scans, and with l_occ 0.85, l_free -0.4, clamp [-2, 3.5]) and an OctoMap (when
+    scans, and with l_occ 0.85, l_free -0.4, clamp [-2, 3.5]), the counting-model grid at
+    0.05 and 0.1 m (its prior tuned the same way) and an OctoMap (when
     pyoctomap is installed) from the same scans, and score them on the held-out beams (end
     points occupied, points along each beam up to 0.1 m before its end free): ROC AUC,
     model bytes, build times, and how well the fused map's raster agrees with its
@@ -70,9 +71,10 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
     for name, figures in (result["textbook"] or {}).items():
         how = ("tuned on an inner split of the training scans" + (f", {figures['note']}" if figures.get("note") else "")
                if "inner_auc" in figures else "the issue's fixed setting")
-        click.echo(f"  {name}: l_occ {figures['l_occ']:g}, l_free {figures['l_free']:g}, clamp "
-                   f"[{figures['clamp'][0]:g}, {figures['clamp'][1]:g}] ({how}); "
-                   f"{figures['bytes'] / 1e6:.2f} MB at a byte a cell")
+        setting = (f"prior {figures['prior']:g} pseudo-beams" if "prior" in figures else
+                   f"l_occ {figures['l_occ']:g}, l_free {figures['l_free']:g}, clamp "
+                   f"[{figures['clamp'][0]:g}, {figures['clamp'][1]:g}]")
+        click.echo(f"  {name}: {setting} ({how}); {figures['bytes'] / 1e6:.2f} MB at a byte a cell")
     if result["octomap_bytes"] is not None:
         click.echo(f"  OctoMap {result['octomap_bytes'] / 1e6:.2f} MB at {resolution:g} m "
                    f"(built in {result['octomap_s']:.1f} s)")

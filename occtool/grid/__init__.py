@@ -45,7 +45,8 @@ The parts, one concept a module (private; everything public is imported from her
 ``_unknown``    unobserved space: :data:`UNKNOWN_SPACE`, observed bands and columns
 ``_build``      :func:`build_grid`: samples per crossed cell, the footprint prior
 ``_textbook``   :func:`textbook_grid`: the textbook 2D log-odds grid of world-frame beams
-``_tune``       :func:`tune_textbook`: its settings picked on an inner split of training scans
+``_counting``   :func:`counting_grid`: the counting-model (reflection) grid of the same beams
+``_tune``       :func:`tune_textbook`, :func:`tune_counting`: settings picked on an inner split of training scans
 ==============  =========================================================================
 """
 
@@ -57,6 +58,7 @@ from occtool.grid._build import (
     observation_log_odds,
     ray_plan,
 )
+from occtool.grid._counting import COUNTING_PRIOR, CountingGrid, counting_grid
 from occtool.grid._grid import OccupancyGrid
 from occtool.grid._logodds import OCTOMAP_DEFAULTS, LogOddsParams, logit, probability
 from occtool.grid._textbook import (
@@ -68,7 +70,7 @@ from occtool.grid._textbook import (
     textbook_grid,
 )
 from occtool.grid._traverse import RaySegments, traverse
-from occtool.grid._tune import TunedGrid, beam_test_points, tune_textbook
+from occtool.grid._tune import TunedCounting, TunedGrid, beam_test_points, tune_counting, tune_grids, tune_textbook
 from occtool.grid._unknown import (
     UNKNOWN_SPACE,
     band_layers,
@@ -78,22 +80,26 @@ from occtool.grid._unknown import (
 )
 
 __all__ = [
+    "COUNTING_PRIOR",
     "MAX_GRID_BYTES",
     "OCTOMAP_DEFAULTS",
     "TEXTBOOK_DEFAULTS",
     "UNKNOWN_SPACE",
+    "CountingGrid",
     "LogOddsParams",
     "OccupancyGrid",
     "RaySegments",
     "ScanUpdates",
     "TextbookGrid",
     "TextbookParams",
+    "TunedCounting",
     "TunedGrid",
     "WorldBeams",
     "band_layers",
     "beam_test_points",
     "build_grid",
     "check_unknown",
+    "counting_grid",
     "first_unobserved",
     "floor_reach",
     "footprint_cells",
@@ -104,5 +110,7 @@ __all__ = [
     "ray_plan",
     "textbook_grid",
     "traverse",
+    "tune_counting",
+    "tune_grids",
     "tune_textbook",
 ]

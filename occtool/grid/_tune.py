@@ -1,4 +1,5 @@
-"""Tuning the textbook grid on training scans only: :func:`tune_textbook`.
+"""Tuning the textbook grids on training scans only: :func:`tune_textbook` (log-odds),
+:func:`tune_counting` (counting model), :func:`tune_grids` (both from one traversal).
 
 The tuner is handed the training scans and nothing else, so it cannot see a held-out
 scan: it holds out its own *inner* blocks of them (the same protocol as the outer split,
@@ -18,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
+from occtool.grid._counting import COUNTING_PRIOR, CountingGrid
 from occtool.grid._logodds import probability
 from occtool.grid._textbook import TEXTBOOK_DEFAULTS, ScanUpdates, TextbookGrid, TextbookParams, WorldBeams
 
@@ -31,6 +33,8 @@ RESOLUTIONS = (0.05, 0.1)
 L_OCC = (0.85, 1.5, 2.5)
 L_FREE = (-0.4, -0.2, -0.1, -0.05, -0.02, -0.01)
 CLAMPS = ((-2.0, 3.5), (-1.0, 3.5), (-2.0, 6.0))
+#: The counting model's candidate priors (pseudo-beams, half of them returns; 0: none).
+COUNTING_PRIORS = (0.0, 0.5, 1.0, 2.0)
 #: Free test points per inner held-out beam, and where they stop before its end (metres).
 FREE_POINTS_PER_BEAM = 5
 END_MARGIN = 0.1
@@ -56,6 +60,22 @@ class TunedGrid:
     def as_dict(self) -> dict[str, Any]:
         return {**self.params.as_dict(), "inner_auc": self.inner_auc, "bytes": self.grid.byte_size,
                 "note": self.note, "candidates": self.candidates}
+
+
+@dataclass
+class TunedCounting:
+    """The best counting-model prior at one resolution and the grid it builds from all
+    training scans; ``candidates`` lists every prior tried with its inner AUC."""
+
+    prior: float
+    grid: CountingGrid
+    inner_auc: float
+    candidates: list[dict[str, Any]] = field(default_factory=list)
+    note: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"resolution": self.grid.resolution, "prior": self.prior, "inner_auc": self.inner_auc,
+                "bytes": self.grid.byte_size, "note": self.note, "candidates": self.candidates}
 
 
 def beam_test_points(beams: WorldBeams, seed: int = 0, per_beam: int = FREE_POINTS_PER_BEAM,
@@ -93,6 +113,68 @@ def _cell_counts(updates: ScanUpdates, points: FloatArray) -> FloatArray:
     return np.bincount(flat, minlength=cells + 1).astype(np.float64)
 
 
+def _inner_split(training: WorldBeams, holdout: float, block: int, seed: int) -> tuple[NDArray[np.bool_] | None, str]:
+    """The inner held-out scans of ``training`` (``None`` and why when too few for a split)."""
+    from occtool.log_score import holdout_blocks
+
+    try:
+        return holdout_blocks(training.n_scans, holdout, block, seed), ""
+    except InputError as exc:
+        return None, f"not tuned ({exc}): the defaults"
+
+
+def _inner_cells(everything: ScanUpdates, training: WorldBeams, inner_held: NDArray[np.bool_],
+                 seed: int) -> tuple[ScanUpdates, FloatArray, FloatArray, NDArray[np.intp]]:
+    """The inner training scans' updates (theirs among all training scans', on the same cells)
+    and the inner test points counted per cell (outside the box: one more cell, 0.5), so that a
+    candidate ranks the cells, not every point (the same AUC): ``updates, pos, neg, used``."""
+    updates = everything.of_scans(~inner_held)
+    occupied, free = beam_test_points(training.of_scans(inner_held), seed=seed)
+    pos, neg = _cell_counts(updates, occupied), _cell_counts(updates, free)
+    return updates, pos, neg, np.flatnonzero(pos + neg)
+
+
+def _search_textbook(everything: ScanUpdates, training: WorldBeams, inner_held: NDArray[np.bool_] | None,
+                     note: str, seed: int, l_occ: tuple[float, ...], l_free: tuple[float, ...],
+                     clamps: tuple[tuple[float, float], ...]) -> TunedGrid:
+    resolution = everything.resolution
+    defaults = TextbookParams(resolution, TEXTBOOK_DEFAULTS.l_occ, TEXTBOOK_DEFAULTS.l_free, TEXTBOOK_DEFAULTS.clamp)
+    default_grid = everything.grid(defaults)
+    if inner_held is None:
+        return TunedGrid(defaults, default_grid, float("nan"), default_grid, note=note)
+    updates, pos, neg, used = _inner_cells(everything, training, inner_held, seed)
+    candidates = []
+    best: tuple[float, TextbookParams] | None = None
+    for occ, fre, clamp in itertools.product(l_occ, l_free, clamps):
+        params = TextbookParams(resolution, occ, fre, clamp)
+        log_odds = np.append(updates.grid(params).log_odds.ravel(), np.float32(0.0))[used]
+        # Ranked as probabilities, as the points are: a residual log-odds of 1e-17 is 0.5.
+        auc = _grouped_auc(probability(log_odds), pos[used], neg[used])
+        candidates.append({**params.as_dict(), "inner_auc": auc})
+        if best is None or auc > best[0]:
+            best = (auc, params)
+    assert best is not None  # at least one candidate
+    return TunedGrid(best[1], everything.grid(best[1]), best[0], default_grid, candidates)
+
+
+def _search_counting(everything: ScanUpdates, training: WorldBeams, inner_held: NDArray[np.bool_] | None,
+                     note: str, seed: int, priors: tuple[float, ...]) -> TunedCounting:
+    if inner_held is None:
+        return TunedCounting(COUNTING_PRIOR, CountingGrid.from_updates(everything, COUNTING_PRIOR), float("nan"),
+                             note=note)
+    updates, pos, neg, used = _inner_cells(everything, training, inner_held, seed)
+    candidates = []
+    best: tuple[float, float] | None = None
+    for prior in priors:
+        p = np.append(CountingGrid.from_updates(updates, prior).probability.ravel(), np.float32(0.5))[used]
+        auc = _grouped_auc(p, pos[used], neg[used])
+        candidates.append({"prior": prior, "inner_auc": auc})
+        if best is None or auc > best[0]:
+            best = (auc, prior)
+    assert best is not None  # at least one candidate
+    return TunedCounting(best[1], CountingGrid.from_updates(everything, best[1]), best[0], candidates)
+
+
 def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
                   l_occ: tuple[float, ...] = L_OCC, l_free: tuple[float, ...] = L_FREE,
                   clamps: tuple[tuple[float, float], ...] = CLAMPS, holdout: float = 0.1, block: int = 40,
@@ -115,45 +197,41 @@ def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESO
         Per resolution, a :class:`TunedGrid` rebuilt from all of ``training`` with the
         setting that scored best on the inner held-out scans (the first listed on a tie).
     """
-    from occtool.log_score import holdout_blocks
+    return tune_grids(training, resolutions=resolutions, l_occ=l_occ, l_free=l_free, clamps=clamps,
+                      priors=(), holdout=holdout, block=block, seed=seed)[0]
 
-    if not (resolutions and l_occ and l_free and clamps):
-        raise InputError("the tuner needs at least one resolution, l_occ, l_free and clamp to try")
-    try:
-        inner_held = holdout_blocks(training.n_scans, holdout, block, seed)
-    except InputError as exc:
-        inner_held = None
-        note = f"not tuned ({exc}): the defaults"
+
+def tune_counting(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
+                  priors: tuple[float, ...] = COUNTING_PRIORS, holdout: float = 0.1, block: int = 40,
+                  seed: int = 0) -> dict[float, TunedCounting]:
+    """Pick the counting-model grid's prior per resolution on ``training`` alone, by the same
+    inner split as :func:`tune_textbook`; per resolution a :class:`TunedCounting` rebuilt
+    from all of ``training`` (the first listed on a tie)."""
+    return tune_grids(training, resolutions=resolutions, l_occ=(), priors=priors, holdout=holdout,
+                      block=block, seed=seed)[1]
+
+
+def tune_grids(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
+               l_occ: tuple[float, ...] = L_OCC, l_free: tuple[float, ...] = L_FREE,
+               clamps: tuple[tuple[float, float], ...] = CLAMPS, priors: tuple[float, ...] = COUNTING_PRIORS,
+               holdout: float = 0.1, block: int = 40,
+               seed: int = 0) -> tuple[dict[float, TunedGrid], dict[float, TunedCounting]]:
+    """Both tuners from one traversal per resolution: the log-odds grids (none when ``l_occ``
+    is empty) and the counting-model grids (none when ``priors`` is empty)."""
+    log_odds_wanted = bool(l_occ)
+    if not resolutions or (log_odds_wanted and not (l_free and clamps)) or not (log_odds_wanted or priors):
+        raise InputError("the tuner needs at least one resolution, l_occ, l_free and clamp (or prior) to try")
+    inner_held, note = _inner_split(training, holdout, block, seed)
     bounds = training.bounds()
-    tuned: dict[float, TunedGrid] = {}
+    textbook: dict[float, TunedGrid] = {}
+    counting: dict[float, TunedCounting] = {}
     for resolution in resolutions:
         everything = ScanUpdates.from_beams(training, resolution, bounds)
-        defaults = TextbookParams(resolution, TEXTBOOK_DEFAULTS.l_occ, TEXTBOOK_DEFAULTS.l_free,
-                                  TEXTBOOK_DEFAULTS.clamp)
-        default_grid = everything.grid(defaults)
-        if inner_held is None:
-            tuned[resolution] = TunedGrid(defaults, default_grid, float("nan"), default_grid, note=note)
-            continue
-        # The inner training scans' updates are theirs among all training scans' (same cells).
-        updates = everything.of_scans(~inner_held)
-        occupied, free = beam_test_points(training.of_scans(inner_held), seed=seed)
-        # The inner test points counted per cell (outside the box: one more cell, log-odds 0),
-        # so that a candidate ranks the cells, not every point (the same AUC).
-        pos, neg = _cell_counts(updates, occupied), _cell_counts(updates, free)
-        used = np.flatnonzero(pos + neg)
-        candidates = []
-        best: tuple[float, TextbookParams] | None = None
-        for occ, fre, clamp in itertools.product(l_occ, l_free, clamps):
-            params = TextbookParams(resolution, occ, fre, clamp)
-            log_odds = np.append(updates.grid(params).log_odds.ravel(), np.float32(0.0))[used]
-            # Ranked as probabilities, as the points are: a residual log-odds of 1e-17 is 0.5.
-            auc = _grouped_auc(probability(log_odds), pos[used], neg[used])
-            candidates.append({**params.as_dict(), "inner_auc": auc})
-            if best is None or auc > best[0]:
-                best = (auc, params)
-        assert best is not None  # at least one candidate
-        tuned[resolution] = TunedGrid(best[1], everything.grid(best[1]), best[0], default_grid, candidates)
-    return tuned
+        if log_odds_wanted:
+            textbook[resolution] = _search_textbook(everything, training, inner_held, note, seed, l_occ, l_free, clamps)
+        if priors:
+            counting[resolution] = _search_counting(everything, training, inner_held, note, seed, priors)
+    return textbook, counting
 
 
-__all__ = ["TunedGrid", "beam_test_points", "tune_textbook"]
+__all__ = ["TunedCounting", "TunedGrid", "beam_test_points", "tune_counting", "tune_grids", "tune_textbook"]
