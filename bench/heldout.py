@@ -445,6 +445,18 @@ def _distinct(values: NDArray[np.int64]) -> NDArray[np.int64]:
     return values[np.append(True, values[1:] != values[:-1])] if values.size else values
 
 
+def _chunk_cells(start: FloatArray, end: FloatArray, hit: NDArray[np.bool_], resolution: float) -> Any:
+    """Per chunk ``lo:hi`` of the beams: the beam and cell of every cell they cross, each
+    beam's end cell, and which crossed cells are a return's own (occupied; every other cell
+    crossed, a free ray's last too, is free)."""
+    for lo in range(0, len(hit), BEAMS_PER_CHUNK):
+        hi = min(len(hit), lo + BEAMS_PER_CHUNK)
+        beam, cell = _crossed_cells(start[lo:hi], end[lo:hi], resolution)
+        end_cell = np.floor(end[lo:hi] / resolution).astype(np.int64)
+        is_end = np.all(cell == end_cell[beam], axis=1) & hit[lo:hi][beam]
+        yield lo, hi, beam, cell, end_cell, is_end
+
+
 def scan_updates(start: FloatArray, end: FloatArray, hit: NDArray[np.bool_], scan: NDArray[np.intp], n_scans: int,
                  resolution: float, box: tuple[FloatArray, FloatArray]) -> Updates:
     """Each scan's cells: occupied where one of its beams returns, else free where one crosses."""
@@ -454,13 +466,8 @@ def scan_updates(start: FloatArray, end: FloatArray, hit: NDArray[np.bool_], sca
         raise InputError(f"the training box needs {nx}x{ny} cells at {resolution:g} m: check the poses")
     n_cells = nx * ny
     keys = []
-    for lo in range(0, len(hit), BEAMS_PER_CHUNK):
-        hi = min(len(hit), lo + BEAMS_PER_CHUNK)
-        beam, cell = _crossed_cells(start[lo:hi], end[lo:hi], resolution)
-        end_cell = np.floor(end[lo:hi] / resolution).astype(np.int64)
-        # The return's cell is occupied; every other cell crossed (a free ray's last too) free.
+    for lo, hi, beam, cell, end_cell, is_end in _chunk_cells(start, end, hit, resolution):
         returned = hit[lo:hi]
-        is_end = np.all(cell == end_cell[beam], axis=1) & returned[beam]
         cells = np.concatenate([cell[~is_end], end_cell[returned]]) - lower
         owner = np.concatenate([scan[lo:hi][beam[~is_end]], scan[lo:hi][returned]]).astype(np.int64)
         flag = np.concatenate([np.zeros(int((~is_end).sum()), np.int64), np.ones(int(returned.sum()), np.int64)])
@@ -484,13 +491,8 @@ def beam_counts(start: FloatArray, end: FloatArray, hit: NDArray[np.bool_], reso
     that crossed it without returning there (misses). Every beam counts, not once a scan."""
     n_cells = shape[0] * shape[1]
     hits, misses = np.zeros(n_cells), np.zeros(n_cells)
-    for lo in range(0, len(hit), BEAMS_PER_CHUNK):
-        hi = min(len(hit), lo + BEAMS_PER_CHUNK)
-        beam, cell = _crossed_cells(start[lo:hi], end[lo:hi], resolution)
-        end_cell = np.floor(end[lo:hi] / resolution).astype(np.int64)
-        returned = hit[lo:hi]
-        is_end = np.all(cell == end_cell[beam], axis=1) & returned[beam]
-        for cells, tally in ((cell[~is_end] - lower, misses), (end_cell[returned] - lower, hits)):
+    for lo, hi, _, cell, end_cell, is_end in _chunk_cells(start, end, hit, resolution):
+        for cells, tally in ((cell[~is_end] - lower, misses), (end_cell[hit[lo:hi]] - lower, hits)):
             inside = np.all((cells >= 0) & (cells < shape), axis=1)
             tally += np.bincount(cells[inside, 0] * shape[1] + cells[inside, 1], minlength=n_cells)
     return hits, misses
