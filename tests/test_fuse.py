@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from _room_log import ROOM, write_room_log
@@ -13,6 +15,7 @@ from occtool.fuse import (
     OCCUPIED,
     UNKNOWN,
     FusedMap,
+    build_world_map,
     fuse_log,
     fuse_models,
     nearest_returns,
@@ -281,3 +284,17 @@ def test_a_model_set_fuses_from_its_folder_as_from_its_models(room, tmp_path):
     again = fuse_models([load_model(folder / e["file"]) for e in entries], [p[1] for p in positions])
     points = np.array([[1.0, 0.25, 0.0], [ROOM[2] + 0.02, 0.3, 0.0], [2.0, 1.0, 0.0]])
     assert np.array_equal(fused.predict(points), again.predict(points))
+
+    # The index tells the map a scanning laser's set from its returns per degree, as a log does.
+    assert all(0 < e["returns_per_degree"] <= 10 for e in entries)
+    assert fused.scanning_laser and not again.scanning_laser and room[4].sightings.scanning_laser
+    world = build_world_map(fused)
+    assert (world.facing != 0).any()
+    # A set written before the index held them: walls facing both sides, as before.
+    index = folder / "index.json"
+    data = json.loads(index.read_text())
+    for entry in data["models"]:
+        del entry["returns_per_degree"]
+    index.write_text(json.dumps(data))
+    old, _, _ = fuse_model_set(folder)
+    assert not old.scanning_laser and (build_world_map(old).facing == 0).all()

@@ -290,9 +290,10 @@ def test_the_room_log_walls_free_inside_unknown_behind(room_map):
     assert world.free_level == 0.1 and world.free_slope == 0.01 and len(world.positions) == len(fused)
     assert np.allclose(p[7:], 0.5)
     # The room's walls were seen from inside only: they fall steeply into the room, slowly behind
-    # (a laser's sightings; told otherwise, or from the fused map's own returns, they face both).
+    # (a laser's sightings; the fused map of a laser log knows it too; told otherwise, both).
     assert (world.facing != 0).mean() > 0.9
-    assert not build_world_map(fused, sightings=None).facing.any()
+    assert fused.scanning_laser and build_world_map(fused, sightings=None).facing.any()
+    assert not build_world_map(fused, sightings=None, one_sided=False).facing.any()
     near = np.array([[x1 - 0.08, 0.3, 0.0], [x1 + 0.08, 0.3, 0.0]])
     assert np.diff(world.predict(near))[0] > 0.2
     # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.

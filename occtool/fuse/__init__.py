@@ -68,7 +68,15 @@ from occtool.fuse._reach import (
     reach_from_guard,
     returns_from_guard,
 )
-from occtool.fuse._world import RunReturns, WorldMap, build_world_map, returns_of_positions
+from occtool.fuse._world import (
+    LASER_RETURNS_PER_DEGREE,
+    RunReturns,
+    WorldMap,
+    build_world_map,
+    is_scanning_laser,
+    returns_of_positions,
+    returns_per_degree,
+)
 from occtool.keyframes import select_keyframes
 
 __all__ = [
@@ -78,6 +86,7 @@ __all__ = [
     "DEFAULT_COMBINATION",
     "DS_CONFIDENCE",
     "FREE",
+    "LASER_RETURNS_PER_DEGREE",
     "FRONT_MARGIN",
     "NO_OBSTACLE",
     "OCCUPIED",
@@ -97,11 +106,13 @@ __all__ = [
     "fuse_log",
     "fuse_model_set",
     "fuse_models",
+    "is_scanning_laser",
     "load_map",
     "nearest_returns",
     "observed_reach",
     "reach_from_guard",
     "returns_from_guard",
     "returns_of_positions",
+    "returns_per_degree",
     "select_keyframes",
 ]

@@ -16,7 +16,7 @@ from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._map import FusedMap
 from occtool.fuse._reach import nearest_returns, observed_reach, reach_from_guard, returns_from_guard
-from occtool.fuse._world import RunReturns, returns_of_positions
+from occtool.fuse._world import RunReturns, is_scanning_laser, returns_of_positions
 from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.robot import Robot
 
@@ -103,7 +103,8 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         raise InputError(f"{log.source or 'the log'}: no position could be fitted ({skipped[0][1]})")
     fused = FusedMap([m.tree_ for m in models], poses, np.stack(reaches), robot, combination=combination,  # type: ignore[arg-type]  # poses checked above
                      threshold=threshold, stamps=stamps, returns=np.stack(returns),
-                     return_offsets=np.stack(return_offsets), return_reach=focus_range + robot.radius)
+                     return_offsets=np.stack(return_offsets), return_reach=focus_range + robot.radius,
+                     scanning_laser=sightings.scanning_laser)
     report = FuseReport(len(models), skipped, fitted - started, time.perf_counter() - fitted, notes, fitted_positions,
                         not_keyframes, sightings)
     return fused, models, report
@@ -111,12 +112,13 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
 
 def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayLike | None = None,
                 combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
-                stamps: Sequence[float | None] | None = None) -> FusedMap:
+                stamps: Sequence[float | None] | None = None, scanning_laser: bool = False) -> FusedMap:
     """Fuse fitted regressors (e.g. a model set read back) placed at ``poses``.
 
     Without ``reaches`` each model's reach comes from its return guard
     (:func:`reach_from_guard`): a model file does not keep its features, so directions
-    where it saw no return stay unknown.
+    where it saw no return stay unknown. ``scanning_laser``: the models are a scanning
+    laser's (:attr:`FusedMap.scanning_laser`; a model file cannot tell).
     """
     if not models:
         raise InputError("a fused map needs at least one local model")
@@ -126,7 +128,7 @@ def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayL
                                               m.focus_range if m.focus else math.inf) for m in models])
     returns = np.stack([returns_from_guard(getattr(m, "guard_", None)) for m in models])
     return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination, threshold=threshold,
-                    stamps=stamps, returns=returns)
+                    stamps=stamps, returns=returns, scanning_laser=scanning_laser)
 
 
 def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,
@@ -134,6 +136,8 @@ def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,
     """Fuse a model set written by ``occtool fit LOG -o DIR/`` (``DIR`` or ``DIR/index.json``).
 
     Returns the fused map, the models and, for each, its position index, pose and stamp.
+    The map is a scanning laser's (:attr:`FusedMap.scanning_laser`) when the index gives
+    every position's returns per degree (``returns_per_degree``) and they say so.
 
     Raises
     ------
@@ -157,4 +161,10 @@ def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,
         poses.append(pose)
         stamps.append(stamp)
         positions.append((entry["position"], pose, stamp))
-    return fuse_models(models, poses, combination=combination, threshold=threshold, stamps=stamps), models, positions
+    # Written by `occtool fit` per position (sets written before it was: walls facing both sides).
+    densities = [entry.get("returns_per_degree") for entry in entries]
+    known = all(isinstance(d, (int, float)) and not isinstance(d, bool) and math.isfinite(d) and d >= 0
+                for d in densities)
+    laser = bool(entries) and known and is_scanning_laser(densities)
+    return (fuse_models(models, poses, combination=combination, threshold=threshold, stamps=stamps,
+                        scanning_laser=laser), models, positions)

@@ -65,6 +65,9 @@ class FusedMap:
         ``(len(trees), guard bins)`` uint8: each return's pan angle within its bin, in
         :data:`OFFSET_STEPS` steps (:func:`nearest_returns`); without, the returns lie at
         the bins' centres (half a bin off at most).
+    scanning_laser
+        The positions are a scanning laser's (:func:`occtool.fuse.is_scanning_laser`): the
+        world map's walls seen from one side fall steeply on that side.
     return_reach
         Returns farther than this from their position (metres; :func:`fuse_log`: the fit's
         focus range plus the robot's radius, the return guard's reach) mark the raster's
@@ -79,7 +82,7 @@ class FusedMap:
                  combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
                  stamps: Sequence[float | None] | None = None, front_margin: float = FRONT_MARGIN,
                  returns: ArrayLike | None = None, return_offsets: ArrayLike | None = None,
-                 return_reach: float = math.inf) -> None:
+                 return_reach: float = math.inf, scanning_laser: bool = False) -> None:
         if combination not in COMBINATIONS:
             raise InputError(f"combination must be one of {', '.join(COMBINATIONS)}, got {combination!r}")
         if not 0.0 < threshold < 1.0:
@@ -105,6 +108,7 @@ class FusedMap:
         if not return_reach > 0:
             raise InputError(f"return_reach must be a positive number of metres, got {return_reach}")
         self.return_reach = float(return_reach)
+        self.scanning_laser = bool(scanning_laser)
         self._basis = [t.basis for t in trees]
         self._roots = [t.root for t in trees]
         self._coefficients = [np.asarray(t.coefficients, dtype=np.float32) for t in trees]

@@ -420,7 +420,8 @@ def returns_of_fused(fused: Any) -> RunReturns:
     ranges = position_ranges(fused)
     offsets = (fused.return_offsets if fused.return_offsets is not None
                else np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8))
-    return RunReturns(fused._pose_array.copy(), ranges, fused.returns != NO_OBSTACLE, np.asarray(offsets))
+    return RunReturns(fused._pose_array.copy(), ranges, fused.returns != NO_OBSTACLE, np.asarray(offsets),
+                      scanning_laser=bool(fused.scanning_laser))
 
 
 def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = math.inf,
@@ -438,8 +439,7 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
     positions = list(positions)
     if not positions:
         raise InputError("no positions to read returns from")
-    density = float(np.median([_returns_per_degree(p.features, robot, level) for p in positions]))
-    laser = density <= LASER_RETURNS_PER_DEGREE
+    laser = is_scanning_laser([returns_per_degree(p.features, robot, level) for p in positions])
     if bins is None:
         bins = SIGHTING_BINS if laser else GUARD_BINS
     returns, offsets, reaches = [], [], []
@@ -454,8 +454,15 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
                       scanning_laser=laser)
 
 
-def _returns_per_degree(features: Any, robot: Any, level: float | None) -> float:
-    """A position's returns in the body band per degree of pan they occupy (0 without any)."""
+def is_scanning_laser(densities: Any) -> bool:
+    """Whether positions of these :func:`returns_per_degree` are a scanning laser's (their
+    median at most :data:`LASER_RETURNS_PER_DEGREE`), not a depth camera's denser clouds."""
+    return float(np.median(np.asarray(densities, dtype=np.float64))) <= LASER_RETURNS_PER_DEGREE
+
+
+def returns_per_degree(features: Any, robot: Any, level: float | None = None) -> float:
+    """A position's returns in the body band per degree of pan they occupy (0 without any;
+    ``level``: the evidence a return needs, ``None``: any above 0)."""
     low, high = robot.body_band
     x, y, z = features.points.T
     returned = features.evidence > 0 if level is None else features.evidence >= level
@@ -551,4 +558,5 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     return quantise(world)
 
 
-__all__ = ["RunReturns", "WorldMap", "build_world_map", "position_ranges", "returns_of_fused", "returns_of_positions"]
+__all__ = ["LASER_RETURNS_PER_DEGREE", "RunReturns", "WorldMap", "build_world_map", "is_scanning_laser",
+           "position_ranges", "returns_of_fused", "returns_of_positions", "returns_per_degree"]

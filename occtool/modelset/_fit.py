@@ -199,7 +199,9 @@ def fit_model_set(
     from occtool import __version__
     from occtool.executor import check_jobs, make_executor
     from occtool.fit import OccupancyRegressor, features_digest
+    from occtool.fuse import returns_per_degree
     from occtool.io.model import save_model_text, with_run
+    from occtool.robot import Robot
 
     start = time.perf_counter()
     sources = list(logs) if isinstance(logs, (list, tuple)) else [logs]
@@ -286,12 +288,17 @@ def fit_model_set(
             outstanding[number] = count
             notify("read", name)
             chunk: list[tuple[dict[str, Any], Any]] = []
+            robot = params.get("robot") or Robot()
             for item in _chosen(stream, positions):
                 digest = features_digest(item.features)
                 model_file = f"model_{item.index:04d}.json"
+                # How dense its returns are: a map of the set tells a scanning laser by it
+                # (occtool.fuse.fuse_model_set), where a model file keeps no features.
+                density = returns_per_degree(item.features, robot, params.get("level"))
                 entry = {"position": item.index, "file": model_file,
                          "pose": item.pose.to_dict() if item.pose is not None else None,
-                         "stamp": item.stamp, "features": len(item.features), "features_sha256": digest}
+                         "stamp": item.stamp, "features": len(item.features), "features_sha256": digest,
+                         "returns_per_degree": round(density, 3)}
                 if skip_existing and _reusable(target / model_file, digest, settings):
                     writer.add(entry)
                     summary.reused += 1
