@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.grid._textbook import ScanUpdates, WorldBeams
+from occtool.grid._textbook import ScanUpdates, WorldBeams, cell_values
 
 FloatArray = NDArray[np.float64]
 
@@ -79,13 +79,9 @@ class CountingGrid:
 
     def occupancy(self, points: ArrayLike) -> FloatArray:
         """Occupancy probability at ``(K, 2)`` or ``(K, 3)`` world points (z ignored); 0.5 outside."""
-        xy = np.atleast_2d(np.asarray(points, dtype=np.float64))[:, :2]
-        finite = np.asarray(np.isfinite(xy).all(axis=1), dtype=bool)
-        index = np.floor(np.where(finite.reshape(-1, 1), xy, 0.0) / self.resolution).astype(np.int64) - self.lower
-        inside = np.all((index >= 0) & (index < np.array(self.probability.shape)), axis=1) & finite
-        out = np.full(xy.shape[0], 0.5)
-        i = index[inside]
-        out[inside] = self.probability[i[:, 0], i[:, 1]]
+        values, inside = cell_values(points, self.lower, self.resolution, self.probability)
+        out = np.full(inside.shape[0], 0.5)
+        out[inside] = values
         return out
 
 

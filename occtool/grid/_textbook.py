@@ -163,14 +163,22 @@ class TextbookGrid:
 
     def occupancy(self, points: ArrayLike) -> FloatArray:
         """Occupancy probability at ``(K, 2)`` or ``(K, 3)`` world points (z ignored); 0.5 outside."""
-        xy = np.atleast_2d(np.asarray(points, dtype=np.float64))[:, :2]
-        index = np.floor(xy / self.resolution).astype(np.int64) - self.lower
-        shape = np.array(self.log_odds.shape)
-        inside = np.all((index >= 0) & (index < shape), axis=1) & np.isfinite(xy).all(axis=1)
-        out = np.full(xy.shape[0], 0.5)
-        i = index[inside]
-        out[inside] = 1.0 / (1.0 + np.exp(-self.log_odds[i[:, 0], i[:, 1]].astype(np.float64)))
+        values, inside = cell_values(points, self.lower, self.resolution, self.log_odds)
+        out = np.full(inside.shape[0], 0.5)
+        out[inside] = 1.0 / (1.0 + np.exp(-values.astype(np.float64)))
         return out
+
+
+def cell_values(points: ArrayLike, lower: IntArray, resolution: float,
+                grid: NDArray[np.floating]) -> tuple[NDArray[np.floating], NDArray[np.bool_]]:
+    """The cells of ``grid`` (cell ``[0, 0]`` at lattice index ``lower``) holding ``(K, 2)`` or
+    ``(K, 3)`` world points (z ignored): their values, and which points fall inside (finite)."""
+    xy = np.atleast_2d(np.asarray(points, dtype=np.float64))[:, :2]
+    finite = np.asarray(np.isfinite(xy).all(axis=1), dtype=bool)
+    index = np.floor(np.where(finite.reshape(-1, 1), xy, 0.0) / resolution).astype(np.int64) - lower
+    inside = np.all((index >= 0) & (index < np.array(grid.shape)), axis=1) & finite
+    i = index[inside]
+    return grid[i[:, 0], i[:, 1]], inside
 
 
 @dataclass(eq=False)
