@@ -10,9 +10,13 @@ from hypothesis import strategies as st
 from occtool.errors import InputError, NotFittedError
 from occtool.features import Features
 from occtool.fit import (
+    DEFAULT_PIECES,
+    MORE_PIECES_FROM,
+    MOST_DEFAULT_PIECES,
     OccupancyRegressor,
     box_qp,
     contradicted_features,
+    default_pieces,
     first_obstacle_distance,
     frontier_samples,
     segment_near_runs,
@@ -453,3 +457,25 @@ def test_progress_is_a_fit_argument_called_per_group():
     features, _ = simulate_scene("office", n_features=1500, seed=4)
     OccupancyRegressor(pieces=12).fit(features, progress=lambda done, total: calls.append((done, total)))
     assert calls and calls[-1][0] == calls[-1][1] and [c[0] for c in calls] == list(range(1, len(calls) + 1))
+
+
+@given(st.integers(min_value=1, max_value=50_000_000))
+def test_default_pieces_grow_with_the_features_in_whole_groups_up_to_a_cap(n):
+    pieces = default_pieces(n)
+    assert pieces % 4 == 0 and DEFAULT_PIECES <= pieces <= MOST_DEFAULT_PIECES
+    assert (pieces == DEFAULT_PIECES) if n <= MORE_PIECES_FROM else pieces >= DEFAULT_PIECES
+    assert default_pieces(n + 1_000) >= pieces  # never fewer for more features
+    if n >= 4 * MORE_PIECES_FROM:
+        assert pieces == MOST_DEFAULT_PIECES
+
+
+def test_pieces_none_fits_the_count_s_default_and_a_number_overrides_it():
+    small, large = ring_room(3000), ring_room(2 * MORE_PIECES_FROM)
+    assert OccupancyRegressor().fit(small).tree_.n_pieces == DEFAULT_PIECES
+    assert OccupancyRegressor().fit(large).tree_.n_pieces == default_pieces(len(large)) > DEFAULT_PIECES
+    assert OccupancyRegressor(pieces=DEFAULT_PIECES).fit(large).tree_.n_pieces == DEFAULT_PIECES
+    # Groups are checked against the pieces the fit places, also when the count picks them.
+    with pytest.raises(InputError, match=r"groups must be between 1 and the number of pieces \(64\)"):
+        OccupancyRegressor(groups=65).fit(small)
+    with pytest.raises(InputError, match="pieces must be a whole number"):
+        OccupancyRegressor(pieces=float("nan")).fit(small)

@@ -320,8 +320,9 @@ def fit_options(function: F) -> F:
     options = _compose(
         sensor_options,
         robot_options,
-        click.option("-L", "--pieces", type=click.IntRange(min=1, max=MAX_PIECES), default=64, show_default=True,
-                     help="Number of linear pieces."),
+        click.option("-L", "--pieces", type=click.IntRange(min=1, max=MAX_PIECES), default=None,
+                     help="Number of linear pieces [default: 64, and beyond 10,000 features a position more, "
+                          "up to 128 from 40,000 on]."),
         click.option("--basis", type=click.Choice(["trig", "linear"]), default="trig", show_default=True,
                      help="Pieces a1 cos(alpha) + a2 sin(alpha) + b h + c r + d (seam-free) or the paper's "
                           "a alpha + b h + c r + d."),

@@ -43,7 +43,7 @@ ProgressCallback = Callable[[int, int], None]
 class FitSettings(Protocol):
     """The estimator's parameters the construction reads (an :class:`OccupancyRegressor`)."""
 
-    pieces: int
+    pieces: int | None
     basis: str
     groups: int | None
     c_min: float
@@ -119,10 +119,12 @@ class _Fitter:
     """One fit: holds the samples, the design matrix and the evolving pieces."""
 
     def __init__(self, params: FitSettings, samples: Samples, robot: Robot,
-                 returns: tuple[FloatArray, FloatArray], *,
+                 returns: tuple[FloatArray, FloatArray], *, pieces: int,
                  floor_is_obstacle: bool = False, depth_error: float = 0.0,
                  progress: ProgressCallback | None = None) -> None:
         self.p = params
+        #: The pieces to place (the estimator's ``pieces``, or the count's default).
+        self.n_pieces = pieces
         self.progress = progress
         #: Pan angle (turned) and horizontal distance of the obstacle returns in the body band.
         self.returns = returns
@@ -298,7 +300,7 @@ class _Fitter:
 
     def run(self) -> tuple[MinMaxTree, list[float]]:
         p = self.p
-        L = int(p.pieces)
+        L = self.n_pieces
         # Four pieces a group by default: two centres (low and high part of the body band)
         # and two sides.
         n_groups = int(p.groups) if p.groups is not None else max(1, L // 4)
