@@ -263,6 +263,46 @@ def test_keyframes_skip_positions_that_see_nothing_new(room):
         select_keyframes(positions, LASER_ROBOT, cell=0.0)
 
 
+def test_a_model_set_keeps_what_each_position_observed_and_maps_as_its_log(room, tmp_path):
+    from occtool.fuse import fuse_model_set, reach_from_guard
+    from occtool.modelset import fit_model_set
+
+    path, log, *_ = room
+    summary = fit_model_set(path, tmp_path / "models", estimator=OccupancyRegressor(robot=LASER_ROBOT), jobs=1)
+    assert not summary.failures
+    fused, models, positions = fuse_model_set(tmp_path / "models")
+    features = {p.index: p.features for p in log.positions}
+    # The reach and returns come from the position's own features, read back from its file.
+    for k, (index, _, _) in enumerate(positions):
+        model = models[k]
+        reach = observed_reach(features[index], model.robot_, model.focus_range)
+        nearest, offsets = nearest_returns(features[index], model.robot_, level=model.level)
+        assert np.array_equal(fused.reaches[k], reach)
+        assert np.array_equal(fused.returns[k], nearest) and np.array_equal(fused.return_offsets[k], offsets)
+    assert fused.return_reach == pytest.approx(models[0].focus_range + models[0].robot_.radius)
+    # A free ray (no return in its bin) reaches into the room; the guard alone leaves it unseen.
+    guard_only = np.stack([reach_from_guard(m.guard_, m.focus_range) for m in models])
+    assert (fused.reaches[:, 0] > guard_only[:, 0]).any()
+
+    # Fitted as `occtool map LOG` fits every position (a focus range the planar defaults keep),
+    # the set's fused map and world map answer as the log's own, to the bit.
+    estimator = OccupancyRegressor(robot=LASER_ROBOT, focus_range=4.5)
+    assert not fit_model_set(path, tmp_path / "same", estimator=estimator, jobs=1).failures
+    from_set, _, _ = fuse_model_set(tmp_path / "same")
+    from_log, _, _ = fuse_log(log, estimator, keyframe_share=0.0)
+    points = np.random.default_rng(0).uniform([-4.0, -3.0, 0.0], [6.0, 3.5, 0.0], (2000, 3))
+    assert np.array_equal(from_set.predict(points), from_log.predict(points))
+    assert np.array_equal(build_world_map(from_set).predict(points), build_world_map(from_log).predict(points))
+
+    # Files without it (sets written before; single fits) fall back to the return guard.
+    for entry in (tmp_path / "models").glob("model_*.json"):
+        data = json.loads(entry.read_text())
+        del data["observed"]
+        entry.write_text(json.dumps(data))
+    old, _, _ = fuse_model_set(tmp_path / "models")
+    assert np.array_equal(old.reaches[:, 0], guard_only[:, 0]) and old.return_offsets is None
+
+
 def test_fuse_log_fits_only_keyframes(room):
     path, log, every, _, _ = room
     fused, models, report = fuse_log(log, OccupancyRegressor(robot=LASER_ROBOT), keyframe_share=0.5)

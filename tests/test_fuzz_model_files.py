@@ -45,7 +45,15 @@ def files(tmp_path_factory) -> dict[str, Path]:
     csv.write_text("\n".join(lines[start: start + 301]) + "\n")
     assert run("fit", csv, "-o", folder / "model.json", "--pieces", "8").exit_code == 0
     assert run("invert", folder / "model.json", "-o", folder / "inverse.json").exit_code == 0
-    return {"model": folder / "model.json", "inverse": folder / "inverse.json"}
+    # A model set's file also keeps what its position observed (occtool.fuse.Observation).
+    from occtool.fuse import observe
+    from occtool.io import read_log
+    from occtool.io.model import model_text, save_model_text
+
+    features = read_log(csv).single().features
+    model = load_model(folder / "model.json")
+    save_model_text(model_text(model, run=model.run_, observed=observe(model, features)), folder / "observed.json")
+    return {"model": folder / "model.json", "inverse": folder / "inverse.json", "observed": folder / "observed.json"}
 
 
 def _nested(data: dict, depth: int) -> str:
@@ -106,17 +114,35 @@ REPLACEMENTS = st.one_of(
 )
 
 
-@settings(max_examples=80)
-@given(data=st.data(), replacement=REPLACEMENTS, kind=st.sampled_from(["model", "inverse"]))
+@settings(max_examples=120)
+@given(data=st.data(), replacement=REPLACEMENTS, kind=st.sampled_from(["model", "inverse", "observed"]))
 def test_any_number_replaced_by_a_wrong_value_loads_or_fails_cleanly(files, tmp_path_factory, data, replacement, kind):
     original = json.loads(files[kind].read_text())
     path_in_file = data.draw(st.sampled_from(_paths(original)))
     path = tmp_path_factory.mktemp("fuzz") / f"{kind}.json"
     path.write_text(_dump(_set(original, path_in_file, replacement), 10**400), encoding="utf-8")
     try:
-        (load_model if kind == "model" else load_inverse)(path)
+        (load_inverse if kind == "inverse" else load_model)(path)
     except ModelFormatError:
         pass
+
+
+@pytest.mark.parametrize(("damage", "message"), [
+    (lambda o: o.update(reach_bins=119), "120 reach bins"),
+    (lambda o: o["returns_mm"].pop(), "list of 360 values"),
+    (lambda o: o["reach_cm"].__setitem__(3, None), "reach_cm' 3 is not a whole number"),
+    (lambda o: o["return_offsets"].__setitem__(0, 256), "return_offsets' 0 is not a whole number 0-255"),
+    (lambda o: o["first_obstacle_cm"].__setitem__(5, -2), "first_obstacle_cm' 5"),
+    (lambda o: o.clear() or o.update(x=[1]), "120 reach bins"),
+])
+def test_a_damaged_observation_is_a_one_line_format_error(files, tmp_path, damage, message):
+    data = json.loads(files["observed"].read_text())
+    damage(data["observed"])
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(ModelFormatError, match=message):
+        load_model(path)
+    assert_one_line_error(run("info", path))
 
 
 @settings(max_examples=15, deadline=None)
@@ -140,10 +166,11 @@ def test_the_bytes_written_do_not_change(files, tmp_path):
     """Reading is stricter; writing is as before: a model read back and saved is byte-identical."""
     from occtool.io.model import save_model
 
-    model = load_model(files["model"])
-    out = tmp_path / "again.json"
-    save_model(model, out, run=model.run_)
-    assert out.read_bytes() == files["model"].read_bytes()
+    for kind in ("model", "observed"):
+        model = load_model(files[kind])
+        out = tmp_path / f"{kind}-again.json"
+        save_model(model, out, run=model.run_)
+        assert out.read_bytes() == files[kind].read_bytes()
 
 
 # --- every JSON a user hands in: navigation maps, scene truths --------------------------------------

@@ -279,9 +279,12 @@ def test_one_position_of_the_whole_intel_log(runner, shared_data, tmp_path):
     index = json.loads((models / "index.json").read_text())
     assert [(e["position"], e["file"]) for e in index["models"]] == [(100, "model_0100.json")]
     assert index["models"][0]["pose"] == log.positions[100].pose.to_dict()
-    # The same position to a file is the same model.
+    # The same position to a file is the same model; the set's file also keeps what the
+    # position observed, for a map of the set (occtool.fuse.Observation).
     run(runner, "fit", shared_data / INTEL, "--position", 100, "--pieces", 8, "-o", tmp_path / "m100.json")
-    assert without_run(tmp_path / "m100.json") == without_run(models / "model_0100.json")
+    in_set = without_run(models / "model_0100.json")
+    assert in_set.pop("observed")["reach_bins"] == 120
+    assert without_run(tmp_path / "m100.json") == in_set
 
 
 # ----------------------------------------------------------------- regression: pan weight

@@ -461,6 +461,9 @@ class OccupancyRegressor:
         self.fit_seconds_ = seconds
         #: A model file's run details (the model reader fills them in).
         self.run_: dict[str, Any] = {}
+        #: What the position observed (an :class:`occtool.fuse.Observation`), where a model
+        #: file of a set keeps one (the model reader fills it in; a fit leaves it ``None``).
+        self.observed_: Any = None
 
     def guarded_returns(self, features: Features) -> NDArray[np.bool_]:
         """Which of ``features`` the return guard holds (:mod:`occtool.guard`): the returns

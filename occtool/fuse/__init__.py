@@ -20,8 +20,9 @@ observed the point:
 
 Where no model speaks the place is *unknown* (never free). Each position also keeps its
 nearest return per pan degree (:func:`nearest_returns`: 720 bytes of distances and 360 of
-angles within the bin; a model read from a file, its return guard's distances at the
-bins' centres): :meth:`FusedMap.predict` joins them to the
+angles within the bin; a model read from a file, the :class:`Observation` a model set's
+file keeps, or in older files and single fits its return guard's distances at the bins'
+centres): :meth:`FusedMap.predict` joins them to the
 models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
 unknown grid over the robot's body band with its walls where the returns fall.
 :func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
@@ -63,7 +64,9 @@ from occtool.fuse._reach import (
     OFFSET_STEPS,
     REACH_BINS,
     REACH_UNIT,
+    Observation,
     nearest_returns,
+    observe,
     observed_reach,
     reach_from_guard,
     returns_from_guard,
@@ -99,6 +102,7 @@ __all__ = [
     "Evidence",
     "FuseReport",
     "FusedMap",
+    "Observation",
     "Raster",
     "RunReturns",
     "WorldMap",
@@ -109,6 +113,7 @@ __all__ = [
     "is_scanning_laser",
     "load_map",
     "nearest_returns",
+    "observe",
     "observed_reach",
     "reach_from_guard",
     "returns_from_guard",

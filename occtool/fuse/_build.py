@@ -15,7 +15,7 @@ from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._map import FusedMap
-from occtool.fuse._reach import nearest_returns, observed_reach, reach_from_guard, returns_from_guard
+from occtool.fuse._reach import observe, reach_from_guard, returns_from_guard
 from occtool.fuse._world import RunReturns, is_scanning_laser, returns_of_positions
 from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.robot import Robot
@@ -90,12 +90,12 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         models.append(model)
         poses.append(item.pose)
         stamps.append(item.stamp)
-        reaches.append(observed_reach(item.features, robot, focus_range))
         # Every return, far ones too: they mark walls; the map's return_reach keeps them from
         # lending occupancy or clearing cells past the guard's reach.
-        nearest, offsets = nearest_returns(item.features, robot, level=model.level)
-        returns.append(nearest)
-        return_offsets.append(offsets)
+        observed = observe(model, item.features)
+        reaches.append(observed.reach)
+        returns.append(observed.returns)
+        return_offsets.append(observed.offsets)
         if progress is not None:
             progress(done, len(positions))
     fitted = time.perf_counter()
@@ -115,14 +115,28 @@ def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayL
                 stamps: Sequence[float | None] | None = None, scanning_laser: bool = False) -> FusedMap:
     """Fuse fitted regressors (e.g. a model set read back) placed at ``poses``.
 
-    Without ``reaches`` each model's reach comes from its return guard
-    (:func:`reach_from_guard`): a model file does not keep its features, so directions
-    where it saw no return stay unknown. ``scanning_laser``: the models are a scanning
-    laser's (:attr:`FusedMap.scanning_laser`; a model file cannot tell).
+    When every model knows what its position observed (``observed_``, an
+    :class:`~occtool.fuse.Observation`: the model files of ``occtool fit LOG -o DIR/``), the
+    map keeps its reaches and returns as :func:`fuse_log` does. Otherwise (models fitted
+    here, older files) each model's reach without ``reaches`` and its returns come from its
+    return guard (:func:`reach_from_guard`, :func:`returns_from_guard`): directions where it
+    saw no return stay unknown and each return is spread over the bins beside it.
+    ``scanning_laser``: the models are a scanning laser's (:attr:`FusedMap.scanning_laser`;
+    a model file cannot tell).
     """
     if not models:
         raise InputError("a fused map needs at least one local model")
     robot = models[0].robot_
+    observed = [o for o in (getattr(m, "observed_", None) for m in models) if o is not None]
+    if len(observed) == len(models):
+        if reaches is None:
+            reaches = np.stack([o.reach for o in observed])
+        # As fuse_log: returns beyond the guard's reach mark walls but lend no occupancy.
+        reach = max(m.focus_range if m.focus else math.inf for m in models)
+        return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination,
+                        threshold=threshold, stamps=stamps, returns=np.stack([o.returns for o in observed]),
+                        return_offsets=np.stack([o.offsets for o in observed]), return_reach=reach + robot.radius,
+                        scanning_laser=scanning_laser)
     if reaches is None:
         reaches = np.stack([reach_from_guard(getattr(m, "guard_", None),
                                               m.focus_range if m.focus else math.inf) for m in models])

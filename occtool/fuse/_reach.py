@@ -7,12 +7,13 @@ to the model, say where that is (:class:`occtool.fuse.FusedMap` reads them).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.errors import InputError
+from occtool.errors import InputError, ModelFormatError
 from occtool.features import Features
 from occtool.robot import Robot
 
@@ -129,3 +130,74 @@ def nearest_returns(features: Features, robot: Robot, reach: float = math.inf, l
         millimetres[index[first]] = np.minimum(np.round(distance[first] * 1000.0), NO_OBSTACLE - 1)
         offsets[index[first]] = np.round(np.clip(fraction[first], 0.0, 1.0) * OFFSET_STEPS).astype(np.uint8)
     return millimetres, offsets
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What one position observed, kept next to its model where its features are not: the
+    reach and first obstacle per pan bin (:func:`observed_reach`) and the nearest return per
+    pan bin with its angle within the bin (:func:`nearest_returns`).
+
+    ``occtool fit LOG -o DIR/`` writes one into every model file of a set (``"observed"``,
+    docs/formats.md), so that a map of the set sees what a map of the log sees: its reach
+    where the position's free rays went and its walls where the returns fell. Without it a
+    model file has only its return guard, which holds no free rays and spreads each return
+    over the bins beside it (the navigation map's margin): on an inner split of Intel's
+    training scans the set's world map scored 0.954 against the log's 0.982, with it 0.981.
+    """
+
+    #: ``(2, REACH_BINS)`` uint16 centimetres: the reach and the first obstacle.
+    reach: NDArray[np.uint16]
+    #: ``(GUARD_BINS,)`` uint16 millimetres: the nearest return (:data:`NO_OBSTACLE` for none).
+    returns: NDArray[np.uint16]
+    #: ``(GUARD_BINS,)`` uint8: each return's angle within its bin, in :data:`OFFSET_STEPS` steps.
+    offsets: NDArray[np.uint8]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: whole numbers, ``null`` where a bin has no obstacle or return."""
+        def listed(values: NDArray[np.uint16]) -> list[int | None]:
+            return [None if v == NO_OBSTACLE else v for v in values.tolist()]
+
+        return {"reach_bins": int(self.reach.shape[1]), "reach_cm": self.reach[0].tolist(),
+                "first_obstacle_cm": listed(self.reach[1]), "return_bins": int(self.returns.size),
+                "returns_mm": listed(self.returns), "return_offsets": self.offsets.tolist()}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Observation:
+        """Read :meth:`to_dict` output; :class:`~occtool.errors.ModelFormatError` when it is malformed."""
+        from occtool.guard import GUARD_BINS
+
+        if not isinstance(data, dict):
+            raise ModelFormatError("'observed' must be an object")
+        if data.get("reach_bins") != REACH_BINS or data.get("return_bins") != GUARD_BINS:
+            raise ModelFormatError(f"'observed' must have {REACH_BINS} reach bins and {GUARD_BINS} return bins, got "
+                                   f"{data.get('reach_bins')!r} and {data.get('return_bins')!r}")
+
+        def whole(key: str, size: int, top: int, none: bool) -> NDArray[np.int64]:
+            values = data.get(key)
+            if not isinstance(values, list) or len(values) != size:
+                raise ModelFormatError(f"'observed.{key}' must be a list of {size} values")
+            out = np.empty(size, dtype=np.int64)
+            for i, value in enumerate(values):
+                if value is None and none:
+                    out[i] = NO_OBSTACLE
+                elif isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= top:
+                    out[i] = value
+                else:
+                    raise ModelFormatError(f"'observed.{key}' {i} is not a whole number 0-{top}"
+                                           f"{' or null' if none else ''}: {value!r}")
+            return out
+
+        reach = np.vstack([whole("reach_cm", REACH_BINS, NO_OBSTACLE - 1, False),
+                           whole("first_obstacle_cm", REACH_BINS, NO_OBSTACLE - 1, True)]).astype(np.uint16)
+        returns = whole("returns_mm", GUARD_BINS, NO_OBSTACLE - 1, True).astype(np.uint16)
+        offsets = whole("return_offsets", GUARD_BINS, OFFSET_STEPS, False).astype(np.uint8)
+        return cls(reach, returns, offsets)
+
+
+def observe(model: Any, features: Features) -> Observation:
+    """The :class:`Observation` of the position a fitted ``model`` was fitted to from
+    ``features``: within the model's focus range (none without focus), returns at its level."""
+    focus_range = float(model.focus_range) if model.focus else math.inf
+    returns, offsets = nearest_returns(features, model.robot_, level=model.level)
+    return Observation(observed_reach(features, model.robot_, focus_range), returns, offsets)

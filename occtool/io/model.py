@@ -53,8 +53,10 @@ def _fit_params() -> tuple[str, ...]:
     return tuple(name for name in OccupancyRegressor._get_param_names() if name not in ("sensor", "robot"))
 
 
-def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
-    """The JSON-ready content of a model file for a fitted :class:`OccupancyRegressor`."""
+def model_to_dict(model: Any, *, run: dict | None = None, observed: Any | None = None) -> dict[str, Any]:
+    """The JSON-ready content of a model file for a fitted :class:`OccupancyRegressor`;
+    ``observed``: what its position observed (:class:`occtool.fuse.Observation`; by default
+    the model's own ``observed_``, read from a file, if any)."""
     model._check_fitted()
     tree = model.tree_
     data: dict[str, Any] = {
@@ -73,9 +75,25 @@ def model_to_dict(model: Any, *, run: dict | None = None) -> dict[str, Any]:
     }
     if getattr(model, "guard_", None) is not None:
         data["guard"] = model.guard_.to_dict()
+    observed = observed if observed is not None else getattr(model, "observed_", None)
+    if observed is not None:
+        data["observed"] = observed.to_dict()
     if run is not None:
         data["run"] = dict(run)
     return data
+
+
+def _observed_from(data: dict[str, Any], source: str) -> Any:
+    """The file's :class:`occtool.fuse.Observation` (``None`` when it has none: a single fit,
+    files written before model sets kept one)."""
+    from occtool.fuse._reach import Observation
+
+    if data.get("observed") is None:
+        return None
+    try:
+        return Observation.from_dict(data["observed"])
+    except ModelFormatError as exc:
+        raise ModelFormatError(f"{source}: {exc}") from None
 
 
 def _guard_from(data: dict[str, Any], source: str) -> Any:
@@ -115,10 +133,11 @@ def save_model(model: Any, path: str | os.PathLike[str], *, run: dict | None = N
 RUN_PLACEHOLDER = {"@@occtool-run@@": 0}
 
 
-def model_text(model: Any, *, run: dict | None = None) -> str:
+def model_text(model: Any, *, run: dict | None = None, observed: Any | None = None) -> str:
     """The text of the model file :func:`save_model` writes (``run=RUN_PLACEHOLDER`` to
-    fill the run object in later with :func:`with_run`, where the file is written)."""
-    return _dumps(model_to_dict(model, run=run)) + "\n"
+    fill the run object in later with :func:`with_run`, where the file is written;
+    ``observed`` as :func:`model_to_dict`)."""
+    return _dumps(model_to_dict(model, run=run, observed=observed)) + "\n"
 
 
 def _run_block(run: dict) -> str:
@@ -159,6 +178,9 @@ def _dumps(data: dict[str, Any]) -> str:
         shaped["pieces"] = [placeholder(piece) for piece in shaped["pieces"]]
     if isinstance(shaped.get("guard"), dict):
         shaped["guard"] = {**shaped["guard"], "distance_mm": placeholder(shaped["guard"]["distance_mm"])}
+    if isinstance(shaped.get("observed"), dict):
+        shaped["observed"] = {key: placeholder(value) if isinstance(value, list) else value
+                              for key, value in shaped["observed"].items()}
     text = json.dumps(shaped, indent=1, allow_nan=False)
     for marker, value in compact.items():
         text = text.replace(json.dumps(marker), value, 1)
@@ -256,6 +278,7 @@ def model_from_dict(data: Any, source: str = "model") -> Any:
                       n_samples=n_samples, sample_counts=sample_counts, rmse=rmse, loss_history=[],
                       loss=loss, n_sweeps=n_sweeps, features_digest=digest,
                       seconds=math.nan)
+    model.observed_ = _observed_from(data, source)
     model.run_ = dict(data["run"]) if isinstance(data.get("run"), dict) else {}
     return model
 

@@ -60,6 +60,7 @@ def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
     import platform
 
     from occtool.fit import OccupancyRegressor
+    from occtool.fuse import observe
     from occtool.io.model import RUN_PLACEHOLDER, model_text
 
     out: list[Any] = []
@@ -72,7 +73,10 @@ def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
             continue
         seconds = time.perf_counter() - start
         facts = {"features": model.n_features_, "rmse": model.rmse_}
-        out.append((model_text(model, run=RUN_PLACEHOLDER), facts, seconds, platform.node()))
+        # What the position observed goes into its file: a map of the set needs its free rays
+        # and returns, and the file keeps no features (occtool.fuse.Observation).
+        text = model_text(model, run=RUN_PLACEHOLDER, observed=observe(model, features))
+        out.append((text, facts, seconds, platform.node()))
     return out
 
 
