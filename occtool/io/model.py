@@ -83,29 +83,29 @@ def model_to_dict(model: Any, *, run: dict | None = None, observed: Any | None =
     return data
 
 
+def _optional_block(data: dict[str, Any], key: str, reader: Any, source: str) -> Any:
+    """``reader(data[key])``, or ``None`` where the file has no ``key``; its format errors name ``source``."""
+    if data.get(key) is None:
+        return None
+    try:
+        return reader(data[key])
+    except ModelFormatError as exc:
+        raise ModelFormatError(f"{source}: {exc}") from None
+
+
 def _observed_from(data: dict[str, Any], source: str) -> Any:
     """The file's :class:`occtool.fuse.Observation` (``None`` when it has none: a single fit,
     files written before model sets kept one)."""
     from occtool.fuse._reach import Observation
 
-    if data.get("observed") is None:
-        return None
-    try:
-        return Observation.from_dict(data["observed"])
-    except ModelFormatError as exc:
-        raise ModelFormatError(f"{source}: {exc}") from None
+    return _optional_block(data, "observed", Observation.from_dict, source)
 
 
 def _guard_from(data: dict[str, Any], source: str) -> Any:
     """The file's return guard (``None`` when it has none: older files, ``--no-guard``)."""
     from occtool.guard import ReturnGuard
 
-    if data.get("guard") is None:
-        return None
-    try:
-        return ReturnGuard.from_dict(data["guard"])
-    except ModelFormatError as exc:
-        raise ModelFormatError(f"{source}: {exc}") from None
+    return _optional_block(data, "guard", ReturnGuard.from_dict, source)
 
 
 def _robot_dict(robot: Robot) -> dict[str, float]:
