@@ -160,14 +160,19 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     assert solid == pytest.approx(1.0) and passing == pytest.approx(0.625)
     raster = world.rasterise(0.05)
     row, col, _ = raster.cell_of([[1.0, 1.0], [3.0, 1.0], [2.0, 1.0], [5.0, 1.0]])
-    # The wall most positions saw through is not drawn for Nav2 (share below 0.5); the
-    # trusted wall's uncertain edge is unknown; past the region nothing was observed.
+    # The wall most positions saw through is not drawn for Nav2 (share below 0.5); past the
+    # region nothing was observed.
     assert raster.cells[row, col].tolist() == [OCCUPIED, FREE, FREE, UNKNOWN]
     assert raster.explored[row, col].tolist() == [True, True, True, False]
-    rim = world.wall_half_width + world.wall_rim
-    edge_row, edge_col, _ = raster.cell_of([[1.0 + 0.5 * (world.wall_half_width + rim), 1.0],
-                                            [1.0 + rim + 0.05, 1.0]])
-    assert raster.cells[edge_row, edge_col].tolist() == [UNKNOWN, FREE]
+    # Across the trusted wall (ridge 1 falling to 0 over WIDTH 0.2 m) the cells follow its
+    # occupancy: occupied to 0.07 m (0.65), unknown to 0.13 m (0.35), then free.
+    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
+
+    occupied_to, free_from = (1.0 - RASTER_OCCUPIED) * world.width, (1.0 - RASTER_FREE) * world.width
+    # (points inside cells whose centres lie 0.025, 0.125 and 0.175 m from the wall's line)
+    assert occupied_to > 0.025 and occupied_to < 0.125 < free_from < 0.175
+    edge_row, edge_col, _ = raster.cell_of([[1.01, 1.0], [1.11, 1.0], [1.16, 1.0]])
+    assert raster.cells[edge_row, edge_col].tolist() == [OCCUPIED, UNKNOWN, FREE]
 
 
 def test_frontiers_ignore_a_walls_uncertain_edge():

@@ -60,11 +60,21 @@ FREE_CAP = 0.45
 UNKNOWN_LEVEL = 0.5
 #: A beam passing a segment's middle more than this in front of its own return saw through it (metres).
 THROUGH_MARGIN = 0.1
-#: The Nav2 raster's occupied cells: their centres within this of a trusted wall (metres, past its thickness).
-WALL_HALF_WIDTH = 0.075
-#: The Nav2 raster's observed cells this near a trusted wall (metres, past its thickness) and
-#: not occupied are unknown, not free: a trinary map's middle value for a wall's uncertain
-#: edge (chosen on inner splits, docs/map.md).
+#: The Nav2 raster's cells are occupied where the map's occupancy at their centre reaches
+#: this (map_server's own ``occupied_thresh``) ...
+RASTER_OCCUPIED = 0.65
+#: ... free where it is at most this and the run observed them, unknown between; the walls
+#: most positions saw through left out (chosen on inner splits of the four CARMEN logs'
+#: training scans, docs/map.md: against the fixed 7.5 cm wall band and its 12.5 cm unknown
+#: rim before it, trinary AUC +0.001 to +0.010 on each and held-out returns on free cells
+#: no more frequent on any).
+RASTER_FREE = 0.35
+#: A trusted wall's band is occupied in the raster however low its occupancy there: cell
+#: centres within this of it (metres, past its thickness; half a 5 cm cell). The occupancy
+#: threshold decides the rest (files before it kept 0.075 and draw their bands that wide).
+WALL_HALF_WIDTH = 0.025
+#: Observed cells this near a trusted wall (metres, past its thickness) are explored even
+#: where unknown: a wall's uncertain edge, not a frontier.
 WALL_RIM = 0.125
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
@@ -244,8 +254,9 @@ class WorldMap:
         half = self._frames[3] if self._index is not None else self._segment_frames()[3]
         return float(half.max() + self.thickness.max() + beyond) if len(self) else 0.0
 
-    def wall_value(self, xy: ArrayLike) -> FloatArray:
-        """MAX over the segments' ridges at world ``(K, 2)`` points (``-inf`` where none reaches)."""
+    def wall_value(self, xy: ArrayLike, *, trusted: bool = False) -> FloatArray:
+        """MAX over the segments' ridges at world ``(K, 2)`` points (``-inf`` where none reaches;
+        ``trusted``: only segments of trust >= ``wall_share``)."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         best = np.full(xy.shape[0], -np.inf)
         if not len(self) or not xy.shape[0]:
@@ -254,8 +265,10 @@ class WorldMap:
         distance, index = self._neighbours(xy, reach)
         middle, axis, normal, half = self._frames
         peak = self.peak
+        keep = self.trust >= self.wall_share if trusted else np.ones(len(self), dtype=bool)
         for j in range(index.shape[1]):  # the few nearest segments of every point at once
             ok = np.isfinite(distance[:, j])
+            ok[ok] = keep[index[ok, j]]
             s = index[ok, j]
             rel = xy[ok] - middle[s]
             across = rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]
@@ -333,13 +346,15 @@ class WorldMap:
         return out
 
     def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000) -> Raster:
-        """Free / occupied / unknown cells, as Nav2 loads them: occupied within
-        :attr:`wall_half_width` of a trusted wall's band; unknown within :attr:`wall_rim` of
-        it (an edge the walls' spread leaves uncertain); free elsewhere in the observed
-        region, unknown elsewhere. Row 0 is the
-        bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks the
-        cells the run observed or placed a wall near (the unknown among them are uncertain,
-        not unexplored: no frontier lies there)."""
+        """Free / occupied / unknown cells, as Nav2 loads them, from the occupancy of the
+        trusted walls (:meth:`predict` without the walls most positions saw through, which the
+        trinary map does not draw) at the cell's centre: occupied where it reaches
+        :data:`RASTER_OCCUPIED` or within :attr:`wall_half_width` of a trusted wall's band;
+        free where the run observed the cell and it is at most :data:`RASTER_FREE`; unknown
+        elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the bottom; ``probability`` is
+        :meth:`predict` at the cell centres; ``explored`` marks the cells the run observed or
+        placed a wall near (within :attr:`wall_rim`: the unknown among them are uncertain, not
+        unexplored: no frontier lies there)."""
         if not (math.isfinite(resolution) and resolution > 0):
             raise InputError(f"resolution must be a positive number of metres, got {resolution}")
         lower, upper = self.bounds
@@ -356,9 +371,10 @@ class WorldMap:
         base = np.full(centres.shape[0], self.unknown_level)
         base[observed] = self.free_value(centres[observed])
         probability = np.maximum(base, self.wall_value(centres))
+        drawn = np.maximum(base, self.wall_value(centres, trusted=True))
         cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
-        cells[observed & ~rim] = FREE
-        cells[wall] = OCCUPIED
+        cells[observed & (drawn <= RASTER_FREE)] = FREE
+        cells[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
         return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
                       probability.reshape(ny, nx).astype(np.float32), np.zeros((ny, nx), dtype=bool),
                       explored=(observed | rim | wall).reshape(ny, nx))
