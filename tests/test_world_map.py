@@ -165,12 +165,13 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     assert raster.cells[row, col].tolist() == [OCCUPIED, FREE, FREE, UNKNOWN]
     assert raster.explored[row, col].tolist() == [True, True, True, False]
     # Across the trusted wall (ridge 1 falling to 0 over WIDTH 0.2 m) the cells follow its
-    # occupancy: occupied to 0.07 m (0.65), unknown to 0.13 m (0.35), then free.
+    # occupancy: occupied to 0.07 m (0.65), then unknown; free from 0.13 m (0.35) and past
+    # the wall's rim (0.125 m); a cell's centre decides.
     from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
 
     occupied_to, free_from = (1.0 - RASTER_OCCUPIED) * world.width, (1.0 - RASTER_FREE) * world.width
     # (points inside cells whose centres lie 0.025, 0.125 and 0.175 m from the wall's line)
-    assert occupied_to > 0.025 and occupied_to < 0.125 < free_from < 0.175
+    assert 0.025 < occupied_to < 0.125 < max(free_from, world.wall_rim) < 0.175
     edge_row, edge_col, _ = raster.cell_of([[1.01, 1.0], [1.11, 1.0], [1.16, 1.0]])
     assert raster.cells[edge_row, edge_col].tolist() == [OCCUPIED, UNKNOWN, FREE]
 
@@ -434,3 +435,31 @@ def test_a_lasers_every_beam_places_walls_a_cameras_cloud_its_nearest_per_degree
     assert np.allclose(dense.ranges[dense.returned], 3.0, atol=1e-3)
     # Only a laser's walls face one side by default (a depth camera's noisy clouds keep both).
     assert run.scanning_laser and not dense.scanning_laser
+
+
+@pytest.mark.parametrize("facing", [0, 1, -1])
+def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_them(facing):
+    """Safety of the trinary cells: a free cell is observed, at most RASTER_FREE and farther
+    than the rim from every trusted wall; every cell on a trusted wall's band is occupied;
+    an untrusted wall is not drawn."""
+    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
+
+    region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 3.0, 2.0)])
+    world = WorldMap([[1.0, 0.2], [2.2, 0.0]], [[1.3, 1.8], [2.2, 2.0]], [0.01, 0.02], [0.9, 0.3], region,
+                     band=BAND, facing=[facing, 0], positions=[[0.5, 1.0]])
+    raster = world.rasterise(0.05)
+    ny, nx = raster.cells.shape
+    jj, ii = np.mgrid[0:ny, 0:nx]
+    x0, y0 = raster.origin
+    centres = np.column_stack([x0 + (ii.ravel() + 0.5) * 0.05, y0 + (jj.ravel() + 0.5) * 0.05])
+    cells = raster.cells.ravel()
+    trusted = world.wall_distance(centres, within=world.wall_rim)
+    free = cells == FREE
+    assert free.any() and (cells == OCCUPIED).any()
+    assert world.observed(centres[free]).all() and (trusted[free] > world.wall_rim).all()
+    drawn = np.maximum(world.free_value(centres), world.wall_value(centres, trusted=True))
+    assert (drawn[free] <= RASTER_FREE).all() and (cells[drawn >= RASTER_OCCUPIED] == OCCUPIED).all()
+    assert (cells[trusted <= world.wall_half_width] == OCCUPIED).all()
+    # The untrusted wall (trust 0.3 < share 0.5) at x = 2.2: free on its line, away from the other.
+    row, col, _ = raster.cell_of([[2.2, 1.0]])
+    assert raster.cells[row, col].tolist() == [FREE]

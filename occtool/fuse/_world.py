@@ -63,18 +63,19 @@ THROUGH_MARGIN = 0.1
 #: The Nav2 raster's cells are occupied where the map's occupancy at their centre reaches
 #: this (map_server's own ``occupied_thresh``) ...
 RASTER_OCCUPIED = 0.65
-#: ... free where it is at most this and the run observed them, unknown between; the walls
-#: most positions saw through left out (chosen on inner splits of the four CARMEN logs'
-#: training scans, docs/map.md: against the fixed 7.5 cm wall band and its 12.5 cm unknown
-#: rim before it, trinary AUC +0.001 to +0.010 on each and held-out returns on free cells
-#: no more frequent on any).
+#: ... free where it is at most this, the run observed them and no trusted wall is within
+#: :data:`WALL_RIM`, unknown between; the walls most positions saw through left out (chosen
+#: on inner splits of the four CARMEN logs' training scans, docs/map.md: against the fixed
+#: 7.5 cm wall band before it, trinary AUC +0.001 to +0.011 on each; its free cells are a
+#: subset of the band's).
 RASTER_FREE = 0.35
 #: A trusted wall's band is occupied in the raster however low its occupancy there: cell
 #: centres within this of it (metres, past its thickness; half a 5 cm cell). The occupancy
 #: threshold decides the rest (files before it kept 0.075 and draw their bands that wide).
 WALL_HALF_WIDTH = 0.025
-#: Observed cells this near a trusted wall (metres, past its thickness) are explored even
-#: where unknown: a wall's uncertain edge, not a frontier.
+#: Observed cells this near a trusted wall (metres, past its thickness) are never free in the
+#: raster, and explored where unknown: a wall's uncertain edge, not a frontier (chosen on
+#: inner splits, docs/map.md).
 WALL_RIM = 0.125
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
@@ -350,8 +351,9 @@ class WorldMap:
         trusted walls (:meth:`predict` without the walls most positions saw through, which the
         trinary map does not draw) at the cell's centre: occupied where it reaches
         :data:`RASTER_OCCUPIED` or within :attr:`wall_half_width` of a trusted wall's band;
-        free where the run observed the cell and it is at most :data:`RASTER_FREE`; unknown
-        elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the bottom; ``probability`` is
+        free where the run observed the cell, it is at most :data:`RASTER_FREE` and the cell
+        lies farther than :attr:`wall_rim` from a trusted wall's band; unknown elsewhere (a
+        wall's uncertain edge, what nobody observed). Row 0 is the bottom; ``probability`` is
         :meth:`predict` at the cell centres; ``explored`` marks the cells the run observed or
         placed a wall near (within :attr:`wall_rim`: the unknown among them are uncertain, not
         unexplored: no frontier lies there)."""
@@ -373,7 +375,9 @@ class WorldMap:
         probability = np.maximum(base, self.wall_value(centres))
         drawn = np.maximum(base, self.wall_value(centres, trusted=True))
         cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
-        cells[observed & (drawn <= RASTER_FREE)] = FREE
+        # Never free near a trusted wall: a held-out return scattered in front of its band
+        # lands on unknown, not on free (the free cells are a subset of the fixed band's).
+        cells[observed & ~rim & (drawn <= RASTER_FREE)] = FREE
         cells[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
         return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
                       probability.reshape(ny, nx).astype(np.float32), np.zeros((ny, nx), dtype=bool),
