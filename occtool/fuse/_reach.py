@@ -139,7 +139,7 @@ class Observation:
     pan bin with its angle within the bin (:func:`nearest_returns`).
 
     ``occtool fit LOG -o DIR/`` writes one into every model file of a set (``"observed"``,
-    docs/formats.md), so that a map of the set sees what a map of the log sees: its reach
+    docs/method.md's model file), so that a map of the set sees what a map of the log sees: its reach
     where the position's free rays went and its walls where the returns fell. Without it a
     model file has only its return guard, which holds no free rays and spreads each return
     over the bins beside it (the navigation map's margin): on an inner split of Intel's
@@ -188,7 +188,8 @@ class Observation:
                                            f"{' or null' if none else ''}: {value!r}")
             return out
 
-        reach = np.vstack([whole("reach_cm", REACH_BINS, NO_OBSTACLE - 1, False),
+        # A reach is clipped to NO_OBSTACLE (655 m, without a focus range); the others read null there.
+        reach = np.vstack([whole("reach_cm", REACH_BINS, NO_OBSTACLE, False),
                            whole("first_obstacle_cm", REACH_BINS, NO_OBSTACLE - 1, True)]).astype(np.uint16)
         returns = whole("returns_mm", GUARD_BINS, NO_OBSTACLE - 1, True).astype(np.uint16)
         offsets = whole("return_offsets", GUARD_BINS, OFFSET_STEPS, False).astype(np.uint8)
