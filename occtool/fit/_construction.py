@@ -41,9 +41,9 @@ ProgressCallback = Callable[[int, int], None]
 
 
 class FitSettings(Protocol):
-    """The estimator's parameters the construction reads (an :class:`OccupancyRegressor`)."""
+    """The estimator's parameters the construction reads (an :class:`OccupancyRegressor`;
+    the pieces to place come apart, resolved from the features' count)."""
 
-    pieces: int | None
     basis: str
     groups: int | None
     c_min: float

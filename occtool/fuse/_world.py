@@ -258,18 +258,23 @@ class WorldMap:
     def wall_value(self, xy: ArrayLike, *, trusted: bool = False) -> FloatArray:
         """MAX over the segments' ridges at world ``(K, 2)`` points (``-inf`` where none reaches;
         ``trusted``: only segments of trust >= ``wall_share``)."""
+        every, of_trusted = self._wall_values(xy)
+        return of_trusted if trusted else every
+
+    def _wall_values(self, xy: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """:meth:`wall_value` over every segment and over the trusted ones, in one neighbour query."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        best = np.full(xy.shape[0], -np.inf)
+        every = np.full(xy.shape[0], -np.inf)
+        of_trusted = every.copy()
         if not len(self) or not xy.shape[0]:
-            return best
+            return every, of_trusted
         reach = self._reach(max(self.width, self.front_width, self.back_width))
         distance, index = self._neighbours(xy, reach)
         middle, axis, normal, half = self._frames
         peak = self.peak
-        keep = self.trust >= self.wall_share if trusted else np.ones(len(self), dtype=bool)
+        trusted = self.trust >= self.wall_share
         for j in range(index.shape[1]):  # the few nearest segments of every point at once
             ok = np.isfinite(distance[:, j])
-            ok[ok] = keep[index[ok, j]]
             s = index[ok, j]
             rel = xy[ok] - middle[s]
             across = rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]
@@ -280,8 +285,10 @@ class WorldMap:
                              np.where(across * facing >= 0, self.front_width, self.back_width))
             value = np.minimum(peak[s], np.minimum(peak[s] - peak[s] / width * (np.abs(across) - self.thickness[s]),
                                                    peak[s] - peak[s] / self.width * (along - half[s])))
-            best[ok] = np.maximum(best[ok], value)
-        return best
+            every[ok] = np.maximum(every[ok], value)
+            held = np.flatnonzero(ok)[trusted[s]]
+            of_trusted[held] = np.maximum(of_trusted[held], value[trusted[s]])
+        return every, of_trusted
 
     def wall_distance(self, xy: ArrayLike, *, trusted: bool = True, within: float | None = None) -> FloatArray:
         """Distance from world ``(K, 2)`` points to the nearest segment's band (its line widened by
@@ -368,12 +375,15 @@ class WorldMap:
         centres = np.column_stack([origin[0] + (ii.ravel() + 0.5) * resolution,
                                    origin[1] + (jj.ravel() + 0.5) * resolution])
         observed = self.observed(centres)
-        wall = self.wall_distance(centres) <= self.wall_half_width
-        rim = self.wall_distance(centres, within=self.wall_rim) <= self.wall_rim
+        # One query for both bands round the trusted walls (exact up to the wider one).
+        near = self.wall_distance(centres, within=max(self.wall_half_width, self.wall_rim))
+        wall = near <= self.wall_half_width
+        rim = near <= self.wall_rim
         base = np.full(centres.shape[0], self.unknown_level)
         base[observed] = self.free_value(centres[observed])
-        probability = np.maximum(base, self.wall_value(centres))
-        drawn = np.maximum(base, self.wall_value(centres, trusted=True))
+        every, of_trusted = self._wall_values(centres)
+        probability = np.maximum(base, every)
+        drawn = np.maximum(base, of_trusted)
         cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
         # Never free near a trusted wall: a held-out return scattered in front of its band
         # lands on unknown, not on free (the free cells are a subset of the fixed band's).
