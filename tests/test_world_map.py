@@ -160,8 +160,8 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     assert solid == pytest.approx(1.0) and passing == pytest.approx(0.625)
     raster = world.rasterise(0.05)
     row, col, _ = raster.cell_of([[1.0, 1.0], [3.0, 1.0], [2.0, 1.0], [5.0, 1.0]])
-    # The wall most positions saw through is not drawn for Nav2 (share below 0.5); past the
-    # region nothing was observed.
+    # The wall most positions saw through is not drawn for Nav2 (share below 0.5; below
+    # DOUBTED_TRUST too, so free on its line); past the region nothing was observed.
     assert raster.cells[row, col].tolist() == [OCCUPIED, FREE, FREE, UNKNOWN]
     assert raster.explored[row, col].tolist() == [True, True, True, False]
     # Across the trusted wall (ridge 1 falling to 0 over WIDTH 0.2 m) the cells follow its
@@ -439,9 +439,9 @@ def test_a_lasers_every_beam_places_walls_a_cameras_cloud_its_nearest_per_degree
 
 @pytest.mark.parametrize("facing", [0, 1, -1])
 def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_them(facing):
-    """Safety of the trinary cells: a free cell is observed, at most RASTER_FREE and farther
-    than the rim from every trusted wall; every cell on a trusted wall's band is occupied;
-    an untrusted wall is not drawn."""
+    """Safety of the trinary cells: a free cell is observed, at most RASTER_FREE, farther
+    than the rim from every trusted wall and than the doubted rim from every doubted one;
+    every cell on a trusted wall's band is occupied; an untrusted wall is not drawn."""
     from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
 
     region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 3.0, 2.0)])
@@ -454,12 +454,15 @@ def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_the
     centres = np.column_stack([x0 + (ii.ravel() + 0.5) * 0.05, y0 + (jj.ravel() + 0.5) * 0.05])
     cells = raster.cells.ravel()
     trusted = world.wall_distance(centres, within=world.wall_rim)
+    doubted = world.wall_distance(centres, trusted=False, within=world.doubted_wall_rim)  # trust 0.3: doubted
     free = cells == FREE
     assert free.any() and (cells == OCCUPIED).any()
     assert world.observed(centres[free]).all() and (trusted[free] > world.wall_rim).all()
+    assert world.doubted_wall_rim > 0 and (doubted[free] > world.doubted_wall_rim).all()
     drawn = np.maximum(world.free_value(centres), world.wall_value(centres, trusted=True))
     assert (drawn[free] <= RASTER_FREE).all() and (cells[drawn >= RASTER_OCCUPIED] == OCCUPIED).all()
     assert (cells[trusted <= world.wall_half_width] == OCCUPIED).all()
-    # The untrusted wall (trust 0.3 < share 0.5) at x = 2.2: free on its line, away from the other.
-    row, col, _ = raster.cell_of([[2.2, 1.0]])
-    assert raster.cells[row, col].tolist() == [FREE]
+    # The untrusted wall (trust 0.3 < share 0.5, but >= DOUBTED_TRUST) at x = 2.2: not
+    # drawn, unknown on its line, free 10 cm off it, away from the other.
+    row, col, _ = raster.cell_of([[2.2, 1.0], [2.1, 1.0]])
+    assert raster.cells[row, col].tolist() == [UNKNOWN, FREE]
