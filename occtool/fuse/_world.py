@@ -81,7 +81,7 @@ WALL_RIM = 0.125
 #: returned from by at least :data:`DOUBTED_TRUST` of the positions that saw it: a door, a
 #: chair or a person some positions returned from and more saw through is not drawn, but its
 #: cells are not known free either (chosen on inner splits, docs/map.md: held-out returns on
-#: free cells fall on all four CARMEN logs, Intel 0.44 -> 0.29 %, FR-079 2.16 -> 1.33 %) ...
+#: free cells fall on all four CARMEN logs, Intel 0.44 -> 0.33 %, FR-079 2.16 -> 1.57 %) ...
 DOUBTED_WALL_RIM = 0.05
 #: ... the share: below it a wall is the noise of a depth camera's floor (half the segments
 #: of fixtures/tum-fr3-cabinet are untrusted, most under 0.3; all of them would take 12 % of
@@ -387,9 +387,9 @@ class WorldMap:
         lies farther than :attr:`wall_rim` from a trusted wall's band and than
         :attr:`doubted_wall_rim` from a doubted one's (trust >= :data:`DOUBTED_TRUST`);
         unknown elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the
-        bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks the cells the run observed or
-        placed a wall near (within those rims: the unknown among them are uncertain, not
-        unexplored: no frontier lies there)."""
+        bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks
+        the cells the run observed or placed a wall near (within those rims: the unknown
+        among them are uncertain, not unexplored: no frontier lies there)."""
         if not (math.isfinite(resolution) and resolution > 0):
             raise InputError(f"resolution must be a positive number of metres, got {resolution}")
         lower, upper = self.bounds
