@@ -131,18 +131,18 @@ def fuse_models(models: Sequence[Any], poses: Sequence[Pose], *, reaches: ArrayL
     if len(observed) == len(models):
         if reaches is None:
             reaches = np.stack([o.reach for o in observed])
+        returns, offsets = np.stack([o.returns for o in observed]), np.stack([o.offsets for o in observed])
         # As fuse_log: returns beyond the guard's reach mark walls but lend no occupancy.
-        reach = max(m.focus_range if m.focus else math.inf for m in models)
-        return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination,
-                        threshold=threshold, stamps=stamps, returns=np.stack([o.returns for o in observed]),
-                        return_offsets=np.stack([o.offsets for o in observed]), return_reach=reach + robot.radius,
-                        scanning_laser=scanning_laser)
-    if reaches is None:
-        reaches = np.stack([reach_from_guard(getattr(m, "guard_", None),
-                                              m.focus_range if m.focus else math.inf) for m in models])
-    returns = np.stack([returns_from_guard(getattr(m, "guard_", None)) for m in models])
+        return_reach = max(m.focus_range if m.focus else math.inf for m in models) + robot.radius
+    else:
+        if reaches is None:
+            reaches = np.stack([reach_from_guard(getattr(m, "guard_", None),
+                                                  m.focus_range if m.focus else math.inf) for m in models])
+        returns = np.stack([returns_from_guard(getattr(m, "guard_", None)) for m in models])
+        offsets, return_reach = None, math.inf
     return FusedMap([m.tree_ for m in models], poses, reaches, robot, combination=combination, threshold=threshold,
-                    stamps=stamps, returns=returns, scanning_laser=scanning_laser)
+                    stamps=stamps, returns=returns, return_offsets=offsets, return_reach=return_reach,
+                    scanning_laser=scanning_laser)
 
 
 def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,

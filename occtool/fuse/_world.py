@@ -32,6 +32,7 @@ the map a planar robot drives by.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +44,8 @@ from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
 from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
 
 FloatArray = NDArray[np.float64]
+#: What :meth:`WorldMap._near_segments` yields: points' rows, segments, offsets across and along.
+_Nearby = tuple[NDArray[np.intp], NDArray[np.intp], FloatArray, FloatArray]
 
 #: Occupancy falls from a wall's trust to 0 over this distance from it (metres, past its thickness) ...
 WIDTH = 0.2
@@ -274,6 +277,20 @@ class WorldMap:
         every, of_trusted = self._wall_values(xy)
         return of_trusted if trusted else every
 
+    def _near_segments(self, xy: FloatArray, reach: float) -> Iterator[_Nearby]:
+        """For each of the few nearest segments of every point (their middles within
+        ``reach``), at once: the points' rows, the segments, and the points' signed offset
+        across each segment's line and their offset along it past its half-length."""
+        distance, index = self._neighbours(xy, reach)
+        middle, axis, normal, half = self._frames
+        for j in range(index.shape[1]):
+            rows = np.flatnonzero(np.isfinite(distance[:, j]))
+            s = index[rows, j]
+            rel = xy[rows] - middle[s]
+            across = rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]
+            along = np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1]) - half[s]
+            yield rows, s, across, along
+
     def _wall_values(self, xy: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:meth:`wall_value` over every segment and over the trusted ones, in one neighbour query."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
@@ -281,26 +298,19 @@ class WorldMap:
         of_trusted = every.copy()
         if not len(self) or not xy.shape[0]:
             return every, of_trusted
-        reach = self._reach(max(self.width, self.front_width, self.back_width))
-        distance, index = self._neighbours(xy, reach)
-        middle, axis, normal, half = self._frames
         peak = self.peak
         trusted = self.trust >= self.wall_share
-        for j in range(index.shape[1]):  # the few nearest segments of every point at once
-            ok = np.isfinite(distance[:, j])
-            s = index[ok, j]
-            rel = xy[ok] - middle[s]
-            across = rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]
-            along = np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1])
+        reach = self._reach(max(self.width, self.front_width, self.back_width))
+        for rows, s, across, along in self._near_segments(xy, reach):
             # Across a one-sided wall the slope differs in front (the side it was seen from) and behind.
             facing = self.facing[s]
             width = np.where(facing == 0, self.width,
                              np.where(across * facing >= 0, self.front_width, self.back_width))
             value = np.minimum(peak[s], np.minimum(peak[s] - peak[s] / width * (np.abs(across) - self.thickness[s]),
-                                                   peak[s] - peak[s] / self.width * (along - half[s])))
-            every[ok] = np.maximum(every[ok], value)
-            held = np.flatnonzero(ok)[trusted[s]]
-            of_trusted[held] = np.maximum(of_trusted[held], value[trusted[s]])
+                                                   peak[s] - peak[s] / self.width * along))
+            every[rows] = np.maximum(every[rows], value)
+            held = trusted[s]
+            of_trusted[rows[held]] = np.maximum(of_trusted[rows[held]], value[held])
         return every, of_trusted
 
     def wall_distance(self, xy: ArrayLike, *, trusted: bool = True, within: float | None = None) -> FloatArray:
@@ -318,21 +328,14 @@ class WorldMap:
         of_trusted = every.copy()
         if not len(self) or not xy.shape[0]:
             return every, of_trusted
-        distance, index = self._neighbours(xy, self._reach(within + 1e-9))
-        middle, axis, normal, half = self._frames
         trusted = self.trust >= self.wall_share
         counted = self.trust >= least_trust
-        for j in range(index.shape[1]):
-            ok = np.isfinite(distance[:, j])
-            s = index[ok, j]
-            rel = xy[ok] - middle[s]
-            across = np.maximum(np.abs(rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]) - self.thickness[s], 0.0)
-            along = np.maximum(np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1]) - half[s], 0.0)
-            gap = np.hypot(across, along)
-            kept = np.flatnonzero(ok)[counted[s]]
-            every[kept] = np.minimum(every[kept], gap[counted[s]])
-            held = np.flatnonzero(ok)[trusted[s]]
-            of_trusted[held] = np.minimum(of_trusted[held], gap[trusted[s]])
+        for rows, s, across, along in self._near_segments(xy, self._reach(within + 1e-9)):
+            gap = np.hypot(np.maximum(np.abs(across) - self.thickness[s], 0.0), np.maximum(along, 0.0))
+            kept = counted[s]
+            every[rows[kept]] = np.minimum(every[rows[kept]], gap[kept])
+            held = trusted[s]
+            of_trusted[rows[held]] = np.minimum(of_trusted[rows[held]], gap[held])
         every[every > within] = np.inf
         of_trusted[of_trusted > within] = np.inf
         return every, of_trusted
