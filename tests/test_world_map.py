@@ -223,10 +223,14 @@ def test_quantised_map_round_trips_bit_for_bit(tmp_path):
     assert encode(loaded) == path.read_bytes()
 
 
-def test_segments_keep_their_geometry_in_eight_bytes_and_two_bits():
-    """Middle, direction and half-length codes: ends within a few millimetres of the fitted
-    ones, a segment longer than a byte of 2 mm widens the unit instead of being cut; the
-    facings four to a byte."""
+def test_segments_keep_their_geometry_in_six_bytes_and_two_bits():
+    """Middle (in its tile), direction and half-length codes: ends within a few millimetres of
+    the fitted ones, a segment longer than a byte of 2 mm widens the unit instead of being
+    cut; the segments listed tile by tile; the facings four to a byte."""
+    from scipy.spatial import cKDTree
+
+    from occtool.fuse._occmap import TILE
+
     rng = np.random.default_rng(5)
     start = rng.uniform(-5, 5, (200, 2))
     end = start + rng.normal(0, 0.3, (200, 2))
@@ -234,12 +238,87 @@ def test_segments_keep_their_geometry_in_eight_bytes_and_two_bits():
     region = shapely.MultiPolygon([shapely.box(-6, -6, 6, 6)])
     world = WorldMap(start, end, np.zeros(200), np.ones(200), region, band=BAND)
     coded = quantise(world)
-    assert coded.half_unit > 0.002
-    same = np.minimum(np.hypot(*(coded.start - start).T) + np.hypot(*(coded.end - end).T),
-                      np.hypot(*(coded.start - end).T) + np.hypot(*(coded.end - start).T))
+    assert coded.half_unit > 0.002 and len(coded) == 200
+    # Each fitted segment has its coded one, in another order.
+    _, match = cKDTree(0.5 * (coded.start + coded.end)).query(0.5 * (start + end))
+    assert np.unique(match).size == 200
+    same = np.minimum(np.hypot(*(coded.start[match] - start).T) + np.hypot(*(coded.end[match] - end).T),
+                      np.hypot(*(coded.start[match] - end).T) + np.hypot(*(coded.end[match] - start).T))
     assert same.max() < 0.02
-    assert coded.nbytes == 8 * 200 + 200 // 4 + 5 * 4 + 3 * 2 * 4  # a box: 5 vertices; ring, part, geometry offsets
+    tile = np.floor((0.5 * (coded.start + coded.end) - coded.origin) / coded.unit / TILE + 1e-9).astype(int)
+    key = tile[:, 0] * (tile[:, 1].max() + 1) + tile[:, 1]
+    assert (np.diff(key) >= 0).all()
+    tiles = int(np.prod(tile.max(axis=0) + 1))
+    # A box's five vertices are anchors (its sides are longer than a step), in uint16; its
+    # ring, part and geometry offsets uint16 too.
+    assert coded.nbytes == 6 * 200 + 200 // 4 + tiles + 5 * (2 + 4) + 3 * 2 * 2
     assert np.array_equal(decode(encode(coded)).end, coded.end)
+
+
+def test_a_crowded_tile_and_long_steps_round_trip():
+    """More than 255 segments in one tile widen its counts; region vertices a step, an
+    anchor or mixed come back exactly; anchors that disagree with their codes are refused."""
+    from occtool.fuse._occmap import _stepped_vertices, _vertex_steps
+
+    rng = np.random.default_rng(8)
+    start = rng.uniform(0, 1.0, (400, 2))
+    world = quantise(WorldMap(start, start + [0.05, 0.0], np.full(400, 0.01), np.ones(400),
+                              shapely.MultiPolygon([shapely.Point(0.5, 0.5).buffer(20.0, 64)]), band=BAND))
+    loaded = decode(encode(world))
+    assert np.array_equal(loaded.start, world.start) and loaded.region.equals_exact(world.region, 0)
+    walk = np.cumsum(rng.integers(-300, 301, (500, 2)) * (rng.uniform(size=(500, 1)) < 0.2)
+                     + rng.integers(-127, 128, (500, 2)), axis=0)
+    walk = walk - walk.min(axis=0)
+    steps, anchors = _vertex_steps(walk)
+    assert 1 < anchors.shape[0] < 500 and np.array_equal(_stepped_vertices(steps, anchors), walk)
+    with pytest.raises(ValueError, match="anchor codes"):
+        _stepped_vertices(steps, anchors[:-1])
+
+
+def _version_3(world):
+    """``world`` as a version 3 file (middles as two uint16 units, every region vertex whole)."""
+    import json
+    import struct
+    import zlib
+
+    from occtool.fuse._occmap import MAGIC, _pack_facing, _segment_codes
+
+    middles, steps, half = _segment_codes(world, world.origin, world.unit, world.half_unit)
+    units = lambda xy: np.round((xy - world.origin) / world.unit).astype("<u2")  # noqa: E731
+    _, coords, offsets = shapely.to_ragged_array([world.region])
+    arrays = [("middles", middles), ("directions", steps), ("half_lengths", half),
+              ("thickness", np.round(world.thickness * 1000).astype(np.uint8)),
+              ("trust", np.round(world.trust * 255).astype(np.uint8)), ("facing", _pack_facing(world.facing)),
+              ("positions", units(world.positions).reshape(-1, 2)), ("region_coords", units(coords))]
+    arrays += [(f"region_offsets_{n}", np.asarray(o, dtype="<u4")) for n, o in enumerate(offsets)]
+    header = {"format": "occtool.occmap", "version": 3, "unit": world.unit, "half_unit": world.half_unit,
+              "origin": list(world.origin), "settings": world.params(),
+              "arrays": [[n, a.dtype.name, list(a.shape)] for n, a in arrays]}
+    text = json.dumps(header).encode()
+    body = MAGIC + struct.pack("<I", len(text)) + text + b"".join(a.tobytes() for _, a in arrays)
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def test_version_3_files_answer_as_they_did_and_are_rewritten_smaller():
+    rng = np.random.default_rng(4)
+    start = rng.uniform(-8, 8, (300, 2))
+    world = quantise(WorldMap(start, start + rng.normal(0, 0.2, (300, 2)), rng.uniform(0, 0.03, 300),
+                              rng.uniform(0, 1, 300), shapely.MultiPolygon([shapely.Point(0, 0).buffer(7.0, 32)]),
+                              band=BAND, positions=rng.uniform(-3, 3, (20, 2)), facing=rng.integers(-1, 2, 300)))
+    # A version 3 file listed its segments as they were fitted.
+    shuffled = quantise(world)
+    order = rng.permutation(300)
+    for name in ("start", "end", "thickness", "trust", "facing"):
+        setattr(shuffled, name, getattr(world, name)[order])
+    old_bytes = _version_3(shuffled)
+    old = decode(old_bytes, "old.occmap")
+    points = np.column_stack([rng.uniform(-8, 8, (4000, 2)), np.zeros(4000)])
+    assert np.array_equal(old.predict(points), world.predict(points))
+    # Read into the file's order: tile by tile, as fitted within a tile.
+    rows = lambda m: np.hstack([m.start, m.end, m.thickness[:, None], m.trust[:, None], m.facing[:, None]])  # noqa: E731
+    assert np.array_equal(np.unique(rows(old), axis=0), np.unique(rows(world), axis=0))
+    assert encode(old) == encode(decode(encode(old)))
+    assert len(encode(old)) == len(encode(world)) < 0.85 * len(old_bytes)
 
 
 def _version_1(world):
@@ -265,12 +344,12 @@ def test_version_1_files_still_load_and_later_ones_are_refused():
     world = quantise(WorldMap([[0.0, 0.0]], [[1.0, 0.0]], [0.01], [1.0], shapely.MultiPolygon(), band=BAND))
     old = decode(_version_1(world), "old.occmap")
     assert np.allclose(old.start, world.start, atol=0.003) and np.allclose(old.end, world.end, atol=0.003)
-    assert old.half_unit is None and decode(encode(old)).half_unit is not None  # rewritten as version 3
+    assert old.half_unit is None and decode(encode(old)).half_unit is not None  # rewritten as version 4
     newer = _version_1(world).replace(b'"version": 1', b'"version": 9')
     import struct
     import zlib
     newer = newer[:-4] + struct.pack("<I", zlib.crc32(newer[:-4]))
-    with pytest.raises(InputError, match="format version 9, this occtool reads 1, 2 and 3"):
+    with pytest.raises(InputError, match="format version 9, this occtool reads 1, 2, 3 and 4"):
         decode(newer, "new.occmap")
 
 
@@ -324,16 +403,31 @@ def test_damaged_files_are_one_line_errors(room_map, tmp_path):
         decode(bytes(flipped))
     with pytest.raises(InputError, match="cannot read"):
         load_map(tmp_path / "absent.occmap")
-    # A facing code no writer makes, under a valid checksum.
+    # Codes no writer makes, under a valid checksum: a facing code 3, a tile holding more
+    # segments than there are, a first vertex given as a step.
+    for name, value, why in (("facing", 0xFF, "segment arrays missing or misshapen: facing code 3"),
+                             ("tile_counts", 0xFF, "segment arrays missing or misshapen: tile counts for"),
+                             ("region_steps", 0x00, "observed region is malformed: .* anchor codes")):
+        with pytest.raises(InputError, match=why) as caught:
+            decode(_with_byte(data, name, value), "world.occmap")
+        assert "\n" not in str(caught.value)
+
+
+def _with_byte(data, name, value):
+    """``data`` with the first byte of array ``name`` set to ``value`` and the checksum redone."""
+    import json
     import struct
     import zlib
 
-    (header,) = struct.unpack("<I", data[8:12])
+    (length,) = struct.unpack("<I", data[8:12])
+    offset = 12 + length
+    for array, dtype, shape in json.loads(data[12:offset])["arrays"]:
+        if array == name:
+            break
+        offset += int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
     coded = bytearray(data[:-4])
-    coded[12 + header + 8 * len(world)] = 0xFF
-    coded += struct.pack("<I", zlib.crc32(coded))
-    with pytest.raises(InputError, match="segment arrays missing or misshapen: facing code 3"):
-        decode(bytes(coded), "world.occmap")
+    coded[offset] = value
+    return bytes(coded + struct.pack("<I", zlib.crc32(coded)))
 
 
 @settings(max_examples=60, deadline=None)

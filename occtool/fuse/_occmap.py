@@ -9,19 +9,28 @@ Layout (little-endian)::
     ...       the arrays' bytes, back to back
     4 bytes   uint32 CRC-32 of everything before it
 
-Arrays (version 3): ``middles`` uint16 ``(S, 2)``, each segment's middle in units from
-``origin``; ``directions`` uint8 ``(S,)``, its direction in [0, pi) in steps of pi/256;
+Arrays (version 4): the segments in the order of the square tiles of :data:`TILE` units
+(1.28 m at 5 mm) their middles lie in, tile ``(i, j)`` (``i`` along x) before ``(i, j + 1)``;
+``tile_counts`` uint8 ``(I, J)`` (uint16 if a tile holds more than 255), the segments of
+each tile; ``middles`` uint8 ``(S, 2)``, each middle's offset in units from its tile's
+corner (version 3 stored the middle as two uint16 units from ``origin``: two bytes more a
+segment); ``directions`` uint8 ``(S,)``, its direction in [0, pi) in steps of pi/256;
 ``half_lengths`` uint8 ``(S,)`` in the header's ``half_unit`` (2 mm unless a segment is
 longer than 1.02 m); ``thickness`` and ``trust`` uint8 ``(S,)`` (millimetres,
-1/255ths): 8 bytes a segment, where its two end points took 10 in version 1 (``segments``
-uint16 ``(S, 4)``, still read); ``facing`` uint8 ``(ceil(S / 4),)``, the side each segment
+1/255ths): 6 bytes a segment, where version 3 took 8 and version 1, its two end points,
+10 (``segments`` uint16 ``(S, 4)``, still read); ``facing`` uint8 ``(ceil(S / 4),)``, the side each segment
 was seen from in two bits (0 both, 1 the left of its direction, 2 the right; segment ``i``
 in bits ``2 (i mod 4)`` of byte ``i // 4``; absent in versions 1 and 2: every segment
 faces both); ``positions`` uint16 ``(P, 2)`` in units, the run's
 positions (the free level rises away from them; absent in version 1). The observed region
-as shapely's ragged arrays: ``region_coords`` uint16 ``(V, 2)`` in units and its
-``region_offsets_*`` uint32. A map is quantised to this precision when it is built
-(:func:`quantise`), so a map read back answers exactly as the one written.
+as shapely's ragged arrays, its vertices as steps: ``region_steps`` int8 ``(V, 2)``, each
+vertex's step in units from the one before, or -128, -128 where it is the next of the
+``region_anchors`` uint16 ``(A, 2)`` (the first vertex and every step longer than 127
+units; version 3 stored every vertex as ``region_coords`` uint16), and its
+``region_offsets_*`` uint16 (uint32 past 65,535 vertices; uint32 in version 3). A map is
+quantised to this precision when it is built (:func:`quantise`, which also lists its
+segments in the file's order), so a map read back answers exactly as the one written;
+files of versions 1-3 are read into that order too.
 :func:`load_map` checks the magic, the version, the sizes, the checksum and every value:
 a damaged or foreign file is one :class:`~occtool.errors.InputError`.
 """
@@ -40,16 +49,20 @@ import numpy as np
 from occtool.errors import InputError
 
 MAGIC = b"\x89OCCMAP\n"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 #: Versions :func:`decode` reads.
-READS = (1, 2, 3)
+READS = (1, 2, 3, 4)
+#: Edge of a segment tile, in units: a middle's offset in its tile fits a byte.
+TILE = 256
+#: The step code of a region vertex given in full (an anchor).
+ANCHOR = -128
 #: A segment's half-length in this unit (metres) unless one is longer than 255 of them.
 HALF_UNIT = 0.002
 #: Direction steps over [0, pi).
 DIRECTION_STEPS = 256
 #: A header longer than this is not an occmap header (bytes).
 MAX_HEADER = 1 << 20
-_DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "uint32": np.uint32}
+_DTYPES = {"int8": np.int8, "uint8": np.uint8, "uint16": np.uint16, "uint32": np.uint32}
 
 
 def _grid(lower: np.ndarray, upper: np.ndarray, unit: float) -> tuple[np.ndarray, float]:
@@ -88,8 +101,63 @@ def _segment_ends(middles: np.ndarray, steps: np.ndarray, half: np.ndarray, orig
     return middle - reach, middle + reach
 
 
+def _narrowest(top: int) -> str:
+    """The narrowest little-endian unsigned type that holds ``0..top``."""
+    return "<u1" if top < 1 << 8 else "<u2" if top < 1 << 16 else "<u4"
+
+
+def _tiles(middles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (stable) order that lists coded middles ``(S, 2)`` tile by tile, and each tile's
+    count ``(I, J)``."""
+    tile = middles.astype(np.int64) // TILE
+    shape = tile.max(axis=0) + 1 if tile.size else np.zeros(2, dtype=np.int64)
+    key = tile[:, 0] * shape[1] + tile[:, 1]
+    counts = np.bincount(key, minlength=int(shape[0] * shape[1])).reshape(int(shape[0]), int(shape[1]))
+    return np.argsort(key, kind="stable"), counts
+
+
+def _tiled_middles(counts: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_tiles`' coding: middles in units from the tiles' counts and
+    the offsets in them; ``ValueError`` if they disagree."""
+    if counts.ndim != 2 or int(counts.sum()) != offsets.shape[0]:
+        raise ValueError(f"tile counts for {int(counts.sum())} segments, {offsets.shape[0]} middles")
+    corners = np.repeat(np.indices(counts.shape).reshape(2, -1).T, counts.ravel().astype(np.int64), axis=0)
+    middles = corners * TILE + offsets.astype(np.int64)
+    if middles.size and middles.max() > 65535:
+        raise ValueError("a segment's middle lies past the map's grid")
+    return middles
+
+
+def _vertex_steps(coords: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``(V, 2)`` in units as int8 steps from the vertex before, :data:`ANCHOR`
+    where one is given in full (the first, and after a step longer than 127 units), and
+    those anchors (uint16)."""
+    coords = coords.astype(np.int64).reshape(-1, 2)
+    step = np.diff(coords, axis=0, prepend=coords[:1])
+    anchor = np.ones(coords.shape[0], dtype=bool)
+    anchor[1:] = (np.abs(step[1:]) > 127).any(axis=1)
+    step[anchor] = ANCHOR
+    return step.astype(np.int8), coords[anchor].astype("<u2")
+
+
+def _stepped_vertices(steps: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_vertex_steps`; ``ValueError`` if the codes and anchors disagree."""
+    code = steps.astype(np.int64) == ANCHOR
+    anchor = code.all(axis=1)
+    first_given = not steps.shape[0] or bool(anchor[0])
+    if (code.any(axis=1) != anchor).any() or int(anchor.sum()) != anchors.shape[0] or not first_given:
+        raise ValueError(f"{int(anchor.sum())} anchor codes for {anchors.shape[0]} anchors")
+    walked = np.cumsum(np.where(anchor[:, None], 0, steps.astype(np.int64)), axis=0)
+    group = np.cumsum(anchor) - 1
+    coords = anchors.astype(np.int64)[group] + walked - walked[np.flatnonzero(anchor)][group]
+    if coords.size and (coords.min() < 0 or coords.max() > 65535):
+        raise ValueError("a vertex steps off the map's grid")
+    return coords
+
+
 def quantise(world: Any, unit: float | None = None) -> Any:
-    """``world`` with its numbers rounded to what the file stores (a new map; same settings)."""
+    """``world`` with its numbers rounded to what the file stores and its segments listed tile
+    by tile, as the file lists them (a new map; same settings)."""
     import shapely
 
     from occtool.fuse._world import UNIT, WorldMap
@@ -102,12 +170,15 @@ def quantise(world: Any, unit: float | None = None) -> Any:
         return origin + np.clip(np.round((xy - origin) / unit), 0, 65535) * unit
 
     half_unit = _half_unit(0.5 * np.hypot(*(world.end - world.start).T))
-    start, end = _segment_ends(*_segment_codes(world, origin, unit, half_unit), origin, unit, half_unit)
+    middles, steps, half = _segment_codes(world, origin, unit, half_unit)
+    # In the file's order, so that a map read back lists its segments as this one does.
+    order, _ = _tiles(middles)
+    start, end = _segment_ends(middles[order], steps[order], half[order], origin, unit, half_unit)
     # The stored direction lies in [0, pi): a segment turned round faces the other way.
-    turned = ((world.end - world.start) * (end - start)).sum(axis=1)
-    facing = np.where(np.hypot(*(end - start).T) > 1e-12, np.sign(turned), 0).astype(np.int8) * world.facing
-    thickness = np.clip(np.round(world.thickness * 1000.0), 0, 255) / 1000.0
-    trust = np.clip(np.round(world.trust * 255.0), 0, 255) / 255.0
+    turned = ((world.end - world.start)[order] * (end - start)).sum(axis=1)
+    facing = np.where(np.hypot(*(end - start).T) > 1e-12, np.sign(turned), 0).astype(np.int8) * world.facing[order]
+    thickness = np.clip(np.round(world.thickness[order] * 1000.0), 0, 255) / 1000.0
+    trust = np.clip(np.round(world.trust[order] * 255.0), 0, 255) / 255.0
     region = world.region
     if not region.is_empty:
         # On the file's grid and valid there (origin is a whole number of units), then
@@ -166,21 +237,31 @@ def _arrays(world: Any) -> tuple[dict[str, Any], list[tuple[str, np.ndarray]]]:
         return np.clip(np.round((xy - origin) / unit), 0, 65535).astype("<u2")
 
     middles, steps, half = _segment_codes(world, origin, unit, half_unit)
-    arrays = [("middles", middles.reshape(-1, 2)), ("directions", steps), ("half_lengths", half),
-              ("thickness", np.clip(np.round(world.thickness * 1000.0), 0, 255).astype(np.uint8)),
-              ("trust", np.clip(np.round(world.trust * 255.0), 0, 255).astype(np.uint8)),
-              ("facing", _pack_facing(world.facing))]
+    order, counts = _tiles(middles)  # the identity for a map quantise() made or decode() read
+    arrays = [("tile_counts", counts.astype(_narrowest(int(counts.max(initial=0))))),
+              ("middles", (middles[order] % TILE).astype(np.uint8).reshape(-1, 2)),
+              ("directions", steps[order]), ("half_lengths", half[order]),
+              ("thickness", np.clip(np.round(world.thickness[order] * 1000.0), 0, 255).astype(np.uint8)),
+              ("trust", np.clip(np.round(world.trust[order] * 255.0), 0, 255).astype(np.uint8)),
+              ("facing", _pack_facing(world.facing[order]))]
     arrays.append(("positions", units(world.positions).reshape(-1, 2)))
     region = _areal(world.region) if not world.region.is_empty else shapely.MultiPolygon()
     if not region.is_empty:
         _, coords, offsets = shapely.to_ragged_array([region])
-        arrays.append(("region_coords", units(coords)))
+        vertex_steps, anchors = _vertex_steps(units(coords))
+        arrays += [("region_steps", vertex_steps), ("region_anchors", anchors)]
+        wide = "<u2" if coords.shape[0] < 1 << 16 else "<u4"  # the offsets run to the vertex count
         for n, offset in enumerate(offsets):
-            arrays.append((f"region_offsets_{n}", np.asarray(offset, dtype="<u4")))
+            arrays.append((f"region_offsets_{n}", np.asarray(offset, dtype=wide)))
     header = {"format": "occtool.occmap", "version": FORMAT_VERSION, "unit": unit, "half_unit": half_unit,
               "origin": [float(origin[0]), float(origin[1])], "settings": world.params(),
               "arrays": [[name, str(a.dtype.name), list(a.shape)] for name, a in arrays]}
     return header, arrays
+
+
+def array_bytes(world: Any) -> int:
+    """Bytes of ``world``'s arrays in its file (the header and checksum aside)."""
+    return int(sum(a.nbytes for _, a in _arrays(world)[1]))
 
 
 def encode(world: Any) -> bytes:
@@ -258,17 +339,28 @@ def decode(data: bytes, name: str = "occmap") -> Any:
             segments = arrays["segments"].reshape(-1, 4).astype(np.float64) * unit
             first, last = origin + segments[:, :2], origin + segments[:, 2:]
         else:
-            first, last = _segment_ends(arrays["middles"].reshape(-1, 2), arrays["directions"].reshape(-1),
+            middles = (_tiled_middles(arrays["tile_counts"], arrays["middles"].reshape(-1, 2)) if version >= 4
+                       else arrays["middles"].reshape(-1, 2))
+            first, last = _segment_ends(middles, arrays["directions"].reshape(-1),
                                         arrays["half_lengths"].reshape(-1), origin, unit, half_unit)
         thickness = arrays["thickness"].astype(np.float64) / 1000.0
         trust = arrays["trust"].astype(np.float64) / 255.0
         facing = (_unpack_facing(arrays["facing"].reshape(-1), first.shape[0]) if version >= 3
                   else np.zeros(first.shape[0], dtype=np.int8))
+        if version < 4:  # into the file's order, as a map quantise() made
+            order, _ = _tiles(np.clip(np.round((0.5 * (first + last) - origin) / unit), 0, None))
+            first, last, thickness, trust, facing = (a[order] for a in (first, last, thickness, trust, facing))
     except (KeyError, ValueError) as exc:
         raise fail(f"segment arrays missing or misshapen: {exc}") from None
     region = shapely.MultiPolygon()
-    if "region_coords" in arrays:
-        coords = origin + arrays["region_coords"].reshape(-1, 2).astype(np.float64) * unit
+    if "region_coords" in arrays or "region_steps" in arrays:
+        try:
+            vertices = (_stepped_vertices(arrays["region_steps"].reshape(-1, 2),
+                                          arrays["region_anchors"].reshape(-1, 2))
+                        if version >= 4 else arrays["region_coords"].reshape(-1, 2))
+        except (KeyError, ValueError) as exc:
+            raise fail(f"observed region is malformed: {exc}") from None
+        coords = origin + vertices.astype(np.float64) * unit
         offsets = [arrays[f"region_offsets_{n}"].astype(np.int64) for n in range(3) if f"region_offsets_{n}" in arrays]
         try:
             region = shapely.from_ragged_array(shapely.GeometryType.MULTIPOLYGON, coords, tuple(offsets))[0]
@@ -297,4 +389,4 @@ def load_map(path: str | os.PathLike[str]) -> Any:
     return decode(data, str(path))
 
 
-__all__ = ["FORMAT_VERSION", "MAGIC", "decode", "encode", "load_map", "quantise", "save_map"]
+__all__ = ["FORMAT_VERSION", "MAGIC", "array_bytes", "decode", "encode", "load_map", "quantise", "save_map"]

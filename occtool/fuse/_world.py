@@ -228,19 +228,15 @@ class WorldMap:
 
     @property
     def nbytes(self) -> int:
-        """Bytes of what :meth:`predict` needs, as the file stores it: per segment its middle
-        (two uint16 units), direction, half-length, thickness and trust (a byte each) and its
-        facing (two bits); per vertex of the region two coordinates (uint16) and its rings'
-        and parts' offsets (uint32); per position two coordinates (uint16)."""
-        import shapely
+        """Bytes of what :meth:`predict` needs, as the file stores it (its arrays, the header
+        aside): per segment its middle in its tile, direction, half-length, thickness and
+        trust (a byte each) and its facing (two bits); per tile of 1.28 m its segments' count;
+        per vertex of the region a step of two int8 (and two uint16 where the step is longer) and
+        its rings' and parts' offsets; per position two coordinates (uint16)
+        (:mod:`occtool.fuse._occmap`)."""
+        from occtool.fuse._occmap import array_bytes
 
-        if self.region.is_empty:
-            vertices, offsets = 0, 0
-        else:
-            _, coords, parts = shapely.to_ragged_array([self.region])
-            vertices, offsets = coords.shape[0], sum(p.size for p in parts)
-        segments = len(self) * (2 * 2 + 4) + -(-len(self) // 4)  # the facings four to a byte
-        return int(segments + vertices * 2 * 2 + offsets * 4 + self.positions.shape[0] * 2 * 2)
+        return array_bytes(self)
 
     def grid_bytes(self, resolution: float) -> int:
         """Bytes of a one-byte-a-cell grid of the map's bounding box at ``resolution`` metres:
