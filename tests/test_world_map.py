@@ -258,7 +258,7 @@ def test_segments_keep_their_geometry_in_six_bytes_and_two_bits():
 def test_a_crowded_tile_and_long_steps_round_trip():
     """More than 255 segments in one tile widen its counts; region vertices a step, an
     anchor or mixed come back exactly; anchors that disagree with their codes are refused."""
-    from occtool.fuse._occmap import _stepped_vertices, _vertex_steps
+    from occtool.fuse._occmap import _arrays, _stepped_vertices, _vertex_steps
 
     rng = np.random.default_rng(8)
     start = rng.uniform(0, 1.0, (400, 2))
@@ -266,6 +266,8 @@ def test_a_crowded_tile_and_long_steps_round_trip():
                               shapely.MultiPolygon([shapely.Point(0.5, 0.5).buffer(20.0, 64)]), band=BAND))
     loaded = decode(encode(world))
     assert np.array_equal(loaded.start, world.start) and loaded.region.equals_exact(world.region, 0)
+    counts = dict(_arrays(world)[1])["tile_counts"]
+    assert counts.dtype == np.uint16 and counts.max() > 255
     walk = np.cumsum(rng.integers(-300, 301, (500, 2)) * (rng.uniform(size=(500, 1)) < 0.2)
                      + rng.integers(-127, 128, (500, 2)), axis=0)
     walk = walk - walk.min(axis=0)
