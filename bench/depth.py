@@ -276,7 +276,7 @@ def real_frames(folder: Path = REAL_TUM) -> dict[str, Any]:
 
 def json_bytes(model: Any) -> bytes:
     """A fitted model's file, as ``occtool fit`` writes it."""
-    from occtool.io.model import model_text
+    from occtool.formats.model import model_text
 
     return model_text(model).encode()
 

@@ -30,8 +30,8 @@ _LAZY: dict[str, str] = {
     "navigation_map": "occtool.navigation",
     "NavigationMap": "occtool.navigation",
     "read_log": "occtool.io",
-    "load_model": "occtool.io.model",
-    "save_model": "occtool.io.model",
+    "load_model": "occtool.formats.model",
+    "save_model": "occtool.formats.model",
     "Features": "occtool.features",
     "Pose": "occtool.features",
     "Position": "occtool.features",
@@ -68,8 +68,8 @@ if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checke
     from occtool.errors import InputError, MissingDependencyError, ModelFormatError, NotFittedError, OcctoolError
     from occtool.features import Features, Pose, Position, RangeLog
     from occtool.fit import OccupancyRegressor
+    from occtool.formats.model import load_model, save_model
     from occtool.io import read_log
-    from occtool.io.model import load_model, save_model
     from occtool.navigation import NavigationMap, navigation_map
     from occtool.robot import Robot
 

@@ -3,8 +3,8 @@
 :func:`map_of_run` turns fitted local models and their poses into :class:`RunMap`: the
 fused map refitted as one :class:`occtool.fuse.WorldMap` (saved as ``world.occmap``)
 and drawn as the Nav2 raster. The writers put it where robots and people look: the
-world map, a Nav2 map (:mod:`occtool.io.nav2`), an
-MCAP that Foxglove draws with its standard schemas (:mod:`occtool.io.foxglove_map`),
+world map, a Nav2 map (:mod:`occtool.formats.nav2`), an
+MCAP that Foxglove draws with its standard schemas (:mod:`occtool.formats.foxglove`),
 GeoJSON layers with one geometry type each, and a JSON summary (:func:`write_run_map`).
 """
 
@@ -23,10 +23,10 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from occtool._files import atomic_write
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse import FusedMap, Raster, RunReturns, WorldMap
-from occtool.io._atomic import atomic_write
 
 FloatArray = NDArray[np.float64]
 #: How far past an exploration point the raster is walked for unknown space, metres.
@@ -175,7 +175,7 @@ def layer_collections(run: RunMap, *, simplify: float | None = None, precision: 
                       georeference: Any | None = None) -> dict[str, dict[str, Any]]:
     """The three GeoJSON layers, one geometry type each: ``navigation`` (Polygon),
     ``obstacles`` and ``frontiers`` (Point), metric x, y in the ``map`` frame, or WGS84
-    longitude/latitude (RFC 7946) with a :class:`occtool.io.wgs84.Georeference`.
+    longitude/latitude (RFC 7946) with a :class:`occtool.formats.wgs84.Georeference`.
     ``simplify`` is in metres either way."""
     region = run.navigation
     if simplify is not None:
@@ -234,8 +234,8 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
 
     ``nav2_mode``: ``"trinary"`` writes ``map.pgm`` (free / occupied / unknown), ``"scale"``
     ``map.png`` with the fused occupancy graded (needs Pillow)."""
-    from occtool.fuse._occmap import encode
-    from occtool.io.nav2 import _pillow, write_nav2, write_nav2_scale
+    from occtool.formats.nav2 import _pillow, write_nav2, write_nav2_scale
+    from occtool.formats.occmap import encode
 
     if nav2_mode not in NAV2_MODES:
         raise InputError(f"nav2_mode must be one of {', '.join(NAV2_MODES)}, got {nav2_mode!r}")
@@ -254,7 +254,7 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
     summary["world_map"]["file_bytes"] = len(world_bytes)
     mcap_bytes = None
     if mcap:
-        from occtool.io.foxglove_map import run_map_mcap_bytes
+        from occtool.formats.foxglove import run_map_mcap_bytes
 
         mcap_bytes = run_map_mcap_bytes(run)
     folder.mkdir(parents=True, exist_ok=True)

@@ -541,7 +541,7 @@ def read_registered_log(path: str, read_options: dict[str, Any], register: bool 
 def write_poses_csv(report: RegistrationReport, path: str | Any, *, overwrite: bool = True) -> None:
     """Every scan's registered pose as CSV: ``scan,stamp,x,y,z,yaw`` (the world ``map``
     frame, metres and radians; ``stamp`` in seconds, empty when the log has none)."""
-    from occtool.io._atomic import atomic_write
+    from occtool._files import atomic_write
 
     with atomic_write(path, "w", overwrite=overwrite) as handle:
         handle.write("scan,stamp,x,y,z,yaw\n")

@@ -11,8 +11,8 @@ from click.testing import CliRunner
 
 from occtool.cli.main import cli
 from occtool.errors import InputError
-from occtool.io.geojson import read_navigation
-from occtool.io.model import save_inverse, save_model
+from occtool.formats.geojson import read_navigation
+from occtool.formats.model import save_inverse, save_model
 from occtool.tree import InverseTree
 
 

@@ -39,7 +39,7 @@ def test_writes_every_output(mapped):
 
 
 def test_nav2_map_puts_walls_where_they_are(mapped):
-    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
+    from occtool.formats.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
 
     _, out = mapped
     loaded = read_nav2(out / "map.yaml")
@@ -64,7 +64,7 @@ def test_nav2_map_puts_walls_where_they_are(mapped):
 
 
 def test_scale_nav2_map_grades_what_the_trinary_map_rounds(mapped, tmp_path):
-    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
+    from occtool.formats.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
 
     log, trinary_out = mapped
     out = tmp_path / "scale"
@@ -135,7 +135,7 @@ def test_mcap_uses_foxglove_schemas_and_decodes(mapped):
     (_, _, grid), = by_topic["/map"]
     assert grid.frame_id == "map" and grid.column_count == summary["raster"]["columns"]
     values = np.frombuffer(grid.data, dtype=np.int8).reshape(-1, grid.column_count)
-    from occtool.io.nav2 import read_nav2
+    from occtool.formats.nav2 import read_nav2
 
     assert (values == read_nav2(out / "map.yaml").cells).all()
 
@@ -231,7 +231,7 @@ def test_keyframe_share_zero_fits_every_position(mapped, tmp_path):
 
 def test_origin_writes_wgs84_that_round_trips(mapped, tmp_path):
     pytest.importorskip("pyproj")
-    from occtool.io.wgs84 import Georeference
+    from occtool.formats.wgs84 import Georeference
 
     log, out = mapped
     result = run("map", log, "-o", tmp_path / "geo", "--origin", "47.0,8.0,30", "--no-mcap", *LASER)

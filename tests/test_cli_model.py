@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from occtool.cli.main import cli
 from occtool.features import Features
-from occtool.io.model import load_inverse, load_model
+from occtool.formats.model import load_inverse, load_model
 
 
 @pytest.fixture(scope="module")

@@ -17,9 +17,9 @@ pytest.importorskip("matplotlib")
 from occtool.cli.main import cli  # noqa: E402
 from occtool.features import Pose, Position, RangeLog  # noqa: E402
 from occtool.fit import OccupancyRegressor  # noqa: E402
+from occtool.formats.geojson import write_navigation, write_navigation_set  # noqa: E402
+from occtool.formats.model import save_model  # noqa: E402
 from occtool.io import write_csv  # noqa: E402
-from occtool.io.geojson import write_navigation, write_navigation_set  # noqa: E402
-from occtool.io.model import save_model  # noqa: E402
 from occtool.navigation import navigation_map  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
 from occtool.simulate import simulate_scene  # noqa: E402

@@ -171,7 +171,7 @@ def test_evaluate_reads_what_extract_writes(tmp_path, fixtures_dir, sequence: bo
     # The navigation module's own writer, with an unbounded model: the map is the full disk,
     # so the scores are those of the disk whatever frame or layout the file uses.
     from occtool.features import Pose
-    from occtool.io.geojson import write_navigation
+    from occtool.formats.geojson import write_navigation
     from occtool.navigation import navigation_map
     from occtool.robot import Robot
 

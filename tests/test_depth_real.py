@@ -42,7 +42,7 @@ def test_the_folder_reads_as_tum_with_its_own_intrinsics():
 
 
 def test_the_map_has_the_cabinet_and_the_floor_round_it_free(mapped):
-    from occtool.io.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
+    from occtool.formats.nav2 import CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN, read_nav2
 
     loaded = read_nav2(mapped / "map.yaml")
 

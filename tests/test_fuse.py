@@ -122,7 +122,7 @@ def test_raster_rows_grow_with_y_and_walls_are_occupied(room):
 
 
 def test_models_from_files_fuse_like_fresh_ones(room, tmp_path):
-    from occtool.io.model import load_model, save_model
+    from occtool.formats.model import load_model, save_model
 
     _, log, _fused, models, report = room
     loaded = []
@@ -311,8 +311,8 @@ def test_fuse_log_fits_only_keyframes(room):
 
 
 def test_a_model_set_fuses_from_its_folder_as_from_its_models(room, tmp_path):
+    from occtool.formats.model import load_model, read_model_set
     from occtool.fuse import fuse_model_set
-    from occtool.io.model import load_model, read_model_set
     from occtool.modelset import fit_model_set
 
     path, *_ = room

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from occtool.cli.main import cli
 from occtool.errors import ModelFormatError
-from occtool.io.model import load_inverse, load_model
+from occtool.formats.model import load_inverse, load_model
 
 FIXTURES = Path(__file__).resolve().parent.parent / "fixtures"
 
@@ -46,9 +46,9 @@ def files(tmp_path_factory) -> dict[str, Path]:
     assert run("fit", csv, "-o", folder / "model.json", "--pieces", "8").exit_code == 0
     assert run("invert", folder / "model.json", "-o", folder / "inverse.json").exit_code == 0
     # A model set's file also keeps what its position observed (occtool.fuse.Observation).
+    from occtool.formats.model import model_text, save_model_text
     from occtool.fuse import observe
     from occtool.io import read_log
-    from occtool.io.model import model_text, save_model_text
 
     features = read_log(csv).single().features
     model = load_model(folder / "model.json")
@@ -164,7 +164,7 @@ def test_commands_reading_a_mutated_model_never_trace_back(files, tmp_path_facto
 
 def test_the_bytes_written_do_not_change(files, tmp_path):
     """Reading is stricter; writing is as before: a model read back and saved is byte-identical."""
-    from occtool.io.model import save_model
+    from occtool.formats.model import save_model
 
     for kind in ("model", "observed"):
         model = load_model(files[kind])
@@ -179,7 +179,7 @@ def test_the_bytes_written_do_not_change(files, tmp_path):
 @settings(max_examples=40)
 @given(depth=st.integers(1, 20_000), digits=st.integers(1, 1000))
 def test_user_json_is_bounded_in_nesting_and_integer_length(depth, digits):
-    from occtool.io import json as _json
+    from occtool import _json
 
     for text in ("[" * depth + "]" * depth, "[" + "7" * digits + "]"):
         try:

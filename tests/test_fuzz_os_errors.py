@@ -24,8 +24,8 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from occtool._files import atomic_write
 from occtool.cli.main import cli
-from occtool.io._atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURES = ROOT / "fixtures"
@@ -68,7 +68,7 @@ def test_write_failures_of_the_file_system_are_one_line_and_leave_nothing(csv, t
     def failing_replace(source, target):
         raise OSError(code, os.strerror(code))
 
-    monkeypatch.setattr("occtool.io._atomic.os.replace", failing_replace)
+    monkeypatch.setattr("occtool._files.os.replace", failing_replace)
     out = tmp_path / "out"
     out.mkdir()
     error = one_error_line(run("convert", csv, "-o", out / "x.csv"))
@@ -179,7 +179,7 @@ def test_a_bad_option_is_one_line_on_stderr_from_the_console_script(tmp_path):
 def test_an_interrupt_the_moment_the_temporary_file_exists_leaves_nothing(tmp_path, monkeypatch):
     # A signal handled right after the temporary file is made (a SIGTERM on a loaded
     # machine once landed there) must still remove it: its name is known before it exists.
-    import occtool.io._atomic as atomic
+    import occtool._files as atomic
 
     real_open = os.open
 

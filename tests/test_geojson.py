@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.io.geojson import navigation_features, navigation_to_geojson, read_navigation, write_navigation
+from occtool.formats.geojson import navigation_features, navigation_to_geojson, read_navigation, write_navigation
 from occtool.navigation import navigation_map
 from occtool.robot import Robot
 

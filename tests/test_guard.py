@@ -16,8 +16,8 @@ from occtool.errors import ModelFormatError
 from occtool.evaluate import returns_within_body
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
+from occtool.formats.model import load_model, save_model
 from occtool.guard import GUARD_BINS, ReturnGuard, Support, build_guard, is_planar_scan
-from occtool.io.model import load_model, save_model
 from occtool.navigation import NavigationWarning, pan_angles
 from occtool.robot import Robot
 from occtool.simulate import simulate_scene
@@ -203,7 +203,7 @@ def test_a_subsample_of_the_support_confirms_a_dense_surface_as_all_of_it_does(m
 
 
 def test_a_model_file_and_its_inverse_extract_the_same_guarded_map(tmp_path):
-    from occtool.io.model import read_navigable, save_inverse
+    from occtool.formats.model import read_navigable, save_inverse
 
     features = laser_scan((-3.0, 3.0, -3.0, 3.0), [(0.8, 0.0, 0.015)], n_beams=180)
     model = OccupancyRegressor(robot=LASER_ROBOT).fit(features)

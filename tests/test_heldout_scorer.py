@@ -33,7 +33,7 @@ def test_auc_known_answers():
 
 
 def test_nav2_reader_against_occtools_writer(tmp_path):
-    from occtool.io.nav2 import write_nav2
+    from occtool.formats.nav2 import write_nav2
 
     # Row 0 is the bottom (y = origin y): occupied at (col 1, row 0), unknown along the top row.
     pixels = np.full((3, 4), 254, dtype=np.uint8)
@@ -50,7 +50,7 @@ def test_nav2_reader_against_occtools_writer(tmp_path):
 
 
 def test_nav2_reader_of_a_scale_png_against_occtools_writer(tmp_path):
-    from occtool.io.nav2 import write_nav2_scale
+    from occtool.formats.nav2 import write_nav2_scale
 
     occupancy = np.array([[0.1, 0.45, 0.9], [np.nan, 0.2, 0.3]])
     write_nav2_scale(occupancy, 0.5, (0.0, 0.0), tmp_path / "map.yaml")

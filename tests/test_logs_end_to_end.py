@@ -19,8 +19,8 @@ import pytest
 from click.testing import CliRunner
 
 from occtool.cli.main import cli
+from occtool.formats.geojson import read_navigation
 from occtool.io import read_log
-from occtool.io.geojson import read_navigation
 
 CCNY = "ccny_hokuyo_bag/demo_ros2_converted.mcap"
 INTEL = "intel_lab/intel-corrected.log.gz"

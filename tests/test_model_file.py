@@ -10,7 +10,7 @@ import pytest
 from occtool.errors import ModelFormatError
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
-from occtool.io.model import (
+from occtool.formats.model import (
     FORMAT_VERSION,
     MODEL_FORMAT,
     load_inverse,

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from occtool.cli.main import cli
 from occtool.errors import InputError
 from occtool.fit import OccupancyRegressor
-from occtool.io.model import (
+from occtool.formats.model import (
     RUN_PLACEHOLDER,
     load_model,
     model_text,

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from occtool.errors import InputError
-from occtool.io.nav2 import (
+from occtool.formats.nav2 import (
     CELL_FREE,
     CELL_OCCUPIED,
     CELL_UNKNOWN,
@@ -84,7 +84,7 @@ def test_a_pgm_of_the_wrong_size_is_an_input_error(tmp_path_factory, width, heig
 
 
 def test_scale_map_by_map_server_rules(tmp_path):
-    from occtool.io.nav2 import write_nav2_scale
+    from occtool.formats.nav2 import write_nav2_scale
 
     occupancy = np.array([[0.1, 0.3, 0.45], [0.9, np.nan, 1.0]], dtype=np.float32)
     yaml_path, image = write_nav2_scale(occupancy, 0.05, (-1.0, 0.5), tmp_path / "map.yaml")
@@ -102,7 +102,7 @@ def test_scale_map_by_map_server_rules(tmp_path):
 def test_scale_map_is_rgba_with_the_origin_in_the_last_row(tmp_path):
     from PIL import Image
 
-    from occtool.io.nav2 import write_nav2_scale
+    from occtool.formats.nav2 import write_nav2_scale
 
     occupancy = np.zeros((3, 2), dtype=np.float32)
     occupancy[0, 0] = 1.0  # the cell at the origin (lower left)
@@ -119,7 +119,7 @@ def test_scale_map_is_rgba_with_the_origin_in_the_last_row(tmp_path):
 
 @given(st.lists(st.one_of(st.floats(0.0, 1.0), st.just(float("nan"))), min_size=1, max_size=30))
 def test_scale_map_keeps_occupied_free_and_unknown(tmp_path_factory, values):
-    from occtool.io.nav2 import write_nav2_scale
+    from occtool.formats.nav2 import write_nav2_scale
 
     folder = tmp_path_factory.mktemp("scale")
     occupancy = np.array(values, dtype=np.float64).reshape(1, -1)
@@ -132,7 +132,7 @@ def test_scale_map_keeps_occupied_free_and_unknown(tmp_path_factory, values):
 
 
 def test_scale_writer_refuses_bad_occupancy(tmp_path):
-    from occtool.io.nav2 import write_nav2_scale
+    from occtool.formats.nav2 import write_nav2_scale
 
     with pytest.raises(InputError, match=r"\[0, 1\]"):
         write_nav2_scale(np.full((2, 2), 1.5), 0.05, (0, 0), tmp_path / "map.yaml")

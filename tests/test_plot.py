@@ -22,7 +22,7 @@ from shapely.geometry import Point, Polygon, mapping  # noqa: E402
 from occtool import plot  # noqa: E402
 from occtool.errors import InputError, MissingDependencyError, ModelFormatError  # noqa: E402
 from occtool.features import Features, Pose, Position, RangeLog  # noqa: E402
-from occtool.io.geojson import write_navigation  # noqa: E402
+from occtool.formats.geojson import write_navigation  # noqa: E402
 from occtool.navigation import NavigationMap, Slice, navigation_map  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
 from occtool.tree import MinMaxTree, Op  # noqa: E402

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from occtool.errors import InputError
-from occtool.io.wgs84 import Georeference, parse_origin
+from occtool.formats.wgs84 import Georeference, parse_origin
 
 pytest.importorskip("pyproj")
 

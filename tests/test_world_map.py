@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 from occtool.cli.main import cli
 from occtool.errors import InputError
 from occtool.fit import OccupancyRegressor
+from occtool.formats.occmap import decode, encode, quantise
 from occtool.fuse import FREE, OCCUPIED, UNKNOWN, WorldMap, build_world_map, fuse_log, load_map
-from occtool.fuse._occmap import decode, encode, quantise
 from occtool.fuse._walls import fit_segments, seen_through
 from occtool.io import read_log
 from occtool.robot import Robot
@@ -229,7 +229,7 @@ def test_segments_keep_their_geometry_in_six_bytes_and_two_bits():
     cut; the segments listed tile by tile; the facings four to a byte."""
     from scipy.spatial import cKDTree
 
-    from occtool.fuse._occmap import TILE
+    from occtool.formats.occmap import TILE
 
     rng = np.random.default_rng(5)
     start = rng.uniform(-5, 5, (200, 2))
@@ -258,7 +258,7 @@ def test_segments_keep_their_geometry_in_six_bytes_and_two_bits():
 def test_a_crowded_tile_and_long_steps_round_trip():
     """More than 255 segments in one tile widen its counts; region vertices a step, an
     anchor or mixed come back exactly; anchors that disagree with their codes are refused."""
-    from occtool.fuse._occmap import _arrays, _stepped_vertices, _vertex_steps
+    from occtool.formats.occmap import _arrays, _stepped_vertices, _vertex_steps
 
     rng = np.random.default_rng(8)
     start = rng.uniform(0, 1.0, (400, 2))
@@ -283,7 +283,7 @@ def _version_3(world):
     import struct
     import zlib
 
-    from occtool.fuse._occmap import MAGIC, _pack_facing, _segment_codes
+    from occtool.formats.occmap import MAGIC, _pack_facing, _segment_codes
 
     middles, steps, half = _segment_codes(world, world.origin, world.unit, world.half_unit)
     units = lambda xy: np.round((xy - world.origin) / world.unit).astype("<u2")  # noqa: E731
@@ -329,7 +329,7 @@ def _version_1(world):
     import struct
     import zlib
 
-    from occtool.fuse._occmap import MAGIC
+    from occtool.formats.occmap import MAGIC
 
     units = lambda xy: np.round((xy - world.origin) / world.unit).astype("<u2")  # noqa: E731
     arrays = [("segments", np.hstack([units(world.start), units(world.end)])),

@@ -9,7 +9,7 @@ floor as obstacle, refit sweeps, no focus); a few positions of the CARMEN logs i
 ../shared/data fitted as ``occtool fit`` fits them (planar defaults,
 :func:`occtool.modelset.estimator_for_log`), with and without free rays. Features are
 cached under ``$TMPDIR/occtool-model-hashes`` (simulating and reading logs is not what is
-timed here). The model bytes are :func:`occtool.io.model.model_text` without a run object.
+timed here). The model bytes are :func:`occtool.formats.model.model_text` without a run object.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
-from occtool.io.model import model_text
+from occtool.formats.model import model_text
 from occtool.sensor import SensorModel
 
 CACHE = Path(tempfile.gettempdir()) / "occtool-model-hashes"

@@ -100,6 +100,7 @@ def compare_grid(
     import logging
 
     refuse_existing(overwrite, json_path, plot_path)
+    from occtool._files import atomic_write
     from occtool.cli.options import (
         extract_from_kwargs,
         fit_from_kwargs,
@@ -107,7 +108,6 @@ def compare_grid(
     )
     from occtool.compare import compare_grid as run_comparison
     from occtool.compare import report_json
-    from occtool.io._atomic import atomic_write
 
     logger = logging.getLogger("occtool.compare")
     regressor = fit_from_kwargs(kwargs, seed=seed)

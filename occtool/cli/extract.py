@@ -83,7 +83,7 @@ def extract(
     import os
     from pathlib import Path
 
-    from occtool.io.geojson import write_navigation
+    from occtool.formats.geojson import write_navigation
     from occtool.modelset import navigation_map_of_file
 
     logger = logging.getLogger("occtool.extract")

@@ -78,7 +78,7 @@ def fit(log_paths: tuple[str, ...], output: str | None, overwrite: bool, positio
     refuse_existing(overwrite, output)
     log = read_log_from_kwargs(logs[0], kwargs)
     item = log.single(position)
-    from occtool.io.model import save_model
+    from occtool.formats.model import save_model
     from occtool.modelset import estimator_for_log, settings_digest
 
     template = estimator_for_log(template, [item], planar_defaults=not _heights_given())

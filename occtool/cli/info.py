@@ -21,7 +21,7 @@ def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: floa
     samples, run) or any range log the readers understand."""
     from rich.console import Console
 
-    from occtool.io.model import read_any
+    from occtool.formats.model import read_any
 
     console = Console()
     found = read_any(path)

@@ -18,7 +18,7 @@ def invert(model_path: str, output: str | None, overwrite: bool) -> None:
     from datetime import datetime, timezone
 
     from occtool import __version__
-    from occtool.io.model import load_model, save_inverse
+    from occtool.formats.model import load_model, save_inverse
 
     refuse_existing(overwrite, output)
     model = load_model(model_path)

@@ -86,7 +86,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
     logger = logging.getLogger("occtool.map")
     georeference = None
     if origin is not None:
-        from occtool.io.wgs84 import Georeference, parse_origin
+        from occtool.formats.wgs84 import Georeference, parse_origin
 
         try:
             georeference = Georeference(*parse_origin(origin))

@@ -113,7 +113,7 @@ def model(model: str, level: float, height: float | None, heights: str | None, e
     """
     figure_size = _prepare(output, size, dpi, overwrite)
     from occtool.cli.options import float_list
-    from occtool.io.model import load_model
+    from occtool.formats.model import load_model
     from occtool.plot import model_extent, model_figure, model_robot
 
     fitted = load_model(model)

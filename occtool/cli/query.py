@@ -22,8 +22,8 @@ def query(world_map: str, points: str, output: str, precision: int, overwrite: b
     [0, 1], 0.5 where no position observed or outside the robot's body band."""
     import logging
 
+    from occtool.formats.query_csv import query_csv
     from occtool.fuse import load_map
-    from occtool.io.query_csv import query_csv
 
     refuse_existing(overwrite, output)
     world = load_map(world_map)

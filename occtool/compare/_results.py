@@ -75,6 +75,6 @@ def tree_bytes(tree: Any) -> int:
 
 
 def _save_model_size(model: Any) -> int:
-    from occtool.io.model import save_model
+    from occtool.formats.model import save_model
 
     return _file_size(lambda name: save_model(model, name), ".json")

@@ -46,6 +46,7 @@ over linear pieces in world x, y under one MAX, over the region some position ob
 the map ``occtool map`` writes as ``world.occmap`` and draws for Nav2 (docs/map.md).
 """
 
+from occtool.formats.occmap import load_map
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set, fuse_models
 from occtool.fuse._combine import (
     CLAMP,
@@ -57,7 +58,6 @@ from occtool.fuse._combine import (
     Evidence,
 )
 from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
-from occtool.fuse._occmap import load_map
 from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
 from occtool.fuse._reach import (
     NO_OBSTACLE,

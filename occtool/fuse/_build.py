@@ -156,10 +156,10 @@ def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,
     Raises
     ------
     InputError
-        If the set is malformed (:func:`occtool.io.model.read_model_set`) or a position has
+        If the set is malformed (:func:`occtool.formats.model.read_model_set`) or a position has
         no pose: a world map needs every model placed.
     """
-    from occtool.io.model import load_model, read_model_set
+    from occtool.formats.model import load_model, read_model_set
 
     folder, entries = read_model_set(path)
     models, poses, stamps, positions = [], [], [], []

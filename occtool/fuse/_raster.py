@@ -32,7 +32,7 @@ class Raster:
 
     def graded(self) -> NDArray[np.float32]:
         """The fused occupancy of every cell the run observed (or placed a wall near), NaN
-        elsewhere: the cells of a ``scale`` Nav2 map (:func:`occtool.io.nav2.write_nav2_scale`),
+        elsewhere: the cells of a ``scale`` Nav2 map (:func:`occtool.formats.nav2.write_nav2_scale`),
         which keeps the map's grades where the trinary cells round them to three."""
         known = self.cells != UNKNOWN if self.explored is None else self.explored | (self.cells != UNKNOWN)
         return np.where(known, self.probability, np.float32(np.nan)).astype(np.float32)

@@ -23,7 +23,7 @@ models observed into one world-frame function of a few kilobytes:
   0.5; 0.5 (unknown) outside the region and at heights outside the robot's body band.
 
 Only the segments (end points, thickness, trust), the positions and the region's vertices are stored:
-:attr:`WorldMap.nbytes` counts them at the precision :mod:`occtool.fuse._occmap` writes
+:attr:`WorldMap.nbytes` counts them at the precision :mod:`occtool.formats.occmap` writes
 them (a unit of :data:`UNIT` metres, 5 mm by default), which is everything
 :meth:`WorldMap.predict` needs. The map is 2D: the occupancy of the robot's body band,
 the map a planar robot drives by.
@@ -194,7 +194,7 @@ class WorldMap:
         self.wall_share = float(wall_share)
         self.wall_rim = float(wall_rim)
         self.doubted_wall_rim = float(doubted_wall_rim)
-        #: The file's grid (:func:`occtool.fuse._occmap.quantise` sets them): unit, metres, and
+        #: The file's grid (:func:`occtool.formats.occmap.quantise` sets them): unit, metres, and
         #: origin; the unit of segments' half-lengths (``None`` in a version 1 file).
         self.unit: float | None = None
         self.origin: FloatArray | None = None
@@ -233,8 +233,8 @@ class WorldMap:
         trust (a byte each) and its facing (two bits); per tile of 1.28 m its segments' count;
         per vertex of the region a step of two int8 (and two uint16 where the step is longer) and
         its rings' and parts' offsets; per position two coordinates (uint16)
-        (:mod:`occtool.fuse._occmap`)."""
-        from occtool.fuse._occmap import array_bytes
+        (:mod:`occtool.formats.occmap`)."""
+        from occtool.formats.occmap import array_bytes
 
         return array_bytes(self)
 
@@ -429,8 +429,8 @@ class WorldMap:
                 "wall_share": self.wall_share, "wall_rim": self.wall_rim, "doubted_wall_rim": self.doubted_wall_rim}
 
     def save(self, path: Any, *, overwrite: bool = True) -> int:
-        """Write the map to ``path`` (:mod:`occtool.fuse._occmap`, atomically); returns its bytes."""
-        from occtool.fuse._occmap import save_map
+        """Write the map to ``path`` (:mod:`occtool.formats.occmap`, atomically); returns its bytes."""
+        from occtool.formats.occmap import save_map
 
         return save_map(self, path, overwrite=overwrite)
 
@@ -571,7 +571,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
                     region_reach: float = REGION_REACH, simplify: float = 0.03, one_sided: bool | None = None,
                     **params: Any) -> WorldMap:
     """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
-    (:func:`occtool.fuse._occmap.quantise`).
+    (:func:`occtool.formats.occmap.quantise`).
 
     ``sightings`` is what every position of the run saw (:func:`returns_of_positions`; by
     default ``fused``'s own positions, :func:`returns_of_fused`): the walls are fitted to
@@ -591,7 +591,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     """
     import shapely
 
-    from occtool.fuse._occmap import quantise
+    from occtool.formats.occmap import quantise
 
     for name, value in (("reach", reach), ("region_reach", region_reach)):
         if not value > 0:

@@ -37,7 +37,7 @@ STAMP_ALIASES = ("stamp", "time", "t")
 
 def open_text(path: str | os.PathLike[str]) -> IO[str]:
     """Open a text file for reading, decompressing gzip and bzip2 (told by content) transparently."""
-    from occtool.io._open import open_input
+    from occtool._files import open_input
 
     return open_input(path, "r")
 
@@ -353,7 +353,7 @@ def write_csv(
         Fixed decimals of the coordinates and of the evidence (``(4, 3)`` for a compact
         synthetic log); the shortest round-trip text when None.
     """
-    from occtool.io._atomic import atomic_write
+    from occtool._files import atomic_write
 
     if isinstance(features_or_log, Features):
         positions = [Position(0, features_or_log)]

@@ -52,7 +52,7 @@ def _points_and_evidence(values: dict[str, np.ndarray], evidence_field: str, con
     return points, np.full(points.shape[0], constant)
 
 def _open_binary(path: str | os.PathLike[str]) -> io.BufferedIOBase:
-    from occtool.io._open import open_input
+    from occtool._files import open_input
 
     return open_input(path, "rb")  # type: ignore[return-value]
 

@@ -50,7 +50,7 @@ def navigation_map_of_file(
     """
     import warnings
 
-    from occtool.io.model import read_navigable
+    from occtool.formats.model import read_navigable
     from occtool.navigation import NavigationWarning, navigation_map
 
     navigable = read_navigable(path)
@@ -110,7 +110,7 @@ def extract_model_set(
     jobs, scheduler
         As for :func:`fit_model_set`.
     geojson
-        Keywords of :func:`occtool.io.geojson.write_navigation` (``sequence``,
+        Keywords of :func:`occtool.formats.geojson.write_navigation` (``sequence``,
         ``precision``, ``indent``, ``include_slices``).
     navigation
         Keywords of :func:`navigation_map_of_file` (``robot``, ``robot_overrides``,
@@ -123,8 +123,8 @@ def extract_model_set(
     """
     from occtool.executor import check_jobs, make_executor
     from occtool.features import Pose
-    from occtool.io.geojson import write_navigation, write_navigation_set
-    from occtool.io.model import read_model_set
+    from occtool.formats.geojson import write_navigation, write_navigation_set
+    from occtool.formats.model import read_model_set
 
     start = time.perf_counter()
     given = list(model_sets) if isinstance(model_sets, (list, tuple)) else [model_sets]

@@ -29,7 +29,7 @@ from occtool.modelset._settings import _GeometrySurvey, estimator_for_log, setti
 
 def _reusable(target: Path, digest: str, settings: str) -> bool:
     """Whether ``target`` is a readable model of these features fitted with these settings."""
-    from occtool.io.model import load_model
+    from occtool.formats.model import load_model
 
     try:
         if not stat.S_ISREG(os.stat(target).st_mode):
@@ -60,8 +60,8 @@ def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
     import platform
 
     from occtool.fit import OccupancyRegressor
+    from occtool.formats.model import RUN_PLACEHOLDER, model_text
     from occtool.fuse import observe
-    from occtool.io.model import RUN_PLACEHOLDER, model_text
 
     out: list[Any] = []
     for features in chunk:
@@ -203,8 +203,8 @@ def fit_model_set(
     from occtool import __version__
     from occtool.executor import check_jobs, make_executor
     from occtool.fit import OccupancyRegressor, features_digest
+    from occtool.formats.model import save_model_text, with_run
     from occtool.fuse import returns_per_degree
-    from occtool.io.model import save_model_text, with_run
     from occtool.robot import Robot
 
     start = time.perf_counter()

@@ -22,7 +22,7 @@ features are drawn in the robot frame unless a pose places them in the world fra
 
 from __future__ import annotations
 
-from occtool.io.json import read_json
+from occtool._json import read_json
 from occtool.plot._canvas import (
     DEFAULT_DPI,
     DEFAULT_SIZE,

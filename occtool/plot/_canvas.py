@@ -185,7 +185,7 @@ def save_figure(figure: Figure, path: str | os.PathLike[str], *, dpi: float | No
     pathlib.Path
         The path written.
     """
-    from occtool.io._atomic import atomic_write
+    from occtool._files import atomic_write
 
     image_format = output_format(path)
     with atomic_write(path, "wb") as handle:

@@ -20,7 +20,7 @@ DEFAULT_MAP_SIZE = (8.0, 8.0)
 
 def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndarray]:
     """The Nav2 map, the path and the frontier points of an ``occtool map`` folder."""
-    from occtool.io.nav2 import read_nav2
+    from occtool.formats.nav2 import read_nav2
 
     folder = Path(folder)
     if not (folder / "map.yaml").is_file():
@@ -48,7 +48,7 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     path (blue), the frontier points (green) and (``walls``) the world map's wall
     segments, from ``world.occmap``, red where every position that saw them returned from
     them and paler as more saw through them."""
-    from occtool.io.nav2 import CELL_UNKNOWN
+    from occtool.formats.nav2 import CELL_UNKNOWN
     from occtool.plot import new_figure
 
     nav2, run_path, frontier_points = read_map_folder(folder)

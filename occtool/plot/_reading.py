@@ -1,7 +1,7 @@
 """Files the pictures are drawn from: navigation maps, comparison reports, benchmark sweeps.
 
-Parsing lives in :mod:`occtool.io` (:func:`occtool.io.geojson.read_navigation`,
-:func:`occtool.io.json.read_json`); this module picks out what a picture needs.
+Parsing lives in :mod:`occtool.io` (:func:`occtool.formats.geojson.read_navigation`,
+:func:`occtool._json.read_json`); this module picks out what a picture needs.
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ if TYPE_CHECKING:  # pragma: no cover
 def read_navigation(path: str | os.PathLike[str]) -> NavigationMap:
     """Read a navigation map GeoJSON written by ``occtool extract``.
 
-    A thin alias of :func:`occtool.io.geojson.read_navigation`, which raises
+    A thin alias of :func:`occtool.formats.geojson.read_navigation`, which raises
     :class:`~occtool.errors.InputError` naming the file for malformed input.
     """
-    from occtool.io.geojson import read_navigation as read
+    from occtool.formats.geojson import read_navigation as read
 
     return read(path)
 
@@ -36,11 +36,11 @@ def read_navigation(path: str | os.PathLike[str]) -> NavigationMap:
 def read_navigation_maps(path: str | os.PathLike[str]) -> list[tuple[int | None, NavigationMap]]:
     """Every map in a navigation GeoJSON file, with the robot position each belongs to.
 
-    A thin alias of :func:`occtool.io.geojson.read_navigation_maps`: ``[(None, map)]``
+    A thin alias of :func:`occtool.formats.geojson.read_navigation_maps`: ``[(None, map)]``
     for a file of one map, one ``(position, map)`` per position, in position order, for
     a model set's file.
     """
-    from occtool.io.geojson import read_navigation_maps as read
+    from occtool.formats.geojson import read_navigation_maps as read
 
     return read(path)
 

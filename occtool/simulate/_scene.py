@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import shapely
 
+from occtool._files import atomic_write
 from occtool.errors import InputError
-from occtool.io._atomic import atomic_write
 from occtool.robot import Robot
 
 TRUTH_FORMAT = "occtool-scene-truth"
@@ -212,7 +212,7 @@ def load_truth(path: str | os.PathLike[str]) -> Scene:
     InputError
         If the file is not JSON or not a valid scene truth; the message names the file.
     """
-    from occtool.io.json import read_json
+    from occtool._json import read_json
 
     data = read_json(path, error=InputError)
     try:

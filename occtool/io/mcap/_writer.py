@@ -30,7 +30,7 @@ def write_mcap(log: RangeLog | Features, path: str | os.PathLike[str]) -> None:
     from mcap.writer import CompressionType, Writer
 
     from occtool import __version__
-    from occtool.io._atomic import atomic_write
+    from occtool._files import atomic_write
 
     if isinstance(log, Features):
         log = RangeLog(positions=[Position(0, log)])

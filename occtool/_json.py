@@ -2,7 +2,7 @@
 
 The one JSON reader of occtool's report-like files (comparison reports, benchmark
 results, scene truths); model files and navigation maps parse with :func:`loads` and keep
-their own format checks (:mod:`occtool.io.model`, :mod:`occtool.io.geojson`).
+their own format checks (:mod:`occtool.formats.model`, :mod:`occtool.formats.geojson`).
 ``json.loads`` turns a 400-digit integer into a Python int that overflows every float
 conversion later, and a document nested a thousand deep into a RecursionError; here both
 are :class:`json.JSONDecodeError`, which every reader reports in one line.

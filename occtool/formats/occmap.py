@@ -275,7 +275,7 @@ def encode(world: Any) -> bytes:
 
 def save_map(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
     """Write ``world`` to ``path`` through a temporary file; returns the bytes written."""
-    from occtool.io._atomic import atomic_write
+    from occtool._files import atomic_write
 
     data = encode(world)
     with atomic_write(path, "wb", overwrite=overwrite) as stream:

@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
+from occtool._files import atomic_write
+from occtool._json import loads, read_json
 from occtool.errors import InputError, ModelFormatError
-from occtool.io._atomic import atomic_write
-from occtool.io.json import loads, read_json
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 from occtool.tree import InverseTree, MinMaxTree

@@ -27,11 +27,11 @@ from shapely.geometry import Polygon, shape
 from shapely.geometry.base import BaseGeometry
 from shapely.geometry.polygon import orient
 
+from occtool import _json as safe_json
+from occtool._files import atomic_write
+from occtool._json import read_text
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.io import json as safe_json
-from occtool.io._atomic import atomic_write
-from occtool.io.json import read_text
 from occtool.navigation import NavigationMap, Slice
 
 CRS_NOTE = (

@@ -31,8 +31,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool._files import atomic_write
 from occtool.errors import InputError
-from occtool.io._atomic import atomic_write
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196

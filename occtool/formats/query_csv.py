@@ -35,7 +35,7 @@ def query_csv(world: Any, source: str | os.PathLike[str], output: str | os.PathL
               overwrite: bool = True, precision: int = 4) -> int:
     """Write ``source``'s rows to ``output`` with ``world.predict`` of their ``x, y, z`` appended
     as ``occupancy`` (``precision`` decimals); returns the rows written. ``output`` may be ``"-"``."""
-    from occtool.io._atomic import atomic_write
+    from occtool._files import atomic_write
 
     name = str(source)
     try:
