@@ -1,4 +1,5 @@
-"""Navigation maps as GeoJSON: a FeatureCollection or a newline-delimited feature sequence.
+"""Navigation maps as GeoJSON (a FeatureCollection or a newline-delimited feature sequence),
+and the layers of a run's map (:func:`run_map_layers`): occtool's one GeoJSON writer.
 
 One Polygon feature ``{"kind": "navigation"}``, Point features ``{"kind": "obstacle",
 "reinforcement": -1}`` and ``{"kind": "exploration", "reinforcement": 1}``, and optionally
@@ -325,8 +326,7 @@ def write_navigation_set(
             handle.write(json.dumps(collection, indent=indent, allow_nan=False) + "\n")
 
 
-# --- the layers of a run's map (occtool map) -----------------------------------------------
-#: The GeoJSON layers of a run's map (file stem -> the ``kind`` of their features).
+#: The GeoJSON layers of a run's map, ``occtool map``'s (file stem -> their features' ``kind``).
 RUN_MAP_LAYERS = {"navigation": "navigation", "obstacles": "obstacle", "frontiers": "frontier"}
 
 
