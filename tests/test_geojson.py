@@ -179,3 +179,76 @@ def test_malformed_files_are_rejected_with_the_reason(tmp_path, text, message):
     with pytest.raises(InputError, match=message) as raised:
         read_navigation(path)
     assert str(path) in str(raised.value)
+
+
+# ---------------------------------------------------------------- the layers of a run's map
+def small_run_map():
+    """A run map's layers by hand: a region of two parts, one with a hole and a clockwise
+    shell, points that need rounding (the raster and world map are not written here)."""
+    from occtool.mapping import RunMap
+
+    hollow = shapely.Polygon([(0, 0), (0, 2.00049), (3.123456, 2), (3, 0)],  # clockwise shell
+                             [[(1, 0.5), (2, 0.5), (2, 1.5), (1, 1.5)]])
+    region = shapely.MultiPolygon([hollow, shapely.box(4.0, 0.0, 4.5, 0.75)])
+    obstacles = np.array([[0.123456, -0.5], [3.5, 2.987654321]])
+    frontiers = np.array([[4.25, 1.0004999]])
+    return RunMap(fused=None, world=None, raster=None, placed=[], navigation=region,
+                  obstacles=obstacles, frontiers=frontiers)
+
+
+@pytest.mark.parametrize("options", [{}, {"precision": 3}, {"simplify": 0.2}, {"simplify": 0.0, "precision": 2}])
+def test_the_run_map_layers_are_the_json_mapping_writes(options):
+    from occtool.formats.geojson import RUN_MAP_LAYERS, run_map_layers
+    from occtool.mapping import LAYERS, layer_collections
+
+    run = small_run_map()
+    layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, **options)
+    assert tuple(layers) == LAYERS == tuple(RUN_MAP_LAYERS)
+    # Compared as the text write_run_map writes, byte for byte.
+    assert json.dumps(layers, separators=(",", ":")) == json.dumps(layer_collections(run, **options),
+                                                                   separators=(",", ":"))
+
+
+def test_the_run_map_layers_say_what_they_hold():
+    from occtool.formats.geojson import run_map_layers
+
+    run = small_run_map()
+    layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, precision=3)
+    navigation = layers["navigation"]["features"]
+    assert [f["geometry"]["type"] for f in navigation] == ["Polygon", "Polygon"]
+    shell, hole = (shapely.LinearRing(ring) for ring in navigation[0]["geometry"]["coordinates"])
+    assert len(navigation[0]["geometry"]["coordinates"]) == 2 and hole.is_valid
+    assert shapely.Polygon(shell, [hole]).area == pytest.approx(run.navigation.geoms[0].area, abs=0.01)
+    assert [f["geometry"]["coordinates"] for f in layers["obstacles"]["features"]] == [[0.123, -0.5], [3.5, 2.988]]
+    assert [f["geometry"]["coordinates"] for f in layers["frontiers"]["features"]] == [[4.25, 1.0]]
+    for name, kind in (("navigation", "navigation"), ("obstacles", "obstacle"), ("frontiers", "frontier")):
+        assert layers[name]["properties"]["kind"] == kind
+        assert layers[name]["properties"]["frame"] == "map" and layers[name]["properties"]["units"] == "m"
+        assert {f["properties"]["kind"] for f in layers[name]["features"]} == {kind}
+    # At full precision the rings follow RFC 7946: the clockwise shell is turned.
+    full = run_map_layers(run.navigation, run.obstacles, run.frontiers)["navigation"]["features"]
+    assert shapely.LinearRing(full[0]["geometry"]["coordinates"][0]).is_ccw
+    assert not shapely.LinearRing(full[0]["geometry"]["coordinates"][1]).is_ccw
+
+
+def test_the_run_map_layers_in_wgs84_are_the_json_mapping_writes():
+    pytest.importorskip("pyproj")
+    from occtool.formats.geojson import run_map_layers
+    from occtool.formats.wgs84 import Georeference
+    from occtool.mapping import layer_collections
+
+    run = small_run_map()
+    where = Georeference(48.0, 7.8, 30.0)
+    layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, georeference=where, precision=7)
+    assert json.dumps(layers) == json.dumps(layer_collections(run, georeference=where, precision=7))
+    assert layers["obstacles"]["properties"]["frame"] == "WGS84"
+    lon, lat = layers["frontiers"]["features"][0]["geometry"]["coordinates"]
+    assert lon == pytest.approx(7.8, abs=1e-3) and lat == pytest.approx(48.0, abs=1e-3)
+
+
+def test_a_negative_simplify_tolerance_is_one_line():
+    from occtool.formats.geojson import run_map_layers
+
+    run = small_run_map()
+    with pytest.raises(InputError, match="simplify tolerance must be a number of metres >= 0, got -1"):
+        run_map_layers(run.navigation, run.obstacles, run.frontiers, simplify=-1.0)

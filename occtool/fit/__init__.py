@@ -35,11 +35,11 @@ The parts, one concept a module (private; everything public is imported from her
 ``_sight``                the line-of-sight test that finds mismatches
 ``_focus``                the samples kept (focus) and added (frontier)
 ``_profile``              angle bins, the first-obstacle profile, its segments
-``_construction``         the tree: centre and side pieces, box QP, loss, refit sweeps
+``_construction``         the initial tree: segments, centre pieces by LP, side pieces
+``_refit``                the loss, the constraints, box QP and the refit sweeps
 ========================  ===============================================================
 """
 
-from occtool.fit._construction import LOSS_SAMPLES, ProgressCallback, box_qp, huber_loss
 from occtool.fit._focus import focus_samples, frontier_samples, join_samples
 from occtool.fit._profile import (
     FOCUS_ANGLE_BINS,
@@ -53,6 +53,7 @@ from occtool.fit._profile import (
     segment_near_runs,
     sorted_within_bins,
 )
+from occtool.fit._refit import LOSS_SAMPLES, ProgressCallback, box_qp, huber_loss
 from occtool.fit._regressor import (
     DEFAULT_BASIS,
     DEFAULT_FOCUS_RANGE,

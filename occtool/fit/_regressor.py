@@ -2,9 +2,9 @@
 
 ``fit`` screens the features (:mod:`occtool.fit._screen`), makes the sensor model's samples
 and focuses them (:mod:`occtool.fit._focus`), then builds the tree
-(:mod:`occtool.fit._construction`). The scikit-learn estimator contract holds: keyword-only
-parameters read from ``__init__``, ``get_params``/``set_params``, fitted attributes ending
-in ``_``.
+(:mod:`occtool.fit._construction`; its loss and refit sweeps in :mod:`occtool.fit._refit`).
+The scikit-learn estimator contract holds: keyword-only parameters read from ``__init__``,
+``get_params``/``set_params``, fitted attributes ending in ``_``.
 """
 
 from __future__ import annotations
@@ -21,8 +21,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, NotFittedError
 from occtool.features import FeatureGeometry, Features
-from occtool.fit._construction import ProgressCallback, _Fitter
+from occtool.fit._construction import _Fitter
 from occtool.fit._focus import focused_blocks
+from occtool.fit._refit import ProgressCallback
 from occtool.fit._screen import guarded_mask, profile_returns, screen_features
 from occtool.guard import SPREAD_SHARE, ReturnGuard, build_guard, guard_candidates
 from occtool.limits import MAX_DISTANCE, MAX_PIECES, MAX_SWEEPS, MAX_WEIGHT

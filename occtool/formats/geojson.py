@@ -1,4 +1,5 @@
-"""Navigation maps as GeoJSON: a FeatureCollection or a newline-delimited feature sequence.
+"""Navigation maps as GeoJSON (a FeatureCollection or a newline-delimited feature sequence),
+and the layers of a run's map (:func:`run_map_layers`): occtool's one GeoJSON writer.
 
 One Polygon feature ``{"kind": "navigation"}``, Point features ``{"kind": "obstacle",
 "reinforcement": -1}`` and ``{"kind": "exploration", "reinforcement": 1}``, and optionally
@@ -19,7 +20,7 @@ import math
 import os
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
@@ -33,6 +34,11 @@ from occtool._json import read_text
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.navigation import NavigationMap, Slice
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from occtool.formats.wgs84 import Georeference
 
 CRS_NOTE = (
     "coordinates are metric x, y (metres) in frame_id, x forward and y left (REP-103), "
@@ -84,15 +90,19 @@ def _rounded(coordinates: np.ndarray, precision: int | None) -> list:
     return (coordinates if precision is None else np.round(coordinates, precision)).tolist()
 
 
-def _polygon_geometry(polygon: BaseGeometry, precision: int | None) -> dict[str, Any]:
+def _polygon_geometry(polygon: BaseGeometry, precision: int | None, *, orient_rings: bool = True) -> dict[str, Any]:
+    """A Polygon's or MultiPolygon's geometry; ``orient_rings=False`` keeps the rings as
+    they are (a run map orients its rings before the grid snap, which may turn them)."""
     if polygon.is_empty:
         return {"type": "Polygon", "coordinates": []}
     if polygon.geom_type == "MultiPolygon":
         return {
             "type": "MultiPolygon",
-            "coordinates": [_polygon_geometry(part, precision)["coordinates"] for part in polygon.geoms],
+            "coordinates": [_polygon_geometry(part, precision, orient_rings=orient_rings)["coordinates"]
+                            for part in polygon.geoms],
         }
-    polygon = orient(polygon, sign=1.0)  # RFC 7946: outer ring counter-clockwise, holes clockwise
+    if orient_rings:
+        polygon = orient(polygon, sign=1.0)  # RFC 7946: outer ring counter-clockwise, holes clockwise
     rings = [polygon.exterior, *polygon.interiors]
     return {"type": "Polygon", "coordinates": [_rounded(np.asarray(ring.coords)[:, :2], precision) for ring in rings]}
 
@@ -316,6 +326,65 @@ def write_navigation_set(
             handle.write(json.dumps(collection, indent=indent, allow_nan=False) + "\n")
 
 
+#: The GeoJSON layers of a run's map, ``occtool map``'s (file stem -> their features' ``kind``).
+RUN_MAP_LAYERS = {"navigation": "navigation", "obstacles": "obstacle", "frontiers": "frontier"}
+
+
+def run_map_layers(navigation: BaseGeometry | None, obstacles: ArrayLike, frontiers: ArrayLike, *,
+                   simplify: float | None = None, precision: int | None = None,
+                   georeference: Georeference | None = None) -> dict[str, dict[str, Any]]:
+    """The GeoJSON layers of a run's map, one geometry type each (``occtool map`` writes
+    them as ``navigation.geojson``, ``obstacles.geojson`` and ``frontiers.geojson``).
+
+    Parameters
+    ----------
+    navigation
+        The navigation region in the ``map`` frame: one Polygon feature per part.
+    obstacles, frontiers
+        ``(K, 2)`` x, y in the ``map`` frame: one Point feature each.
+    simplify
+        Tolerance in metres of a topology-preserving simplification of the region.
+    precision
+        Decimal places: points are rounded, polygons snapped to a grid of
+        ``10**-precision`` (whose rings then come out as GEOS builds them).
+    georeference
+        Write WGS84 longitude/latitude (RFC 7946) instead of metric map x, y.
+
+    Returns
+    -------
+    dict
+        ``{"navigation": ..., "obstacles": ..., "frontiers": ...}``, FeatureCollections
+        whose ``properties`` say the frame and units.
+    """
+    if simplify is not None:
+        if not (math.isfinite(simplify) and simplify >= 0):
+            raise InputError(f"simplify tolerance must be a number of metres >= 0, got {simplify}")
+        navigation = shapely.simplify(navigation, simplify, preserve_topology=True)
+    parts = [] if navigation is None or navigation.is_empty else (
+        [navigation] if navigation.geom_type == "Polygon" else
+        [g for g in getattr(navigation, "geoms", []) if g.geom_type == "Polygon" and not g.is_empty])
+    polygons = [orient(p, sign=1.0) for p in parts]
+    properties: dict[str, Any] = {"frame": "map", "units": "m",
+                                  "crs_note": "metric x, y in the map frame, not longitude/latitude"}
+    if georeference is not None:
+        # A rotation and an azimuthal projection: rings keep their orientation.
+        polygons = [shapely.transform(p, georeference.to_lonlat) for p in polygons]
+        obstacles, frontiers = georeference.to_lonlat(obstacles), georeference.to_lonlat(frontiers)
+        properties = {"frame": "WGS84", "units": "degrees",
+                      "origin": {"lat": georeference.lat, "lon": georeference.lon, "heading": georeference.heading}}
+    if precision is not None:
+        polygons = [shapely.set_precision(p, 10.0 ** -precision) for p in polygons]
+    # Polygons are oriented before the transform and the snap, and written as those leave them.
+    geometries = {"navigation": [_polygon_geometry(p, None, orient_rings=False) for p in polygons],
+                  **{layer: [{"type": "Point", "coordinates": xy}
+                             for xy in _rounded(np.asarray(points, dtype=np.float64).reshape(-1, 2), precision)]
+                     for layer, points in (("obstacles", obstacles), ("frontiers", frontiers))}}
+    return {layer: {"type": "FeatureCollection", "properties": {**properties, "kind": kind},
+                    "features": [{"type": "Feature", "properties": {"kind": kind}, "geometry": geometry}
+                                 for geometry in geometries[layer]]}
+            for layer, kind in RUN_MAP_LAYERS.items()}
+
+
 # --- reading ------------------------------------------------------------------------------
 
 
@@ -517,12 +586,14 @@ def read_navigation_maps(path: str | os.PathLike[str]) -> list[tuple[int | None,
 
 __all__ = [
     "CRS_NOTE",
+    "RUN_MAP_LAYERS",
     "map_properties",
     "navigation_features",
     "navigation_set_to_geojson",
     "navigation_to_geojson",
     "read_navigation",
     "read_navigation_maps",
+    "run_map_layers",
     "write_navigation",
     "write_navigation_set",
 ]

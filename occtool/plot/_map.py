@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from occtool.errors import InputError
+from occtool.plot._canvas import new_figure
 
 DEFAULT_MAP_SIZE = (8.0, 8.0)
 
@@ -49,7 +50,6 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     segments, from ``world.occmap``, red where every position that saw them returned from
     them and paler as more saw through them."""
     from occtool.formats.nav2 import CELL_UNKNOWN
-    from occtool.plot import new_figure
 
     nav2, run_path, frontier_points = read_map_folder(folder)
     figure = new_figure(size, dpi)
