@@ -11,14 +11,14 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from occtool.errors import InputError
-from occtool.evaluate import (
+from occtool.robot import Robot
+from occtool.scoring import (
     configuration_obstacles,
     evaluate_navigation,
     reachable_region,
     robot_frame_polygon,
     true_reach,
 )
-from occtool.robot import Robot
 from occtool.simulate import SCENES, Scene, box, build_scene
 
 ROBOT = Robot(radius=0.25, sensor_height=1.0, body_height=1.0, ground_clearance=0.05)
@@ -245,7 +245,7 @@ def test_points_are_judged_by_their_direction() -> None:
 
 
 def test_the_blind_radius_is_where_the_lowest_ray_meets_the_obstacles_top():
-    from occtool.evaluate import blind_radius
+    from occtool.scoring import blind_radius
 
     robot = Robot()  # sensor 1 m up, body 0.05-1.0 m
     down, up = math.radians(-50.0), math.radians(30.0)
@@ -263,7 +263,7 @@ def test_the_blind_radius_is_where_the_lowest_ray_meets_the_obstacles_top():
 
 
 def test_the_violation_splits_into_what_the_sensor_could_see_and_its_blind_zone():
-    from occtool.evaluate import observable_footprints, violation_by_observability
+    from occtool.scoring import observable_footprints, violation_by_observability
 
     # A pallet 0.15 m high from 0.55 to 1.0 m ahead: a camera tilting down to -50 degrees
     # from 1 m sees its top from 0.713 m on; the 0.16 m in front of that are blind.
