@@ -125,3 +125,17 @@ def test_grid_raster_reads_the_world_grid_as_nav2_does():
     four = grid_raster(world_grid([_scan(k, pose, [[0.5, 0.0, 0.0]], [1.0]) for k in range(4)], 0.05))
     row, col, _ = four.cell_of(np.array([[1.51, 2.01], [1.26, 2.01]]))
     assert list(four.cells[row, col]) == [OCCUPIED, FREE]  # four misses: p 0.165 <= 0.196
+
+
+def test_the_layers_grid_scoring_compare_import_only_downwards():
+    import ast
+    from pathlib import Path
+
+    package = Path(occtool.scoring.__file__).parent.parent
+    above = {"grid": ("occtool.scoring", "occtool.compare"), "scoring": ("occtool.compare",)}
+    for layer, forbidden in above.items():
+        for path in (package / layer).glob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                         else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+                assert not [n for n in names if n.startswith(forbidden)], f"{path.name} imports {names}"
