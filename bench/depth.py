@@ -35,11 +35,11 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from occtool.evaluate import evaluate_navigation  # noqa: E402
 from occtool.fit import OccupancyRegressor  # noqa: E402
 from occtool.io import read_log  # noqa: E402
 from occtool.io.depth import PinholeCamera, back_project  # noqa: E402
 from occtool.navigation import NavigationWarning  # noqa: E402
+from occtool.scoring import evaluate_navigation  # noqa: E402
 from occtool.simulate import SCENES, simulate_scene  # noqa: E402
 from occtool.simulate._depth import (  # noqa: E402
     render_depth_frames,
@@ -113,7 +113,7 @@ def scenes() -> list[dict[str, Any]]:
 
 def hand_held() -> dict[str, Any]:
     from occtool.compare import compare_grid
-    from occtool.log_score import evaluate_log
+    from occtool.scoring import evaluate_log
 
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -143,7 +143,7 @@ def hand_held() -> dict[str, Any]:
 
 def world_grid_3d(starts: Any, ends: Any, hits: Any, resolution: float = 0.05) -> Any:
     """A dense 3D log-odds grid in the world frame from rays (OctoMap's hit/miss model and
-    clamping, the 3D twin of :func:`occtool.log_score.world_grid`); a ray that is not a hit
+    clamping, the 3D twin of :func:`occtool.scoring.world_grid`); a ray that is not a hit
     (a floor return) is a miss all along, as the sensor model's floor features are."""
     import numpy as np
 
@@ -175,9 +175,9 @@ def held_out_3d(path: Path, *, features: int = 2000, holdout: float = 0.1, block
     position when none did), a 5 cm 3D log-odds grid and a 5 cm OctoMap of the training frames."""
     import numpy as np
 
-    from occtool.compare import roc_auc
     from occtool.io.positions import Scan, build_log
-    from occtool.log_score import END_MARGIN, FREE_POINTS_PER_BEAM, _octomap_scores, _world_rays, holdout_blocks
+    from occtool.scoring import END_MARGIN, FREE_POINTS_PER_BEAM, holdout_blocks, roc_auc, world_rays
+    from occtool.scoring._log import _octomap_scores
 
     scans = read_log(path, group_by="message", depth_features=features).positions
     held = holdout_blocks(len(scans), holdout, block, 0)
@@ -230,7 +230,7 @@ def held_out_3d(path: Path, *, features: int = 2000, holdout: float = 0.1, block
         parametric[mine] = model.predict(np.arctan2(local[:, 1], local[:, 0]), local[:, 2],
                                          np.linalg.norm(local, axis=1))
     unseen = float((~seen_array.any(axis=0)).mean())
-    starts, ends, train_returns, _ = _world_rays(train)
+    starts, ends, train_returns, _ = world_rays(train)
     keep = train_returns  # returns only (no free rays in this log)
     started = time.perf_counter()
     grid = world_grid_3d(starts[keep], ends[keep], ends[keep][:, 2] >= GROUND_CLEARANCE)
@@ -258,7 +258,7 @@ REAL_SPLITS = ((0.1, 10), (0.2, 5))
 def real_frames(folder: Path = REAL_TUM) -> dict[str, Any]:
     """The real TUM frames (``fixtures/tum-fr3-cabinet``): :func:`held_out_3d` for each of
     :data:`REAL_SPLITS`, and ``evaluate-log`` with 20 % held out in blocks of 5."""
-    from occtool.log_score import evaluate_log
+    from occtool.scoring import evaluate_log
 
     path = folder / "depth.txt"
     out: dict[str, Any] = {"source": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)}

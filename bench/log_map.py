@@ -1,6 +1,6 @@
 """The fused world map on real laser logs, for the bench (``bench/run.py`` calls it).
 
-:func:`log_map_section` runs :func:`occtool.log_score.evaluate_log` (the Hilbert-maps
+:func:`log_map_section` runs :func:`occtool.scoring.evaluate_log` (the Hilbert-maps
 protocol: 10 % of scans held out in blocks of 40 consecutive scans; end points occupied,
 points along the beam up to 0.1 m before its end free) on the CARMEN logs present in
 ``data_dir`` and returns a markdown section and the figures as JSON.
@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any
 
 from occtool.fit import OccupancyRegressor
-from occtool.log_score import evaluate_log
 from occtool.robot import Robot
+from occtool.scoring import evaluate_log
 
 #: The logs of issue 10, as (folder, file) in ../shared/data.
 LOGS = (
@@ -183,7 +183,7 @@ def log_map_section(data_dir: str | Path, logs: tuple[tuple[str, str], ...] = LO
          f"Grid: a 2D log-odds grid (OctoMap's hit/miss and clamping, every beam's update summed, clamped once) "
          f"from the same training scans, at {resolution:g} m and coarser. Textbook grid: each cell updated once a "
          f"scan (l_occ at a return, l_free where a beam crosses), clamped after every scan, its l_occ, l_free and "
-         f"clamp picked per resolution on an inner split of the training scans (occtool.grid.tune_textbook), and "
+         f"clamp picked per resolution on an inner split of the training scans (occtool.scoring.tune_textbook), and "
          f"in brackets the issue's l_occ 0.85, l_free -0.4, clamp [-2, 3.5]. OctoMap: the same training scans inserted from each scan's pose "
          f"(pyoctomap, {resolution:g} m, OctoMap's defaults; memory as its memoryUsage()). Nav2 agreement: the fused map rasterised at {resolution:g} m (occupied "
          f"where the positions' returns fall) against its training scans, and the {resolution:g} m grid read as "

@@ -28,10 +28,10 @@ import numpy as np
 
 from occtool.compare import compare_grid
 from occtool.errors import OcctoolError
-from occtool.evaluate import returns_within_body
 from occtool.fit import PLANAR_FOCUS_RANGE, OccupancyRegressor
 from occtool.navigation import NavigationWarning
 from occtool.robot import Robot
+from occtool.scoring import returns_within_body
 from occtool.simulate import SCENES, simulate_scene
 
 RESOLUTION = 0.05

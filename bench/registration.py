@@ -58,10 +58,9 @@ def _aligned_poses(estimate: list[Any], truth: list[Any]) -> list[Any]:
 def held_out_auc(scans: list[Any], poses: list[Any], *, seed: int = 0) -> dict[str, float]:
     """Held-out AUC (log-odds) of the fused map of the training scans placed at ``poses``; the
     test points are the held-out scans at their own (corrected) poses, as evaluate_log scores them."""
-    from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
     from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
-    from occtool.log_score import BLOCK, HOLDOUT, holdout_blocks, holdout_test_points
+    from occtool.scoring import BLOCK, HOLDOUT, holdout_blocks, holdout_test_points, roc_auc
 
     held = holdout_blocks(len(scans), HOLDOUT, BLOCK, seed)
     train = build_log([Scan(s.features.points, s.features.evidence, pose, s.stamp, s.source)

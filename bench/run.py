@@ -59,11 +59,11 @@ from unseen_rooms import unseen_rooms_section, unseen_targets  # noqa: E402
 
 from occtool.compare import compare_grid, report_json  # noqa: E402
 from occtool.errors import OcctoolError  # noqa: E402
-from occtool.evaluate import evaluate_navigation  # noqa: E402
 from occtool.fit import DEFAULT_FOCUS_RANGE, OccupancyRegressor  # noqa: E402
 from occtool.grid import build_grid  # noqa: E402
 from occtool.navigation import NavigationWarning  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
+from occtool.scoring import evaluate_navigation  # noqa: E402
 from occtool.simulate import DEFAULT_RANGE_NOISE, DEFAULT_SENSOR_RANGE, SCENES, Scene, build_scene, simulate_scene  # noqa: E402
 
 warnings.simplefilter("ignore", NavigationWarning)

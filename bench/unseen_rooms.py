@@ -214,14 +214,14 @@ def quality_row(name: str, seed: int, n: int) -> dict[str, Any]:
     """The parametric polygon and the careful grid (``compare-grid --unknown occupied``) on
     ``n`` features of ``name``: IoU and violation against the truth, the violation split
     into the part on obstacles the sensor could see and the part in its blind zone
-    (:func:`occtool.evaluate.violation_by_observability`), held-out AUC in front of the
+    (:func:`occtool.scoring.violation_by_observability`), held-out AUC in front of the
     first obstacle."""
     import shapely
 
     from occtool.compare import compare_grid
-    from occtool.evaluate import violation_by_observability
     from occtool.fit import OccupancyRegressor
     from occtool.robot import Robot
+    from occtool.scoring import violation_by_observability
 
     features, scene = make_scene(name, seed, n)
     robot = Robot()

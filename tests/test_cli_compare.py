@@ -70,9 +70,9 @@ def test_plot_is_written(small_log: Path, tmp_path: Path) -> None:
 
 
 def test_missing_octomap_extra_is_a_one_line_error(small_log: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import occtool.octomap
+    import occtool.grid
 
-    monkeypatch.setattr(occtool.octomap, "octomap_available", lambda: False)
+    monkeypatch.setattr(occtool.grid, "octomap_available", lambda: False)
     result = CliRunner().invoke(cli, ["compare-grid", str(small_log), "--octomap"])
     assert result.exit_code == 1
     assert "pip install 'occtool[octomap]'" in result.output

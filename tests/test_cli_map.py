@@ -191,7 +191,7 @@ def test_evaluate_log_prints_the_figures(mapped):
     expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid", "textbook_0.05m", "textbook_0.1m",
                 "world", "nav2_map",
                 "textbook_fixed_0.05m", "textbook_fixed_0.1m", "counting_0.05m", "counting_0.1m"}
-    from occtool.octomap import octomap_available
+    from occtool.grid import octomap_available
 
     if octomap_available():
         expected.add("octomap")

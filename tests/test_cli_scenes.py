@@ -11,8 +11,8 @@ import shapely
 from click.testing import CliRunner
 
 from occtool.cli.main import cli
-from occtool.evaluate import reachable_region
 from occtool.io import read_log
+from occtool.scoring import reachable_region
 from occtool.simulate import load_truth, simulate_scene
 
 

@@ -11,20 +11,12 @@ import shapely.geometry
 from hypothesis import given
 from hypothesis import strategies as st
 
-from occtool.compare import (
-    FREE_FRACTIONS,
-    compare_grid,
-    holdout_points,
-    polygon_iou,
-    report_json,
-    roc_auc,
-    split_holdout,
-    tree_bytes,
-)
+from occtool.compare import compare_grid, report_json, tree_bytes
 from occtool.errors import InputError
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
 from occtool.robot import Robot
+from occtool.scoring import FREE_FRACTIONS, holdout_points, polygon_iou, roc_auc, split_holdout
 from occtool.simulate import simulate_scene
 
 pytestmark = pytest.mark.filterwarnings("ignore::UserWarning")
@@ -300,7 +292,7 @@ def test_also_unknown_gives_the_other_reading_from_the_same_build() -> None:
 
 
 def test_auc_in_front_of_the_first_obstacle_leaves_out_what_lies_behind_it() -> None:
-    from occtool.compare import in_front_of_first_obstacle
+    from occtool.scoring import in_front_of_first_obstacle
 
     # A wall 1.2 m away all round: a point at 1.0 m is in front of it, at 1.5 m behind it,
     # and a point above the body band is out of it either way.

@@ -11,14 +11,17 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from occtool.errors import InputError
-from occtool.evaluate import (
+from occtool.robot import Robot
+from occtool.scoring import (
+    as_polygon,
+    blocking_obstacles,
     configuration_obstacles,
     evaluate_navigation,
     reachable_region,
+    robot_frame_points,
     robot_frame_polygon,
     true_reach,
 )
-from occtool.robot import Robot
 from occtool.simulate import SCENES, Scene, box, build_scene
 
 ROBOT = Robot(radius=0.25, sensor_height=1.0, body_height=1.0, ground_clearance=0.05)
@@ -145,6 +148,34 @@ def test_vertex_array_and_empty_polygon_are_accepted() -> None:
         evaluate_navigation(np.array([[0.0, 0.0], [1.0, np.nan], [1.0, 1.0]]), scene, max_range=1.0)
 
 
+def test_as_polygon_makes_vertices_valid_and_refuses_what_is_not_an_area() -> None:
+    # A bow tie is invalid: made valid it is its two triangles, 0.25 m2 each.
+    bow_tie = as_polygon(np.array([[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]]))
+    assert bow_tie.is_valid and bow_tie.area == pytest.approx(0.5)
+    assert as_polygon(np.zeros((0, 2))).is_empty
+    for bad in (np.zeros((2, 2)), np.zeros((4, 3)), shapely.LineString([(0, 0), (1, 1)])):
+        with pytest.raises(InputError):
+            as_polygon(bad)
+
+
+def test_blocking_obstacles_are_those_overlapping_the_body_band() -> None:
+    # ROBOT: ground clearance 0.05 m, body height 1 m.
+    kerb = box("kerb", 1, 0, 2, 1, 0.0, 0.05)  # at the clearance: driven over
+    pallet = box("pallet", 1, 0, 2, 1, 0.0, 0.06)
+    table = box("table", 1, 0, 2, 1, 0.7, 0.75)
+    shelf = box("shelf", 1, 0, 2, 1, 1.0, 1.2)  # at the body's top: passes over
+    scene = Scene((kerb, pallet, table, shelf), ROBOT)
+    assert [o.name for o in blocking_obstacles(scene)] == ["pallet", "table"]
+
+
+def test_robot_frame_points_know_answers() -> None:
+    from occtool.features import Pose
+
+    # A robot at (1, 2) facing +y: a point 1 m north of it is 1 m ahead, one east of it 1 m to the right.
+    points = robot_frame_points([[1.0, 3.0], [2.0, 2.0], [1.0, 2.0]], Pose(x=1.0, y=2.0, yaw=math.pi / 2))
+    np.testing.assert_allclose(points, [[1.0, 0.0], [0.0, -1.0], [0.0, 0.0]], atol=1e-12)
+
+
 @given(
     x=st.floats(0.5, 2.0), y=st.floats(-2.0, 2.0), w=st.floats(0.05, 1.0),
     radius=st.floats(0.0, 0.4), max_range=st.floats(0.5, 3.0),
@@ -245,7 +276,7 @@ def test_points_are_judged_by_their_direction() -> None:
 
 
 def test_the_blind_radius_is_where_the_lowest_ray_meets_the_obstacles_top():
-    from occtool.evaluate import blind_radius
+    from occtool.scoring import blind_radius
 
     robot = Robot()  # sensor 1 m up, body 0.05-1.0 m
     down, up = math.radians(-50.0), math.radians(30.0)
@@ -263,7 +294,7 @@ def test_the_blind_radius_is_where_the_lowest_ray_meets_the_obstacles_top():
 
 
 def test_the_violation_splits_into_what_the_sensor_could_see_and_its_blind_zone():
-    from occtool.evaluate import observable_footprints, violation_by_observability
+    from occtool.scoring import observable_footprints, violation_by_observability
 
     # A pallet 0.15 m high from 0.55 to 1.0 m ahead: a camera tilting down to -50 degrees
     # from 1 m sees its top from 0.713 m on; the 0.16 m in front of that are blind.

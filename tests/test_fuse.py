@@ -24,8 +24,8 @@ from occtool.fuse import (
     select_keyframes,
 )
 from occtool.io import read_log
-from occtool.log_score import evaluate_log, holdout_blocks
 from occtool.robot import Robot
+from occtool.scoring import evaluate_log, holdout_blocks
 
 LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
 

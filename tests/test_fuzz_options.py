@@ -151,7 +151,7 @@ def test_the_sensor_model_refuses_too_many_samples_by_keyword(name):
 
 
 def test_simulate_and_evaluate_refuse_by_keyword():
-    from occtool.evaluate import reachable_region
+    from occtool.scoring import reachable_region
     from occtool.simulate import load_truth, simulate_scene
 
     with pytest.raises(InputError, match="n_features must be at most"):

@@ -13,13 +13,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from occtool.errors import ModelFormatError
-from occtool.evaluate import returns_within_body
 from occtool.features import Features
 from occtool.fit import OccupancyRegressor
 from occtool.formats.model import load_model, save_model
 from occtool.guard import GUARD_BINS, ReturnGuard, Support, build_guard, is_planar_scan
 from occtool.navigation import NavigationWarning, pan_angles
 from occtool.robot import Robot
+from occtool.scoring import returns_within_body
 from occtool.simulate import simulate_scene
 
 #: A 2D laser 0.3 m above the floor on a 0.5 m tall robot, as on the CARMEN logs.

@@ -94,7 +94,7 @@ def test_carmen_parser_split_and_test_points(tmp_path):
     held = heldout.held_out(910, seed=3)
     assert held.sum() == 80 and (heldout.held_out(910, seed=3) == held).all()
     # Written apart from occtool's, it picks the same blocks as evaluate-log does.
-    from occtool.log_score import holdout_blocks
+    from occtool.scoring import holdout_blocks
 
     assert (holdout_blocks(910, 0.1, 40, seed=3) == held).all()
     starts = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(int)])) == 1)

@@ -131,9 +131,9 @@ def office_frames():
 
 
 def _score(features, scene):
-    from occtool.evaluate import evaluate_navigation
     from occtool.fit import OccupancyRegressor
     from occtool.navigation import NavigationWarning
+    from occtool.scoring import evaluate_navigation
 
     model = OccupancyRegressor(seed=0).fit(features)
     with warnings.catch_warnings():

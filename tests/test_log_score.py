@@ -9,7 +9,7 @@ import pytest
 
 from occtool.features import Features, Pose, Position
 from occtool.fuse import FREE, OCCUPIED, Raster
-from occtool.log_score import nav2_agreement
+from occtool.scoring import nav2_agreement
 
 
 def _scan(index: int, ends_x: list[float]) -> Position:

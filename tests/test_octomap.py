@@ -15,7 +15,7 @@ from occtool.robot import Robot
 
 pyoctomap = pytest.importorskip("pyoctomap")
 
-from occtool.octomap import (  # noqa: E402
+from occtool.grid import (  # noqa: E402
     OctoMapModel,
     build_octomap,
     build_world_octomap,

@@ -11,9 +11,9 @@ import shapely.affinity
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from occtool.evaluate import evaluate_navigation
 from occtool.fit import OccupancyRegressor
 from occtool.navigation import NavigationWarning, navigation_map
+from occtool.scoring import evaluate_navigation
 from occtool.simulate import simulate_scene
 
 

@@ -12,8 +12,8 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from occtool.errors import InputError
-from occtool.evaluate import reachable_region
 from occtool.robot import Robot
+from occtool.scoring import reachable_region
 from occtool.simulate import (
     FLOOR,
     NOTHING,

@@ -1,4 +1,5 @@
-"""The textbook 2D grids (occtool.grid.textbook_grid, counting_grid) and their tuners, on hand-made beams."""
+"""The textbook 2D grids (occtool.grid.textbook_grid, counting_grid) and their tuners
+(occtool.scoring.tune_grids ...), on hand-made beams."""
 
 from __future__ import annotations
 
@@ -14,10 +15,8 @@ from occtool.grid import (
     WorldBeams,
     counting_grid,
     textbook_grid,
-    tune_counting,
-    tune_grids,
-    tune_textbook,
 )
+from occtool.scoring import tune_counting, tune_grids, tune_textbook
 
 ONE_METRE = TextbookParams(resolution=1.0)
 
@@ -159,18 +158,18 @@ def test_the_tuner_sees_only_the_scans_it_is_given():
 
 
 def test_textbook_scores_hand_the_tuner_the_training_scans_only(monkeypatch):
-    import occtool.grid
+    import occtool.scoring._log
     from occtool.features import Features, Pose, Position
-    from occtool.log_score import textbook_scores
+    from occtool.scoring import textbook_scores
 
     seen = []
-    real = occtool.grid.tune_grids
+    real = occtool.scoring._log.tune_grids
 
     def spy(training, **kwargs):
         seen.append(training)
         return real(training, **kwargs)
 
-    monkeypatch.setattr(occtool.grid, "tune_grids", spy)
+    monkeypatch.setattr(occtool.scoring._log, "tune_grids", spy)
     room = _room_beams(12, seed=3)
     train = [Position(k, Features(np.column_stack([room.end[room.scan == k] - room.start[room.scan == k],
                                                     np.zeros(90)]), np.ones(90)),
@@ -184,12 +183,11 @@ def test_textbook_scores_hand_the_tuner_the_training_scans_only(monkeypatch):
 
 
 def test_the_tuners_grouped_auc_is_the_points_auc():
-    from occtool.compare import roc_auc
-    from occtool.grid._tune import _grouped_auc
+    from occtool.scoring import grouped_auc, roc_auc
 
     rng = np.random.default_rng(4)
     occupied, free = rng.integers(0, 6, 300), rng.integers(0, 6, 500)
     values = np.linspace(0.1, 0.9, 6)
-    grouped = _grouped_auc(values, np.bincount(occupied, minlength=6).astype(float),
-                           np.bincount(free, minlength=6).astype(float))
+    grouped = grouped_auc(values, np.bincount(occupied, minlength=6).astype(float),
+                          np.bincount(free, minlength=6).astype(float))
     assert grouped == pytest.approx(roc_auc(values[occupied], values[free]))

@@ -122,7 +122,7 @@ def compare_grid(
 
         scene = load_truth(truth)
     if use_octomap:
-        from occtool.octomap import octomap_available
+        from occtool.grid import octomap_available
 
         if not octomap_available():
             from occtool.errors import MissingDependencyError

@@ -33,8 +33,8 @@ def evaluate(navigation: str, truth: str, robot_radius: float | None, max_range:
     import math
 
     from occtool.errors import InputError
-    from occtool.evaluate import evaluate_navigation, robot_frame_points, robot_frame_polygon
     from occtool.formats.geojson import read_navigation
+    from occtool.scoring import evaluate_navigation, robot_frame_points, robot_frame_polygon
     from occtool.simulate import load_truth
 
     nav = read_navigation(navigation)

@@ -39,7 +39,7 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
     import json
 
     from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs
-    from occtool.log_score import evaluate_log as score
+    from occtool.scoring import evaluate_log as score
 
     template = fit_from_kwargs(kwargs, seed=seed)
     options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}

@@ -14,7 +14,7 @@ build, extraction and scoring:
 
 * ``grid`` (:data:`GRID`): the dense 3D grid of :mod:`occtool.grid`, fed with the same
   sensor model;
-* ``octomap`` (:data:`OCTOMAP`): OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`),
+* ``octomap`` (:data:`OCTOMAP`): OctoMap through ``pyoctomap`` (:func:`occtool.grid.build_octomap`),
   optional.
 
 Both get the parametric model's prior on the robot's footprint (it is free), since the
@@ -27,7 +27,6 @@ The parts, one concept a module (private; everything public is imported from her
 ===============  ========================================================================
 ``_compare``     :func:`compare_grid`: build, extract and score every model; the report
 ``_baselines``   :class:`OccupancyMap`, :class:`Baseline`, :data:`GRID`, :data:`OCTOMAP`
-``_metrics``     ROC AUC, polygon IoU, the held-out split and its test points
 ``_results``     :class:`ModelResult`: what a model cost (time, memory, file size)
 ===============  ========================================================================
 """
@@ -41,18 +40,9 @@ from occtool.compare._baselines import (
     observation_band,
 )
 from occtool.compare._compare import REPORT_VERSION, UNKNOWN_SPACE_NOTES, compare_grid, report_json
-from occtool.compare._metrics import (
-    FREE_FRACTIONS,
-    holdout_points,
-    in_front_of_first_obstacle,
-    polygon_iou,
-    roc_auc,
-    split_holdout,
-)
 from occtool.compare._results import ModelResult, tree_bytes
 
 __all__ = [
-    "FREE_FRACTIONS",
     "GRID",
     "OCTOMAP",
     "REPORT_VERSION",
@@ -62,12 +52,7 @@ __all__ = [
     "ModelResult",
     "OccupancyMap",
     "compare_grid",
-    "holdout_points",
-    "in_front_of_first_obstacle",
     "observation_band",
-    "polygon_iou",
     "report_json",
-    "roc_auc",
-    "split_holdout",
     "tree_bytes",
 ]

@@ -18,7 +18,7 @@ FloatArray = NDArray[np.float64]
 class OccupancyMap(Protocol):
     """What the comparison asks of a built baseline.
 
-    :class:`occtool.grid.OccupancyGrid` and :class:`occtool.octomap.OctoMapModel` offer it.
+    :class:`occtool.grid.OccupancyGrid` and :class:`occtool.grid.OctoMapModel` offer it.
     """
 
     @property
@@ -99,7 +99,7 @@ def _build_grid(inputs: BuildInputs) -> OccupancyMap:
 
 
 def _build_octomap(inputs: BuildInputs) -> OccupancyMap:
-    from occtool.octomap import build_octomap
+    from occtool.grid import build_octomap
 
     return build_octomap(
         inputs.features,
@@ -111,7 +111,7 @@ def _build_octomap(inputs: BuildInputs) -> OccupancyMap:
 
 
 def _octomap_samples(tree: Any, inputs: BuildInputs) -> int:
-    from occtool.octomap import octomap_updates
+    from occtool.grid import octomap_updates
 
     return octomap_updates(
         inputs.features, inputs.resolution, inputs.octomap_scans, robot=inputs.robot, sensor=inputs.sensor
@@ -130,7 +130,7 @@ GRID = Baseline(
     },
 )
 
-#: OctoMap through ``pyoctomap`` (:mod:`occtool.octomap`); its samples are recounted cell updates.
+#: OctoMap through ``pyoctomap`` (:func:`occtool.grid.build_octomap`); its samples are recounted cell updates.
 OCTOMAP = Baseline(
     "octomap",
     build=_build_octomap,

@@ -13,17 +13,11 @@ import shapely
 from numpy.typing import NDArray
 
 from occtool.compare._baselines import GRID, OCTOMAP, Baseline, BuildInputs, observation_band
-from occtool.compare._metrics import (
-    holdout_points,
-    in_front_of_first_obstacle,
-    polygon_iou,
-    roc_auc,
-    split_holdout,
-)
 from occtool.compare._results import ModelResult, _save_model_size, _timed, tree_bytes
 from occtool.errors import InputError
 from occtool.features import Features, polar
 from occtool.robot import Robot
+from occtool.scoring import holdout_points, in_front_of_first_obstacle, polygon_iou, roc_auc, split_holdout
 
 if TYPE_CHECKING:
     from occtool.fit import OccupancyRegressor
@@ -74,9 +68,9 @@ def _load_libraries(octomap: bool) -> None:
     import occtool.navigation  # noqa: F401
 
     if octomap:
-        from occtool.octomap import _pyoctomap
+        from occtool.grid import require_pyoctomap
 
-        _pyoctomap()
+        require_pyoctomap()
 
 
 def _run_baseline(
@@ -325,7 +319,7 @@ def compare_grid(
             "extract_time": result.extract_s / max(1e-12, parametric.extract_s),
         }
     if truth is not None:
-        from occtool.evaluate import evaluate_navigation
+        from occtool.scoring import evaluate_navigation
 
         report["truth"] = {}
         for name, result in results.items():
@@ -341,7 +335,7 @@ def compare_grid(
             entry: dict[str, Any] = {"polygon_area": float(polygon.area),
                                      "agreement": {"iou": polygon_iou(parametric.polygon, polygon)}}
             if truth is not None:
-                from occtool.evaluate import evaluate_navigation
+                from occtool.scoring import evaluate_navigation
 
                 evaluation = evaluate_navigation(polygon, truth, robot_radius=robot.radius, max_range=max_range)
                 entry["truth"] = {"iou": float(evaluation.iou), "violation": float(evaluation.violation),

@@ -36,7 +36,7 @@ def observed_reach(features: Features, robot: Robot, focus_range: float = math.i
 
     the least of: the first obstacle's distance widened by its cluster window (the fit's
     :func:`occtool.fit.first_obstacle_distance`, as
-    :func:`occtool.compare.in_front_of_first_obstacle` scores it), the farthest feature in
+    :func:`occtool.scoring.in_front_of_first_obstacle` scores it), the farthest feature in
     the body band at that angle (a free ray reaches its end), and ``focus_range``. 0 where
     the position saw nothing.
     """

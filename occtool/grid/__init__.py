@@ -1,4 +1,4 @@
-"""The dense 3D occupancy grid baseline.
+"""The grid baselines: the dense 3D occupancy grid, the textbook 2D grids and OctoMap.
 
 The grid is built the way grid methods sample the sensor model (the paper's Figure 3a):
 every cell that a feature's ray crosses between the sensor and the feature gets one
@@ -46,8 +46,13 @@ The parts, one concept a module (private; everything public is imported from her
 ``_build``      :func:`build_grid`: samples per crossed cell, the footprint prior
 ``_textbook``   :func:`textbook_grid`: the textbook 2D log-odds grid of world-frame beams
 ``_counting``   :func:`counting_grid`: the counting-model (reflection) grid of the same beams
-``_tune``       :func:`tune_textbook`, :func:`tune_counting`: settings picked on an inner split of training scans
+``_octomap``    :func:`build_octomap`, :func:`build_world_octomap`: OctoMap through ``pyoctomap``
 ==============  =========================================================================
+
+The grids are built here and scored elsewhere: nothing in ``grid`` imports
+:mod:`occtool.scoring` or :mod:`occtool.compare` (both import it). The textbook grids'
+settings are tuned by their held-out score, so the tuners live in :mod:`occtool.scoring`
+(:func:`occtool.scoring.tune_grids`).
 """
 
 from occtool.grid._build import (
@@ -61,6 +66,14 @@ from occtool.grid._build import (
 from occtool.grid._counting import COUNTING_PRIOR, CountingGrid, counting_grid
 from occtool.grid._grid import OccupancyGrid
 from occtool.grid._logodds import OCTOMAP_DEFAULTS, LogOddsParams, logit, probability
+from occtool.grid._octomap import (
+    OctoMapModel,
+    build_octomap,
+    build_world_octomap,
+    octomap_available,
+    octomap_updates,
+    require_pyoctomap,
+)
 from occtool.grid._textbook import (
     TEXTBOOK_DEFAULTS,
     ScanUpdates,
@@ -70,7 +83,6 @@ from occtool.grid._textbook import (
     textbook_grid,
 )
 from occtool.grid._traverse import RaySegments, traverse
-from occtool.grid._tune import TunedCounting, TunedGrid, beam_test_points, tune_counting, tune_grids, tune_textbook
 from occtool.grid._unknown import (
     UNKNOWN_SPACE,
     band_layers,
@@ -88,16 +100,16 @@ __all__ = [
     "CountingGrid",
     "LogOddsParams",
     "OccupancyGrid",
+    "OctoMapModel",
     "RaySegments",
     "ScanUpdates",
     "TextbookGrid",
     "TextbookParams",
-    "TunedCounting",
-    "TunedGrid",
     "WorldBeams",
     "band_layers",
-    "beam_test_points",
     "build_grid",
+    "build_octomap",
+    "build_world_octomap",
     "check_unknown",
     "counting_grid",
     "first_unobserved",
@@ -106,11 +118,11 @@ __all__ = [
     "footprint_columns_reached",
     "logit",
     "observation_log_odds",
+    "octomap_available",
+    "octomap_updates",
     "probability",
     "ray_plan",
+    "require_pyoctomap",
     "textbook_grid",
     "traverse",
-    "tune_counting",
-    "tune_grids",
-    "tune_textbook",
 ]

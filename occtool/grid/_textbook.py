@@ -13,10 +13,10 @@ Scans are applied in their order, each one vectorised over its cells; the traver
 that of :func:`occtool.grid.traverse` (all beams of a chunk at once). The per-scan cell
 updates depend on the resolution only, so :class:`ScanUpdates` keeps them and
 :meth:`ScanUpdates.grid` applies any ``l_occ``, ``l_free`` and clamp to them: the tuner
-(:mod:`occtool.grid._tune`) traverses once per resolution.
+(:mod:`occtool.scoring`'s tuners) traverses once per resolution.
 
 Two switches exist to measure how the repository's older grid
-(:func:`occtool.log_score.world_grid`, OctoMap's parameters) differs: ``per_scan=False``
+(:func:`occtool.scoring.world_grid`, OctoMap's parameters) differs: ``per_scan=False``
 updates a cell once per *beam* (a cell crossed by twenty beams of a scan gets twenty
 misses) and ``clamp_every_scan=False`` clamps once at the end, after summing everything.
 """

@@ -1,7 +1,7 @@
 """Casting rays from the origin against polygon edges: the first hit of each ray.
 
 The one ray caster of occtool: the navigation map casts rays to its polygon's boundary
-(obstacle points, the straight-line cut) and :mod:`occtool.evaluate` casts them against
+(obstacle points, the straight-line cut) and :mod:`occtool.scoring` casts them against
 the truth's obstacles.
 """
 

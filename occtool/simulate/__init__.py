@@ -7,7 +7,7 @@ sensor-centred, its z is measured up from the floor. :func:`simulate_scene` cast
 rays of a stereo camera on a pan-tilt unit at the sensor against the prisms and the
 floor and returns the registered :class:`~occtool.features.Features` (sensor frame,
 z relative to the sensor) together with the scene, which is the truth that
-:mod:`occtool.evaluate` scores navigation polygons against.
+:mod:`occtool.scoring` scores navigation polygons against.
 
 The camera model, the scenes and the truth file format are described in
 ``docs/scenes.md``.

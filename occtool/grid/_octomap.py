@@ -26,25 +26,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError, MissingDependencyError
 from occtool.features import Features
-from occtool.grid import (
-    OCTOMAP_DEFAULTS,
-    LogOddsParams,
-    band_layers,
-    check_unknown,
-    first_unobserved,
-    floor_reach,
-    footprint_cells,
-    logit,
-    ray_plan,
-    traverse,
-)
+from occtool.grid._build import floor_reach, footprint_cells, ray_plan
+from occtool.grid._logodds import OCTOMAP_DEFAULTS, LogOddsParams, logit
+from occtool.grid._traverse import traverse
+from occtool.grid._unknown import band_layers, check_unknown, first_unobserved
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
 
 FloatArray = NDArray[np.float64]
 
 
-def _pyoctomap() -> Any:
+def require_pyoctomap() -> Any:
+    """The ``pyoctomap`` module, imported (it is optional: the ``octomap`` extra);
+    :class:`~occtool.errors.MissingDependencyError` without it."""
     try:
         import pyoctomap
     except ImportError:
@@ -55,7 +49,7 @@ def _pyoctomap() -> Any:
 def octomap_available() -> bool:
     """Whether the optional ``pyoctomap`` bindings can be imported."""
     try:
-        _pyoctomap()
+        require_pyoctomap()
     except MissingDependencyError:
         return False
     return True
@@ -299,7 +293,7 @@ def build_octomap(
     InputError
         If the resolution is not positive or there are no features.
     """
-    pyoctomap = _pyoctomap()
+    pyoctomap = require_pyoctomap()
     if not (np.isfinite(resolution) and resolution > 0):
         raise InputError(f"OctoMap resolution must be a positive number of metres, got {resolution}")
     if len(features) == 0:
@@ -347,7 +341,7 @@ def build_world_octomap(scans: Sequence[tuple[ArrayLike, ArrayLike, ArrayLike]],
     InputError
         If the resolution is not positive.
     """
-    pyoctomap = _pyoctomap()
+    pyoctomap = require_pyoctomap()
     if not (np.isfinite(resolution) and resolution > 0):
         raise InputError(f"OctoMap resolution must be a positive number of metres, got {resolution}")
     tree = _new_tree(pyoctomap, resolution, params)
@@ -426,3 +420,7 @@ def _cell_keys(cells: NDArray[np.int64]) -> NDArray[np.int64]:
     # rows is much slower than on integers.
     offset = 1 << 20
     return ((cells[:, 0] + offset) << 42) | ((cells[:, 1] + offset) << 21) | (cells[:, 2] + offset)
+
+
+__all__ = ["OctoMapModel", "build_octomap", "build_world_octomap", "octomap_available", "octomap_updates",
+           "require_pyoctomap"]

@@ -2,8 +2,9 @@
 :func:`tune_counting` (counting model), :func:`tune_grids` (both from one traversal).
 
 The tuner is handed the training scans and nothing else, so it cannot see a held-out
-scan: it holds out its own *inner* blocks of them (the same protocol as the outer split,
-:func:`occtool.log_score.holdout_blocks`), builds a grid of the inner training scans for
+scan: it holds out its own *inner* blocks of them (the same protocol, and the same
+generator of blocks and test points, as the outer split: :func:`holdout_blocks`,
+:func:`beam_test_points`), builds a grid of the inner training scans for
 every candidate setting, scores each on the inner held-out beams (returns occupied, points
 along the beam up to 0.1 m before its end free; ROC AUC), keeps the best setting per
 resolution and rebuilds it from all the training scans it was given.
@@ -19,9 +20,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.grid._counting import COUNTING_PRIOR, CountingGrid
-from occtool.grid._logodds import probability
-from occtool.grid._textbook import TEXTBOOK_DEFAULTS, ScanUpdates, TextbookGrid, TextbookParams, WorldBeams
+from occtool.grid import (
+    COUNTING_PRIOR,
+    TEXTBOOK_DEFAULTS,
+    CountingGrid,
+    ScanUpdates,
+    TextbookGrid,
+    TextbookParams,
+    WorldBeams,
+    probability,
+)
+from occtool.scoring._heldout import BLOCK, HOLDOUT, beam_test_points, holdout_blocks
+from occtool.scoring._metrics import grouped_auc
 
 FloatArray = NDArray[np.float64]
 
@@ -35,9 +45,6 @@ L_FREE = (-0.4, -0.2, -0.1, -0.05, -0.02, -0.01)
 CLAMPS = ((-2.0, 3.5), (-1.0, 3.5), (-2.0, 6.0))
 #: The counting model's candidate priors (pseudo-beams, half of them returns; 0: none).
 COUNTING_PRIORS = (0.0, 0.5, 1.0, 2.0)
-#: Free test points per inner held-out beam, and where they stop before its end (metres).
-FREE_POINTS_PER_BEAM = 5
-END_MARGIN = 0.1
 
 
 @dataclass
@@ -78,32 +85,6 @@ class TunedCounting:
                 "bytes": self.grid.byte_size, "note": self.note, "candidates": self.candidates}
 
 
-def beam_test_points(beams: WorldBeams, seed: int = 0, per_beam: int = FREE_POINTS_PER_BEAM,
-                     margin: float = END_MARGIN) -> tuple[FloatArray, FloatArray]:
-    """Occupied (each return's end) and free (``per_beam`` uniform points along each return's
-    beam, up to ``margin`` before its end) ``(K, 2)`` points of ``beams``."""
-    start, end = beams.start[beams.hit], beams.end[beams.hit]
-    length = np.hypot(*(end - start).T)
-    usable = length > margin
-    fraction = np.random.default_rng(seed).uniform(0.0, 1.0, size=(int(usable.sum()), per_beam))
-    reach = ((length[usable] - margin) / length[usable])[:, None] * fraction
-    s, e = start[usable], end[usable]
-    free = (s[:, None, :] + reach[:, :, None] * (e - s)[:, None, :]).reshape(-1, 2)
-    return end, free
-
-
-def _grouped_auc(values: NDArray[np.floating[Any]], occupied: FloatArray, free: FloatArray) -> float:
-    """ROC AUC of points grouped by score: ``occupied[g]`` and ``free[g]`` points score
-    ``values[g]`` (ties half: the figure :func:`occtool.compare.roc_auc` gives the points)."""
-    distinct, inverse = np.unique(values, return_inverse=True)
-    pos = np.bincount(inverse, weights=occupied, minlength=distinct.size)
-    neg = np.bincount(inverse, weights=free, minlength=distinct.size)
-    if pos.sum() == 0 or neg.sum() == 0:
-        return float("nan")
-    below = np.cumsum(neg) - neg
-    return float(np.sum(pos * (below + 0.5 * neg)) / (pos.sum() * neg.sum()))
-
-
 def _cell_counts(updates: ScanUpdates, points: FloatArray) -> FloatArray:
     """How many of ``points`` fall in each cell of ``updates``' grid, one slot more for outside."""
     index = np.floor(points / updates.resolution).astype(np.int64) - updates.lower
@@ -115,8 +96,6 @@ def _cell_counts(updates: ScanUpdates, points: FloatArray) -> FloatArray:
 
 def _inner_split(training: WorldBeams, holdout: float, block: int, seed: int) -> tuple[NDArray[np.bool_] | None, str]:
     """The inner held-out scans of ``training`` (``None`` and why when too few for a split)."""
-    from occtool.log_score import holdout_blocks
-
     try:
         return holdout_blocks(training.n_scans, holdout, block, seed), ""
     except InputError as exc:
@@ -129,7 +108,8 @@ def _inner_cells(everything: ScanUpdates, training: WorldBeams, inner_held: NDAr
     and the inner test points counted per cell (outside the box: one more cell, 0.5), so that a
     candidate ranks the cells, not every point (the same AUC): ``updates, pos, neg, used``."""
     updates = everything.of_scans(~inner_held)
-    occupied, free = beam_test_points(training.of_scans(inner_held), seed=seed)
+    inner = training.of_scans(inner_held)
+    occupied, free = beam_test_points(inner.start[inner.hit], inner.end[inner.hit], seed=seed)
     pos, neg = _cell_counts(updates, occupied), _cell_counts(updates, free)
     return updates, pos, neg, np.flatnonzero(pos + neg)
 
@@ -149,7 +129,7 @@ def _search_textbook(everything: ScanUpdates, training: WorldBeams, inner_held: 
         params = TextbookParams(resolution, occ, fre, clamp)
         log_odds = np.append(updates.grid(params).log_odds.ravel(), np.float32(0.0))[used]
         # Ranked as probabilities, as the points are: a residual log-odds of 1e-17 is 0.5.
-        auc = _grouped_auc(probability(log_odds), pos[used], neg[used])
+        auc = grouped_auc(probability(log_odds), pos[used], neg[used])
         candidates.append({**params.as_dict(), "inner_auc": auc})
         if best is None or auc > best[0]:
             best = (auc, params)
@@ -167,7 +147,7 @@ def _search_counting(everything: ScanUpdates, training: WorldBeams, inner_held: 
     best: tuple[float, float] | None = None
     for prior in priors:
         p = np.append(CountingGrid.from_updates(updates, prior).probability.ravel(), np.float32(0.5))[used]
-        auc = _grouped_auc(p, pos[used], neg[used])
+        auc = grouped_auc(p, pos[used], neg[used])
         candidates.append({"prior": prior, "inner_auc": auc})
         if best is None or auc > best[0]:
             best = (auc, prior)
@@ -177,7 +157,7 @@ def _search_counting(everything: ScanUpdates, training: WorldBeams, inner_held: 
 
 def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
                   l_occ: tuple[float, ...] = L_OCC, l_free: tuple[float, ...] = L_FREE,
-                  clamps: tuple[tuple[float, float], ...] = CLAMPS, holdout: float = 0.1, block: int = 40,
+                  clamps: tuple[tuple[float, float], ...] = CLAMPS, holdout: float = HOLDOUT, block: int = BLOCK,
                   seed: int = 0) -> dict[float, TunedGrid]:
     """Pick the textbook grid's ``l_occ``, ``l_free`` and clamp per resolution on ``training`` alone.
 
@@ -202,7 +182,7 @@ def tune_textbook(training: WorldBeams, *, resolutions: tuple[float, ...] = RESO
 
 
 def tune_counting(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
-                  priors: tuple[float, ...] = COUNTING_PRIORS, holdout: float = 0.1, block: int = 40,
+                  priors: tuple[float, ...] = COUNTING_PRIORS, holdout: float = HOLDOUT, block: int = BLOCK,
                   seed: int = 0) -> dict[float, TunedCounting]:
     """Pick the counting-model grid's prior per resolution on ``training`` alone, by the same
     inner split as :func:`tune_textbook`; per resolution a :class:`TunedCounting` rebuilt
@@ -214,7 +194,7 @@ def tune_counting(training: WorldBeams, *, resolutions: tuple[float, ...] = RESO
 def tune_grids(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUTIONS,
                l_occ: tuple[float, ...] = L_OCC, l_free: tuple[float, ...] = L_FREE,
                clamps: tuple[tuple[float, float], ...] = CLAMPS, priors: tuple[float, ...] = COUNTING_PRIORS,
-               holdout: float = 0.1, block: int = 40,
+               holdout: float = HOLDOUT, block: int = BLOCK,
                seed: int = 0) -> tuple[dict[float, TunedGrid], dict[float, TunedCounting]]:
     """Both tuners from one traversal per resolution: the log-odds grids (none when ``l_occ``
     is empty) and the counting-model grids (none when ``priors`` is empty)."""
@@ -234,4 +214,4 @@ def tune_grids(training: WorldBeams, *, resolutions: tuple[float, ...] = RESOLUT
     return textbook, counting
 
 
-__all__ = ["TunedCounting", "TunedGrid", "beam_test_points", "tune_counting", "tune_grids", "tune_textbook"]
+__all__ = ["TunedCounting", "TunedGrid", "tune_counting", "tune_grids", "tune_textbook"]

@@ -1,4 +1,4 @@
-"""Scoring a fused map on a real log: the Hilbert-maps held-out protocol and Nav2 agreement.
+"""Scoring a fused map on a real log: the Hilbert-maps held-out protocol.
 
 :func:`evaluate_log` holds out 10 % of a log's scans in blocks of 40 consecutive scans
 (Ramos and Ott's protocol for Hilbert maps, as used for BHM on the Intel lab), fuses
@@ -6,23 +6,22 @@ the local models of the remaining scans (:func:`occtool.fuse.fuse_log`), builds 
 2D log-odds grid from the same training scans (OctoMap's hit/miss model, vectorised ray
 traversal of :mod:`occtool.grid`) and scores both on the held-out beams: each beam's end
 point is occupied; points drawn uniformly along the beam up to 0.1 m before its end are
-free. ROC AUC (:func:`occtool.compare.roc_auc`) with model bytes and build times.
+free. ROC AUC (:func:`roc_auc`) with model bytes and build times.
 
 Beside that grid, the textbook one (:func:`occtool.grid.textbook_grid`: each cell updated
 once a scan, ``l_occ`` at the return, ``l_free`` before it, clamped after every scan) at
 0.05 and 0.1 m, its settings tuned on an inner split of the training scans alone
-(:func:`occtool.grid.tune_textbook`), and with the issue's fixed ones; and the counting-model
+(:func:`tune_textbook`), and with the issue's fixed ones; and the counting-model
 grid (:func:`occtool.grid.counting_grid`: per cell the share of the beams reaching it that
 returned there), its prior tuned the same way (:func:`textbook_scores`).
 
-:func:`nav2_agreement` checks a rasterised map against scans: each return should fall
-on an occupied cell or one of its eight neighbours, and the cells along each beam up to
-0.1 m before its end should not be occupied.
+The fused map's raster and the grid are also checked against their training scans
+(:func:`nav2_agreement`): each return should fall on an occupied cell or one of its eight
+neighbours, and the cells along each beam up to 0.1 m before its end should not be occupied.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -30,65 +29,30 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.errors import InputError
+from occtool.errors import InputError, MissingDependencyError
 from occtool.features import Position
-from occtool.fuse import COMBINATIONS, OCCUPIED, Raster
+from occtool.fuse import COMBINATIONS, FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.grid import (
+    OCTOMAP_DEFAULTS,
+    TEXTBOOK_DEFAULTS,
+    OccupancyGrid,
+    WorldBeams,
+    build_world_octomap,
+    observation_log_odds,
+    traverse,
+)
+from occtool.scoring._heldout import BLOCK, HOLDOUT, holdout_blocks, holdout_test_points, world_rays
+from occtool.scoring._metrics import roc_auc
+from occtool.scoring._nav2 import RAYS_PER_CHUNK, grid_raster, nav2_agreement
+from occtool.scoring._tune import tune_grids
 
 FloatArray = NDArray[np.float64]
-
-HOLDOUT = 0.1
-BLOCK = 40
-#: Free test points stop this far before the beam's end (metres), as in the protocol.
-END_MARGIN = 0.1
-FREE_POINTS_PER_BEAM = 5
-#: Rays traversed per chunk when building the world grid (bounds the temporary arrays).
-RAYS_PER_CHUNK = 20_000
-
-
-def holdout_blocks(n_scans: int, holdout: float = HOLDOUT, block: int = BLOCK, seed: int = 0) -> NDArray[np.bool_]:
-    """Which of ``n_scans`` consecutive scans are held out: ``round(holdout * n / block)`` (at
-    least one) whole blocks of ``block`` scans, picked at random with ``seed``."""
-    if not 0.0 < holdout < 1.0:
-        raise InputError(f"the held-out share must lie strictly between 0 and 1, got {holdout}")
-    if block < 1:
-        raise InputError(f"block must be a whole number >= 1, got {block}")
-    n_blocks = math.ceil(n_scans / block)
-    take = max(1, round(holdout * n_scans / block))
-    if n_blocks < 2 or take >= n_blocks:
-        raise InputError(f"{n_scans} scans make {n_blocks} block(s) of {block}: too few to hold {holdout:.0%} out")
-    chosen = np.random.default_rng(seed).choice(n_blocks, size=take, replace=False)
-    held = np.zeros(n_scans, dtype=bool)
-    for b in chosen:
-        held[b * block:(b + 1) * block] = True
-    return held
-
-
-def _world_rays(scans: list[Position]) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.intp]]:
-    """Start (pose), end (world point), is-a-return and scan number of every beam, ``(N, 3)`` each."""
-    starts, ends, returns, owner = [], [], [], []
-    for k, scan in enumerate(scans):
-        pose = scan.pose
-        assert pose is not None, "scored scans have poses"  # evaluate_log refuses a log without
-        points = scan.features.points @ pose.rotation.T + pose.translation
-        starts.append(np.broadcast_to(pose.translation, points.shape))
-        ends.append(points)
-        returns.append(scan.features.evidence > 0)
-        owner.append(np.full(points.shape[0], k, dtype=np.intp))
-    return np.concatenate(starts), np.concatenate(ends), np.concatenate(returns), np.concatenate(owner)
-
 
 def world_grid(scans: list[Position], resolution: float = 0.05) -> Any:
     """A dense 2D log-odds grid in the world frame from scans with poses (OctoMap's hit/miss
     model and clamping): an :class:`occtool.grid.OccupancyGrid` one cell thick, whose
     ``occupancy`` reads points at any z in the scans' plane."""
-    from occtool.grid import (
-        OCTOMAP_DEFAULTS,
-        OccupancyGrid,
-        observation_log_odds,
-        traverse,
-    )
-
-    starts, ends, returns, _ = _world_rays(scans)
+    starts, ends, returns, _ = world_rays(scans)
     flat_start = starts[:, :2]
     flat_end = ends[:, :2]
     lower = np.floor(np.minimum(flat_start.min(axis=0), flat_end.min(axis=0)) / resolution).astype(np.int64)
@@ -109,149 +73,6 @@ def world_grid(scans: list[Position], resolution: float = 0.05) -> Any:
     np.clip(log_odds, *params.clamp_log_odds, out=log_odds)
     return OccupancyGrid(log_odds.reshape(int(shape[0]), int(shape[1]), 1), float(resolution),
                          np.array([lower[0], lower[1], 0], dtype=np.int64), params=params)
-
-
-def grid_raster(grid: Any) -> Raster:
-    """A one-layer world grid as Nav2 would load it (trinary: occupied at or above 0.65,
-    free at or below 0.196, unknown between and where no ray passed): the reference for
-    :func:`nav2_agreement`."""
-    from scipy.special import expit
-
-    from occtool.fuse import FREE, UNKNOWN
-
-    log_odds = np.asarray(grid.log_odds, dtype=np.float64)[:, :, 0].T  # rows along y
-    p = expit(log_odds)
-    cells = np.full(p.shape, UNKNOWN, dtype=np.uint8)
-    cells[(log_odds != 0) & (p <= 0.196)] = FREE
-    cells[p >= 0.65] = OCCUPIED
-    origin = (float(grid.lower[0]), float(grid.lower[1]))
-    return Raster(cells, float(grid.resolution), origin, p.astype(np.float32), np.zeros(p.shape, dtype=bool))
-
-
-def holdout_test_points(scans: list[Position], seed: int = 0, per_beam: int = FREE_POINTS_PER_BEAM,
-                margin: float = END_MARGIN) -> tuple[FloatArray, FloatArray]:
-    """Occupied (each return's end point) and free (uniform along each return's beam, up to
-    ``margin`` before its end) world points of held-out scans."""
-    starts, ends, returns, _ = _world_rays(scans)
-    starts, ends = starts[returns], ends[returns]
-    length = np.linalg.norm(ends - starts, axis=1)
-    usable = length > margin
-    rng = np.random.default_rng(seed)
-    fraction = rng.uniform(0.0, 1.0, size=(int(usable.sum()), per_beam))
-    reach = ((length[usable] - margin) / length[usable])[:, None] * fraction
-    s, e = starts[usable], ends[usable]
-    free = (s[:, None, :] + reach[:, :, None] * (e - s)[:, None, :]).reshape(-1, 3)
-    return ends, free
-
-
-def nav2_agreement(raster: Raster, scans: list[Position], margin: float = END_MARGIN) -> dict[str, float]:
-    """How well a free/occupied/unknown raster agrees with scans, per beam and per cell.
-
-    Both count a return as agreeing when it falls on an occupied cell or one of its eight
-    neighbours, and a stretch of beam as agreeing when no cell it crosses, from the sensor
-    to ``margin`` before the return, is occupied (outside the raster counts as not occupied).
-
-    *Per beam* (the stricter figures, kept as the target's wording reads): ``returns_on_occupied``
-    and ``beams_clear`` are shares of returns and of beams; a beam fails when a single cell
-    of its whole length is occupied. ``scans_returns_95``, ``scans_beams_95`` and
-    ``scans_both_95`` are the shares of scans where at least 95 % of the returns, the
-    beams, or both pass.
-
-    *Per cell* (OctoMap's "map accuracy", Hornung et al. 2013: the share of a scan's cells
-    the map holds as the scan says, its end-point cells occupied and the cells its beams
-    traverse not occupied): each scan's distinct end-point cells and distinct traversed
-    cells are counted once, whichever and however many beams touch them; a traversed cell
-    that is also one of that scan's own end-point cells is counted as an end point only
-    (OctoMap's scan insertion does the same: a cell a scan both hits and passes is
-    occupied for it). ``endpoint_cells_on_occupied`` and ``traversed_cells_clear`` are the
-    shares over all scans' cells; ``scans_endpoint_cells_95``, ``scans_traversed_cells_95``
-    and ``scans_cells_both_95`` the shares of scans where at least 95 % of their cells pass.
-    A grazing beam that crosses one occupied cell near a wall fails as a beam but counts
-    one wrong cell among the dozens it crosses: the per-cell figures are the looser ones.
-    """
-    from occtool.grid import traverse
-
-    starts, ends, returns, owner = _world_rays(scans)
-    starts, ends, owner = starts[returns], ends[returns], owner[returns]
-    occupied = raster.cells == OCCUPIED
-    padded = np.pad(occupied, 1)
-    near = np.zeros_like(occupied)
-    for dj in (-1, 0, 1):
-        for di in (-1, 0, 1):
-            near |= padded[1 + dj:1 + dj + occupied.shape[0], 1 + di:1 + di + occupied.shape[1]]
-    row, col, inside = raster.cell_of(ends[:, :2])
-    hit = inside & near[row, col]
-    # Beams: the cells crossed from the sensor to ``margin`` before the end.
-    length = np.hypot(*(ends[:, :2] - starts[:, :2]).T)
-    short = np.clip((length - margin) / np.maximum(length, 1e-12), 0.0, 1.0)[:, None]
-    stop = starts[:, :2] + short * (ends[:, :2] - starts[:, :2])
-    clear = np.ones(length.size, dtype=bool)
-    origin = np.array(raster.origin)
-    # Cells are keyed (scan, row, column) over a box holding every beam, inside the raster or not.
-    both = np.concatenate([starts[:, :2], ends[:, :2]]) if length.size else origin[None, :]
-    corner = np.floor((both.min(axis=0) - origin) / raster.resolution).astype(np.int64) - 1
-    far = np.floor((both.max(axis=0) - origin) / raster.resolution).astype(np.int64) + 2
-    width, height = int(far[0] - corner[0]), int(far[1] - corner[1])
-
-    def cell_key(scan: NDArray[np.intp], i: NDArray[np.int64], j: NDArray[np.int64]) -> NDArray[np.int64]:
-        return (scan.astype(np.int64) * height + (j - corner[1])) * width + (i - corner[0])
-
-    end_i = np.floor((ends[:, 0] - origin[0]) / raster.resolution).astype(np.int64)
-    end_j = np.floor((ends[:, 1] - origin[1]) / raster.resolution).astype(np.int64)
-    end_keys, first = np.unique(cell_key(owner, end_i, end_j), return_index=True)
-    end_cell_hit = hit[first]  # a cell's verdict depends on the cell alone
-    traversed_keys, traversed_blocked = [], []
-    for lo in range(0, length.size, RAYS_PER_CHUNK):
-        hi = min(length.size, lo + RAYS_PER_CHUNK)
-        a = np.column_stack([starts[lo:hi, :2] - origin, np.full(hi - lo, 0.5 * raster.resolution)])
-        b = np.column_stack([stop[lo:hi] - origin, np.full(hi - lo, 0.5 * raster.resolution)])
-        seg = traverse(a, b, raster.resolution)
-        j, i = seg.cell[:, 1], seg.cell[:, 0]
-        valid = (j >= 0) & (j < occupied.shape[0]) & (i >= 0) & (i < occupied.shape[1])
-        blocked = np.zeros(seg.ray.size, dtype=bool)
-        blocked[valid] = occupied[j[valid], i[valid]]
-        bad = np.zeros(hi - lo, dtype=bool)
-        bad[seg.ray[blocked]] = True
-        clear[lo:hi] = ~bad
-        keys, once = np.unique(cell_key(owner[lo:hi][seg.ray], i, j), return_index=True)
-        traversed_keys.append(keys)
-        traversed_blocked.append(blocked[once])
-    n_scans = len(scans)
-    per_scan = np.bincount(owner, minlength=n_scans).astype(np.float64)
-    has = per_scan > 0
-    hit_share = np.bincount(owner, weights=hit, minlength=n_scans)[has] / per_scan[has]
-    clear_share = np.bincount(owner, weights=clear, minlength=n_scans)[has] / per_scan[has]
-    # Per cell: a scan's traversed cells once each (beams of one chunk share cells with the
-    # next chunk's), less its own end-point cells.
-    keys = np.concatenate(traversed_keys) if traversed_keys else np.zeros(0, np.int64)
-    keys, once = np.unique(keys, return_index=True)
-    cell_blocked = (np.concatenate(traversed_blocked) if traversed_blocked else np.zeros(0, bool))[once]
-    own_end = np.isin(keys, end_keys, assume_unique=True)
-    keys, cell_blocked = keys[~own_end], cell_blocked[~own_end]
-    cells_per_scan = width * height
-    end_owner = end_keys // cells_per_scan
-    traversed_owner = keys // cells_per_scan
-    ends_of = np.bincount(end_owner, minlength=n_scans).astype(np.float64)
-    traversed_of = np.bincount(traversed_owner, minlength=n_scans).astype(np.float64)
-    end_cell_share = (np.bincount(end_owner, weights=end_cell_hit, minlength=n_scans)[has]
-                      / np.maximum(ends_of[has], 1.0))
-    # A scan whose beams cross no cell before their margin (all returns within 0.1 m) passes.
-    traversed_share = np.where(traversed_of[has] > 0,
-                               np.bincount(traversed_owner, weights=~cell_blocked, minlength=n_scans)[has]
-                               / np.maximum(traversed_of[has], 1.0), 1.0)
-    return {
-        "returns_on_occupied": float(hit.mean()) if hit.size else math.nan,
-        "beams_clear": float(clear.mean()) if clear.size else math.nan,
-        "scans_returns_95": float((hit_share >= 0.95).mean()),
-        "scans_beams_95": float((clear_share >= 0.95).mean()),
-        "scans_both_95": float(((hit_share >= 0.95) & (clear_share >= 0.95)).mean()),
-        "endpoint_cells_on_occupied": float(end_cell_hit.mean()) if end_cell_hit.size else math.nan,
-        "traversed_cells_clear": float((~cell_blocked).mean()) if cell_blocked.size else math.nan,
-        "scans_endpoint_cells_95": float((end_cell_share >= 0.95).mean()),
-        "scans_traversed_cells_95": float((traversed_share >= 0.95).mean()),
-        "scans_cells_both_95": float(((end_cell_share >= 0.95) & (traversed_share >= 0.95)).mean()),
-        "scans": int(has.sum()),
-    }
 
 
 @dataclass
@@ -329,7 +150,7 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
         training position is fitted). The test points and the grid do not depend on it.
     octomap
         Also build an OctoMap of the training scans at ``resolution``
-        (:func:`occtool.octomap.build_world_octomap`) and score it as ``auc["octomap"]``.
+        (:func:`occtool.grid.build_world_octomap`) and score it as ``auc["octomap"]``.
         Without ``pyoctomap`` (the ``octomap`` extra) the score says so in
         :attr:`LogScore.octomap_note` and has no OctoMap figures.
 
@@ -338,7 +159,6 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     and with the issue's fixed setting, and the counting-model grids (prior tuned the same
     way); :attr:`LogScore.textbook` holds their settings.
     """
-    from occtool.compare import roc_auc
     from occtool.fuse import fuse_log
     from occtool.io import read_log
     from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
@@ -412,8 +232,6 @@ def _trinary(raster: Raster, points: FloatArray, n_occupied: int) -> tuple[Float
     """A Nav2 raster read as map_server's trinary map at ``points`` (occupied 1, free 0,
     unknown 0.5, outside unknown) and where the first ``n_occupied`` (returns) and the
     rest (free points) fall."""
-    from occtool.fuse import FREE, UNKNOWN
-
     row, col, inside = raster.cell_of(points[:, :2])
     cells = np.where(inside, raster.cells[row, col], UNKNOWN)
     p = np.where(cells == OCCUPIED, 1.0, np.where(cells == FREE, 0.0, 0.5))
@@ -426,11 +244,9 @@ def _trinary(raster: Raster, points: FloatArray, n_occupied: int) -> tuple[Float
     return p, hits
 
 
-def _beams(scans: list[Position]) -> Any:
-    """The scans' beams in the world plane (:class:`occtool.grid.WorldBeams`)."""
-    from occtool.grid import WorldBeams
-
-    starts, ends, returns, owner = _world_rays(scans)
+def _beams(scans: list[Position]) -> WorldBeams:
+    """The scans' beams in the world plane."""
+    starts, ends, returns, owner = world_rays(scans)
     return WorldBeams(starts[:, :2], ends[:, :2], returns, owner)
 
 
@@ -439,16 +255,13 @@ def textbook_scores(train: list[Position], points: FloatArray, n_occupied: int, 
                     resolutions: tuple[float, ...] = (0.05, 0.1)) -> tuple[dict[str, float], dict[str, Any]]:
     """AUC of the textbook grids of ``train`` on the test ``points`` (the first ``n_occupied`` occupied).
 
-    The settings are tuned by :func:`occtool.grid.tune_grids` on ``train`` alone (an inner
+    The settings are tuned by :func:`tune_grids` on ``train`` alone (an inner
     split ``holdout`` / ``block`` / ``seed`` of those scans); ``points`` are read only by
     the grids it returns. Returns ``auc`` (``textbook_0.05m``: the log-odds grid tuned,
     ``textbook_fixed_0.05m``: l_occ 0.85, l_free -0.4, clamp [-2, 3.5], ``counting_0.05m``:
     the counting-model grid, its prior tuned; and so on per resolution) and per name the
     setting, inner AUC and bytes at one byte a cell.
     """
-    from occtool.compare import roc_auc
-    from occtool.grid import TEXTBOOK_DEFAULTS, tune_grids
-
     tuned, counting = tune_grids(_beams(train), resolutions=resolutions, holdout=holdout, block=block, seed=seed)
     auc: dict[str, float] = {}
     settings: dict[str, Any] = {}
@@ -467,10 +280,6 @@ def textbook_scores(train: list[Position], points: FloatArray, n_occupied: int, 
 
 def _octomap_scores(train: list[Position], points: FloatArray, n_occupied: int, resolution: float) -> dict[str, Any]:
     """OctoMap's AUC on the test points, its bytes and build time; a note instead without pyoctomap."""
-    from occtool.compare import roc_auc
-    from occtool.errors import MissingDependencyError
-    from occtool.octomap import build_world_octomap
-
     scans = []
     for scan in train:
         pose = scan.pose
@@ -488,5 +297,4 @@ def _octomap_scores(train: list[Position], points: FloatArray, n_occupied: int, 
             "octomap_s": seconds}
 
 
-__all__ = ["LogScore", "evaluate_log", "grid_raster", "holdout_blocks", "holdout_test_points", "nav2_agreement",
-           "textbook_scores", "world_grid"]
+__all__ = ["LogScore", "evaluate_log", "textbook_scores", "world_grid"]
