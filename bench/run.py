@@ -805,6 +805,80 @@ def plot(results: dict[str, Any], path: Path) -> bool:
     return True
 
 
+HEADLINE_BEGIN, HEADLINE_END = "<!-- headline:begin -->", "<!-- headline:end -->"
+HEADLINE_LOG_NAMES = {"intel-corrected.log.gz": "Intel", "freiburg-079-corrected.log.gz": "FR-079",
+                      "aces-corrected.log.gz": "ACES", "csail-corrected.log.gz": "CSAIL"}
+
+
+def headline_rows(results: dict[str, Any]) -> list[tuple[str, str]]:
+    """The README's headline figures (label, value) from a run's results.json; a row whose
+    section the run skipped (``--quick``, no data folder) is left out, never guessed.
+    tests/test_readme_figures.py reads the same figures from the JSON on its own."""
+    rows: list[tuple[str, str]] = []
+    office = results.get("headline_report")
+    if office:
+        m, truth = office["models"], office["truth"]
+        rows.append(("Office model memory: occtool / 5 cm 3D grid / OctoMap",
+                     f"{_mb(m['parametric']['memory_bytes'])} (file {_mb(m['parametric']['file_bytes'])}) / "
+                     f"{_mb(m['grid']['memory_bytes'])} / {_mb(m['octomap']['memory_bytes'])}"))
+        rows.append(("Office IoU with the truth: occtool / 5 cm grid / OctoMap",
+                     " / ".join(f"{truth[n]['iou']:.3f}" for n in ("parametric", "grid", "octomap"))))
+    if results.get("speed"):
+        rows.append(("Office fit / extraction, one core", f"{_s(results['speed']['fit_s'])} / "
+                     f"{_s(results['speed']['extract_s'])}"))
+    scenes = next((r for r in results.get("map_quality_summary", []) if r["features"] == 10_000), None)
+    if scenes:
+        rows.append(("Seven scenes x 3 seeds, mean IoU: occtool / careful grid / best of grid and OctoMap",
+                     f"{scenes['parametric_iou_mean']:.3f} / {scenes['grid_iou_mean']:.3f} / "
+                     f"{scenes['best_grid_iou_mean']:.3f}"))
+    million = next((r for r in results.get("large", []) if r["features"] == 1_000_000), None)
+    if million:
+        rows.append(("Fit of 1M features, fresh process (CPU)", _s(million["fit_cpu_s"])))
+    lasers = results.get("laser_logs", [])
+    if lasers:
+        rows.append(("Six CARMEN logs: positions whose own returns enter the robot's body",
+                     f"{sum(r['positions_with_returns_within_the_body'] for r in lasers):,} of "
+                     f"{sum(r['positions'] for r in lasers):,}"))
+    logs = [log for log in (results.get("heldout") or {}).get("logs", [])
+            if any(r["model"].startswith("fused map") and r.get("auc") is not None for r in log["rows"])]
+    if logs:
+        world = [next(r for r in log["rows"] if r["model"].startswith("fused map")) for log in logs]
+        # The best grid of a log: the better of the log-odds and counting grids, each tuned on
+        # the training scans, at 0.05 or 0.1 m (as heldout_targets judges it).
+        grids = [max((r for r in log["rows"] if r["model"].endswith("tuned on the training scans")),
+                     key=lambda r: r["auc"]) for log in logs]
+        byte_grids = [next(r for r in log["rows"] if r.get("resolution") == 0.1) for log in logs]
+        names = " / ".join(HEADLINE_LOG_NAMES.get(log["log"], log["log"]) for log in logs)
+        rows.append((f"Whole-log map, held-out AUC, {names}: world.occmap",
+                     " / ".join(f"{r['auc']:.3f}" for r in world)))
+        rows.append((f"Whole-log map, held-out AUC, {names}: best tuned grid",
+                     " / ".join(f"{r['auc']:.3f}" for r in grids)))
+        rows.append((f"world.occmap against a 0.1 m byte grid, {names}",
+                     f"{' / '.join(_mb(r['bytes']) for r in world)} against "
+                     f"{' / '.join(_mb(r['bytes']) for r in byte_grids)}"))
+    whole = next((r for r in (results.get("log_map") or {}).get("whole_log", [])
+                  if not r.get("exit_status") and r.get("keyframe_share") is None), None)
+    if whole:
+        rows.append(("Intel whole log through `occtool map` (CPU)", _s(whole["cpu_s"])))
+    return rows
+
+
+def write_headline(results: dict[str, Any], readme: Path) -> None:
+    """Write the headline table between the README's two marker comments, every row
+    naming the run's commit and date, so the README's figures are the run's own."""
+    meta = results["meta"]
+    run = f"{meta['machine'].get('commit') or '?'}, {meta['date'][:10]}"
+    table = ["| figure | value | run |", "|---|---|---|"]
+    table += [f"| {label} | {value} | {run} |" for label, value in headline_rows(results)]
+    text = readme.read_text(encoding="utf-8")
+    start, end = text.find(HEADLINE_BEGIN), text.find(HEADLINE_END)
+    if start < 0 or end < start:
+        log(f"{readme}: no {HEADLINE_BEGIN} ... {HEADLINE_END} markers, headline table not written")
+        return
+    block = "\n".join([HEADLINE_BEGIN, *table, HEADLINE_END])
+    readme.write_text(text[:start] + block + text[end + len(HEADLINE_END):], encoding="utf-8")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--output", default="bench/results.md", help="Markdown results file.")
@@ -887,6 +961,8 @@ def main(argv: list[str] | None = None) -> int:
     json_path.write_text(report_json(document) + "\n", encoding="utf-8")
     output.write_text(render(results, plot_path.name if plotted else None, json_path.name), encoding="utf-8")
     log(f"wrote {output}, {json_path}" + (f", {plot_path}" if plotted else "") + f" in {elapsed:.0f} s")
+    if not args.quick and json_path.resolve() == ROOT / "bench" / "results.json":  # the README's one source
+        write_headline(json.loads(json_path.read_text(encoding="utf-8")), ROOT / "README.md")
     return 0
 
 
