@@ -179,7 +179,7 @@ def test_walls_few_positions_saw_through_read_less_occupied():
 def test_frontiers_ignore_a_walls_uncertain_edge():
     """An unknown cell the run observed (a wall's edge) is no frontier; one nothing observed is."""
     from occtool.fuse import Raster
-    from occtool.mapping import PlacedMap, _frontiers
+    from occtool.fuse._run import PlacedMap, _frontiers
 
     cells = np.full((1, 40), FREE, dtype=np.uint8)
     cells[0, 20:23] = UNKNOWN  # a wall's edge, observed

@@ -77,15 +77,13 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
     import logging
     from pathlib import Path
 
-    from occtool.cli.options import fit_from_kwargs
-    from occtool.cli.register_options import read_map_log, trajectory, write_map_poses
-    from occtool.errors import InputError
-    from occtool.fuse import fuse_log, fuse_model_set
-    from occtool.mapping import map_of_run, output_paths, write_run_map
+    from occtool import fuse
+    from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs, read_log_from_kwargs
 
     logger = logging.getLogger("occtool.map")
     georeference = None
     if origin is not None:
+        from occtool.errors import InputError
         from occtool.formats.wgs84 import Georeference, parse_origin
 
         try:
@@ -100,48 +98,43 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
             raise click.ClickException("--nav2-mode scale writes a PNG and needs Pillow: "
                                        "pip install 'occtool[png]'") from None
     if not overwrite:
-        for path in output_paths(output, nav2_mode):
+        for path in fuse.output_paths(output, nav2_mode):
             if path.exists():
                 raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
     if Path(output).exists() and not Path(output).is_dir():
         raise click.ClickException(f"{output} exists and is not a folder")
-    is_models = Path(source).is_dir() or Path(source).name == "index.json"
-    registration = None
-    if is_models and kwargs.get("register"):
-        raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
-    if is_models:
-        fused, models, positions = fuse_model_set(source, combination=combination, threshold=threshold)
-        sightings = None
-        logger.info("%d models read from %s", len(models), source)
-        extra = {"source": str(source), "fitted_here": False}
+    written: dict[str, Any] = {"resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
+               "max_range": max_range, "simplify": simplify, "precision": precision,
+               "georeference": georeference, "mcap": mcap, "overwrite": overwrite}
+    if Path(source).is_dir() or Path(source).name == "index.json":
+        if kwargs.get("register"):
+            raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
+        result = fuse.map_model_set(source, output, **written)
+        logger.info("%d models read from %s", len(result.models), source)
     else:
-        template = fit_from_kwargs(kwargs, seed=seed)
-        log, registration = read_map_log(source, kwargs)
-        fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold,
-                                         keyframe_share=keyframe_share)
+        from occtool.register import RegistrationSettings
+
+        estimator = fit_from_kwargs(kwargs, seed=seed)
+        registration = RegistrationSettings(loop_closure=kwargs.pop("loop_closure", True))
+        register = kwargs.pop("register", None)
+        read_options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
+        if "topics" in read_options:
+            read_options["topics"] = list(read_options["topics"]) or None
+        log = read_log_from_kwargs(source, read_options) if str(source) == "-" else source
+        result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
+                              registration=registration, keyframe_share=keyframe_share, **written)
+        report = result.report
+        assert report is not None
         for note in report.notes:
             logger.warning("%s: %s", Path(source).name, note)
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
-        positions = list(zip(report.fitted, fused.poses, fused.stamps))
-        sightings = report.sightings
         logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,
                     report.fit_seconds, len(report.not_keyframes))
-        extra = {"source": str(source), "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
-                 "skipped_positions": [index for index, _ in report.skipped],
-                 "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
-    run = map_of_run(fused, models, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold}, sightings=sightings)
-    run.trajectory = trajectory(registration)
-    if registration is not None:
-        extra["registration"] = registration.to_dict()
-    written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
-                            georeference=georeference, extra_summary=extra, nav2_mode=nav2_mode)
-    written += [p for p in [write_map_poses(registration, output, overwrite)] if p is not None]
-    summary = run.summary()
+    summary = result.summary
     logger.info("fused map: %d positions, %.1f KB; world map %s: %d wall segments, %.1f KB; raster %dx%d: %s",
                 summary["positions"], summary["fused_map_bytes"] / 1e3, Path(output) / "world.occmap",
                 summary["world_map"]["segments"], summary["world_map"]["bytes"] / 1e3, summary["raster"]["columns"],
                 summary["raster"]["rows"], summary["raster"]["cells"])
-    for path in written:
+    for path in result.written:
         logger.debug("wrote %s", path)

@@ -25,7 +25,7 @@ file keeps, or in older files and single fits its return guard's distances at th
 centres): :meth:`FusedMap.predict` joins them to the
 models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
 unknown grid over the robot's body band with its walls where the returns fall.
-:func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
+:func:`fuse_log` fits only the log's keyframes (:func:`select_keyframes`).
 
 The parts, one concept a module (private; everything public is imported from here):
 
@@ -37,15 +37,22 @@ The parts, one concept a module (private; everything public is imported from her
 ``_build``    :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
 ``_walls``    walls as linear pieces: the returns summarised into segments, and who saw through them
 ``_world``    :class:`WorldMap`: the run refitted in the world frame, a few kilobytes; its raster
-``_occmap``   the ``.occmap`` file: :meth:`WorldMap.save`, :func:`load_map`
+``_keyframes``  the positions of a log worth fitting (:func:`select_keyframes`)
+``_run``      :func:`map_of_run`: the map of a run (world map, raster, navigation region, frontiers)
+``_outputs``  :func:`write_run_map`: its files (world map, Nav2, MCAP, GeoJSON, summary)
+``_mapping``  :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
 ============  =========================================================================
 
 A :class:`FusedMap` is the run as its local models saw it (a megabyte and more for a
 building); :func:`build_world_map` refits it into a :class:`WorldMap` (walls as MIN nodes
 over linear pieces in world x, y under one MAX, over the region some position observed),
 the map ``occtool map`` writes as ``world.occmap`` and draws for Nav2 (docs/map.md).
+:func:`map_log` and :func:`map_model_set` are ``occtool map`` as library calls.
 """
 
+from typing import TYPE_CHECKING
+
+from occtool._lazy import lazy_attributes
 from occtool.formats.occmap import load_map
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set, fuse_models
 from occtool.fuse._combine import (
@@ -57,6 +64,7 @@ from occtool.fuse._combine import (
     RETURN_KERNEL,
     Evidence,
 )
+from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
 from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
 from occtool.fuse._reach import (
@@ -80,9 +88,55 @@ from occtool.fuse._world import (
     returns_of_positions,
     returns_per_degree,
 )
-from occtool.keyframes import select_keyframes
+
+# The map of a run and its writers, imported on first use (PEP 562): they import shapely
+# at their top, and `import occtool.fuse` stays as light as it was without them.
+_LAZY: dict[str, str] = {
+    "FRONTIER_LOOKAHEAD": "occtool.fuse._run",
+    "PlacedMap": "occtool.fuse._run",
+    "RunMap": "occtool.fuse._run",
+    "map_of_run": "occtool.fuse._run",
+    "LAYERS": "occtool.fuse._outputs",
+    "NAV2_MODES": "occtool.fuse._outputs",
+    "check_outputs": "occtool.fuse._outputs",
+    "layer_collections": "occtool.fuse._outputs",
+    "output_paths": "occtool.fuse._outputs",
+    "write_run_map": "occtool.fuse._outputs",
+    "MapResult": "occtool.fuse._mapping",
+    "map_log": "occtool.fuse._mapping",
+    "map_model_set": "occtool.fuse._mapping",
+}
+
+if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checkers and IDEs
+    from occtool.fuse._mapping import MapResult, map_log, map_model_set
+    from occtool.fuse._outputs import (
+        LAYERS,
+        NAV2_MODES,
+        check_outputs,
+        layer_collections,
+        output_paths,
+        write_run_map,
+    )
+    from occtool.fuse._run import FRONTIER_LOOKAHEAD, PlacedMap, RunMap, map_of_run
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
+    "FRONTIER_LOOKAHEAD",
+    "KEYFRAME_CELL",
+    "KEYFRAME_NEW_SHARE",
+    "LAYERS",
+    "NAV2_MODES",
+    "MapResult",
+    "PlacedMap",
+    "RunMap",
+    "check_outputs",
+    "layer_collections",
+    "map_log",
+    "map_model_set",
+    "map_of_run",
+    "output_paths",
+    "write_run_map",
     "CLAMP",
     "COMBINATIONS",
     "CONFLICT_FLAG",
