@@ -140,16 +140,47 @@ def test_mcap_uses_foxglove_schemas_and_decodes(mapped):
     assert (values == read_nav2(out / "map.yaml").cells).all()
 
 
-def test_map_of_a_model_set(mapped, tmp_path):
+@pytest.fixture(scope="module")
+def model_set(mapped, tmp_path_factory):
     log, _ = mapped
-    models = tmp_path / "models"
+    models = tmp_path_factory.mktemp("set") / "models"
     models.mkdir()
     assert run("fit", log, "-o", f"{models}/", *LASER).exit_code == 0
-    result = run("map", models, "-o", tmp_path / "out", "--no-mcap")
+    return models
+
+
+def test_map_of_a_model_set(model_set, tmp_path):
+    result = run("map", model_set, "-o", tmp_path / "out", "--no-mcap")
     assert result.exit_code == 0, result.output
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["fitted_here"] is False and summary["positions"] >= 10
     assert not (tmp_path / "out" / "map.mcap").exists()
+
+
+def test_a_model_set_map_takes_the_robot_options(model_set, tmp_path):
+    def area(*options):
+        out = tmp_path / "-".join(options)
+        result = run("map", model_set, "-o", out, "--no-mcap", *options)
+        assert result.exit_code == 0, result.output
+        return json.loads((out / "summary.json").read_text())["navigation_area_m2"]
+
+    # The set was fitted for a 0.25 m robot: a wider one has less room, a narrower one more.
+    fitted, narrow, wide = area(), area("--robot-radius", "0.1"), area("--robot-radius", "0.4")
+    assert narrow > fitted > wide > 0
+    assert area("--robot-radius", "0.25") == fitted
+
+
+@pytest.mark.parametrize("option", [("--pieces", "8"), ("-L", "8"), ("--no-guard",), ("--no-return-range", "5"),
+                                    ("--keyframe-share", "0"), ("--seed", "3"), ("--no-loop-closure",)])
+def test_a_model_set_map_refuses_what_applies_to_a_log(model_set, tmp_path, capsys, option):
+    from occtool.cli.main import _run
+
+    code = _run(["-q", "map", str(model_set), "-o", str(tmp_path / "out"), *option])
+    message = capsys.readouterr().err.strip()
+    assert code == 2 and len(message.splitlines()) == 1, message
+    flag = {"-L": "--pieces"}.get(option[0], option[0])
+    assert message.startswith(f"Error: {flag} applies to a log, not to a model set")
+    assert not (tmp_path / "out").exists()
 
 
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path):

@@ -22,6 +22,38 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
     return float(value)
 
 
+#: What a model set's map takes from the command line: the map's own options and the robot's
+#: (its navigation maps'); the fit, log, keyframe and registration options apply to a log.
+MODEL_SET_OPTIONS = frozenset({
+    "source", "output", "resolution", "nav2_mode", "threshold", "combination", "max_range", "simplify", "precision",
+    "origin", "mcap", "overwrite", "config", "register",
+})
+#: The robot options and the :class:`occtool.robot.Robot` fields they set.
+ROBOT_FIELDS = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
+                "ground_clearance": "ground_clearance"}
+
+
+def _given(ctx: click.Context) -> dict[str, click.Parameter]:
+    """The parameters set on the command line or in a --config file (not left at their defaults)."""
+    from click.core import ParameterSource
+
+    return {p.name: p for p in ctx.command.params
+            if p.name and ctx.get_parameter_source(p.name) not in (ParameterSource.DEFAULT, None)}
+
+
+def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, float]:
+    """The robot fields a model set's map overrides; a usage error naming the first option
+    given that cannot apply to a set (its models are fitted already)."""
+    given = _given(ctx)
+    for name, param in given.items():
+        if name in MODEL_SET_OPTIONS or name in ROBOT_FIELDS:
+            continue
+        flags = param.opts if not (param.secondary_opts and ctx.params.get(name) is False) else param.secondary_opts
+        flag = max(flags, key=len) if flags else name
+        raise click.UsageError(f"{flag} applies to a log, not to a model set (its models are fitted already)", ctx)
+    return {field: kwargs[name] for name, field in ROBOT_FIELDS.items() if name in given}
+
+
 @click.command(short_help="Fuse every position of a log into one world map (Nav2, Foxglove, GeoJSON).")
 @click.argument("source", metavar="LOG|MODELS", type=click.Path(exists=True, dir_okay=True))
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
@@ -73,6 +105,10 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
     obstacle, within its reach); places no position observed stay unknown (205 in the
     Nav2 map), never free. For a 2D laser give its height: --sensor-height 0.3
     --body-height 0.5 --no-return-range 5 (docs/map.md).
+
+    MODELS were fitted already: the robot options given replace the fitted robot's in the
+    navigation maps (the navigation region, obstacles and frontiers), and the fit, log,
+    keyframe and registration options are refused.
     """
     import logging
     from pathlib import Path
@@ -103,13 +139,15 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
                 raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
     if Path(output).exists() and not Path(output).is_dir():
         raise click.ClickException(f"{output} exists and is not a folder")
-    written: dict[str, Any] = {"resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
-               "max_range": max_range, "simplify": simplify, "precision": precision,
-               "georeference": georeference, "mcap": mcap, "overwrite": overwrite}
+    written: dict[str, Any] = {
+        "resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
+        "max_range": max_range, "simplify": simplify, "precision": precision, "georeference": georeference,
+        "mcap": mcap, "overwrite": overwrite}
     if Path(source).is_dir() or Path(source).name == "index.json":
         if kwargs.get("register"):
             raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
-        result = fuse.map_model_set(source, output, **written)
+        robot = _model_set_robot(click.get_current_context(), kwargs)
+        result = fuse.map_model_set(source, output, robot_overrides=robot, **written)
         logger.info("%d models read from %s", len(result.models), source)
     else:
         from occtool.register import RegistrationSettings

@@ -133,20 +133,26 @@ def map_log(source: str | os.PathLike[str] | RangeLog, output: str | os.PathLike
 
 def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str], *,
                   combination: str = DEFAULT_COMBINATION, threshold: float = 0.6, resolution: float = 0.05,
-                  max_range: float = 1.5, nav2_mode: str = "trinary",
+                  max_range: float = 1.5, robot_overrides: Mapping[str, float] | None = None,
+                  nav2_mode: str = "trinary",
                   simplify: float | None = None, precision: int | None = None, georeference: Any | None = None,
                   mcap: bool = True, overwrite: bool = True) -> MapResult:
     """Map a model set: what ``occtool map MODELS/ -o OUTPUT`` does.
 
     ``models`` is a set written by ``occtool fit LOG -o DIR/`` (``DIR`` or
     ``DIR/index.json``), fused by :func:`occtool.fuse.fuse_model_set`; the other
-    keywords are :func:`map_log`'s. Its models are fitted already: their robot and fit
-    settings are the ones they were fitted with.
+    keywords are :func:`map_log`'s. Its models are fitted already: their fit settings
+    are the ones they were fitted with, and so is their robot but for ``robot_overrides``,
+    :class:`~occtool.robot.Robot` fields (``radius``, ``sensor_height``, ``body_height``,
+    ``ground_clearance``) that replace the fitted robot's in the navigation maps (the
+    navigation region, obstacles and frontiers; the fused and world maps keep the band the
+    models were fitted for).
     """
     check_outputs(output, nav2_mode=nav2_mode, overwrite=overwrite)
     fused, fitted, positions = fuse_model_set(models, combination=combination, threshold=threshold)
     run = map_of_run(fused, fitted, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold})
+                     navigation={"max_range": max_range, "threshold": threshold},
+                     robot_overrides=robot_overrides)
     extra: dict[str, Any] = {"source": str(models), "fitted_here": False}
     written, summary = _write(run, output, extra, None, overwrite=overwrite, simplify=simplify, precision=precision,
                               mcap=mcap, georeference=georeference, nav2_mode=nav2_mode)

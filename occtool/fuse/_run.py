@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,7 @@ from occtool.features import Pose
 from occtool.fuse._map import FusedMap
 from occtool.fuse._raster import FREE, UNKNOWN, Raster
 from occtool.fuse._world import RunReturns, WorldMap, build_world_map
+from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
 #: How far past an exploration point the raster is walked for unknown space, metres.
@@ -104,7 +106,8 @@ def _frontiers(raster: Raster, placed: list[PlacedMap], lookahead: float) -> Flo
 
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
-               lookahead: float = FRONTIER_LOOKAHEAD, sightings: RunReturns | None = None) -> RunMap:
+               lookahead: float = FRONTIER_LOOKAHEAD, sightings: RunReturns | None = None,
+               robot_overrides: Mapping[str, float] | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -123,11 +126,17 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     sightings
         What every position of the run saw (:attr:`occtool.fuse.FuseReport.sightings`), for
         the world map's walls; ``None``: the fused map's own positions.
+    robot_overrides
+        :class:`~occtool.robot.Robot` fields (``radius``, ``sensor_height``, ...) that
+        replace those of each model's own robot (or ``navigation``'s) in its navigation map.
     """
     from occtool.navigation import NavigationWarning
 
     if len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
+    unknown = sorted(set(robot_overrides or {}) - {f.name for f in fields(Robot)})
+    if unknown:
+        raise InputError(f"robot_overrides: no robot field {', '.join(unknown)}")
     seconds = {}
     started = time.perf_counter()
     world = build_world_map(fused, sightings=sightings)
@@ -140,7 +149,10 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NavigationWarning)
         for model, (index, pose, stamp) in zip(models, positions):
-            nav = model.navigation_map(**(navigation or {})).in_world(pose)
+            options = dict(navigation or {})
+            if robot_overrides:
+                options["robot"] = replace(options.get("robot", model.robot_), **robot_overrides)
+            nav = model.navigation_map(**options).in_world(pose)
             placed.append(PlacedMap(index, pose, stamp, nav))
     seconds["navigation"] = time.perf_counter() - started
     started = time.perf_counter()
