@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from occtool.errors import MissingDependencyError
-from occtool.fuse import FREE, OCCUPIED
+from occtool.raster import FREE, OCCUPIED
 
 GRID_TOPIC = "/map"
 SCENE_TOPIC = "/positions"

@@ -55,7 +55,7 @@ def _fit_params() -> tuple[str, ...]:
 
 def model_to_dict(model: Any, *, run: dict | None = None, observed: Any | None = None) -> dict[str, Any]:
     """The JSON-ready content of a model file for a fitted :class:`OccupancyRegressor`;
-    ``observed``: what its position observed (:class:`occtool.fuse.Observation`; by default
+    ``observed``: what its position observed (:class:`occtool.observation.Observation`; by default
     the model's own ``observed_``, read from a file, if any)."""
     model._check_fitted()
     tree = model.tree_
@@ -94,9 +94,9 @@ def _optional_block(data: dict[str, Any], key: str, reader: Any, source: str) ->
 
 
 def _observed_from(data: dict[str, Any], source: str) -> Any:
-    """The file's :class:`occtool.fuse.Observation` (``None`` when it has none: a single fit,
+    """The file's :class:`occtool.observation.Observation` (``None`` when it has none: a single fit,
     files written before model sets kept one)."""
-    from occtool.fuse._reach import Observation
+    from occtool.observation import Observation
 
     return _optional_block(data, "observed", Observation.from_dict, source)
 

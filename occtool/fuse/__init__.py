@@ -29,11 +29,9 @@ unknown grid over the robot's body band with its walls where the returns fall.
 
 The parts, one concept a module (private; everything public is imported from here):
 
-============  =========================================================================
-``_reach``    what a position observed: reach and first obstacle per pan bin, returns
+==============  =======================================================================
 ``_combine``  the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
 ``_map``      :class:`FusedMap`: storage, where each model speaks, queries, rasterising
-``_raster``   :class:`Raster` and the Nav2 pixel values
 ``_build``    :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
 ``_walls``    walls as linear pieces: the returns summarised into segments, and who saw through them
 ``_world``    :class:`WorldMap`: the run refitted in the world frame, a few kilobytes; its raster
@@ -41,7 +39,13 @@ The parts, one concept a module (private; everything public is imported from her
 ``_run``      :func:`map_of_run`: the map of a run (world map, raster, navigation region, frontiers)
 ``_outputs``  :func:`write_run_map`: its files (world map, Nav2, MCAP, GeoJSON, summary)
 ``_mapping``  :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
-============  =========================================================================
+==============  =======================================================================
+
+Below it, and below :mod:`occtool.formats` which writes its files: :mod:`occtool.observation`
+(what a position observed: reach and first obstacle per pan bin, returns; the
+:class:`Observation` a model file keeps) and :mod:`occtool.raster` (:class:`Raster` and the
+Nav2 pixel values). :mod:`occtool.formats.occmap` reads and writes the ``.occmap`` file's
+numbers; :func:`load_map` makes a :class:`WorldMap` of them.
 
 A :class:`FusedMap` is the run as its local models saw it (a megabyte and more for a
 building); :func:`build_world_map` refits it into a :class:`WorldMap` (walls as MIN nodes
@@ -53,7 +57,6 @@ the map ``occtool map`` writes as ``world.occmap`` and draws for Nav2 (docs/map.
 from typing import TYPE_CHECKING
 
 from occtool._lazy import lazy_attributes
-from occtool.formats.occmap import load_map
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set, fuse_models
 from occtool.fuse._combine import (
     CLAMP,
@@ -66,28 +69,23 @@ from occtool.fuse._combine import (
 )
 from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
-from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
-from occtool.fuse._reach import (
+from occtool.fuse._world import RunReturns, WorldMap, build_world_map, decode_map, load_map, returns_of_positions
+from occtool.observation import (
+    LASER_RETURNS_PER_DEGREE,
     NO_OBSTACLE,
     OFFSET_STEPS,
     REACH_BINS,
     REACH_UNIT,
     Observation,
+    is_scanning_laser,
     nearest_returns,
     observe,
     observed_reach,
     reach_from_guard,
     returns_from_guard,
-)
-from occtool.fuse._world import (
-    LASER_RETURNS_PER_DEGREE,
-    RunReturns,
-    WorldMap,
-    build_world_map,
-    is_scanning_laser,
-    returns_of_positions,
     returns_per_degree,
 )
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
 
 # The map of a run and its writers, imported on first use (PEP 562): they import shapely
 # at their top, and `import occtool.fuse` stays as light as it was without them.
@@ -161,6 +159,7 @@ __all__ = [
     "RunReturns",
     "WorldMap",
     "build_world_map",
+    "decode_map",
     "fuse_log",
     "fuse_model_set",
     "fuse_models",

@@ -16,8 +16,8 @@ from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.fuse._map import FusedMap
-from occtool.fuse._reach import observe, reach_from_guard, returns_from_guard
-from occtool.fuse._world import RunReturns, is_scanning_laser, returns_of_positions
+from occtool.fuse._world import RunReturns, returns_of_positions
+from occtool.observation import is_scanning_laser, observe, reach_from_guard, returns_from_guard
 from occtool.robot import Robot
 
 

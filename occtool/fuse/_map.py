@@ -12,8 +12,8 @@ from numpy.typing import ArrayLike, NDArray
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse._combine import COMBINATIONS, DEFAULT_COMBINATION, RETURN_KERNEL, Evidence, _Sums
-from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
-from occtool.fuse._reach import NO_OBSTACLE, OFFSET_STEPS, REACH_UNIT
+from occtool.observation import NO_OBSTACLE, OFFSET_STEPS, REACH_UNIT
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]

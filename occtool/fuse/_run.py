@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse._map import FusedMap
-from occtool.fuse._raster import FREE, UNKNOWN, Raster
 from occtool.fuse._world import RunReturns, WorldMap, build_world_map
+from occtool.raster import FREE, UNKNOWN, Raster
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]

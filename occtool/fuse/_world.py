@@ -40,8 +40,20 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.formats.occmap import UNIT, MapArrays, quantise, read_map, unreadable
+from occtool.formats.occmap import decode as occmap_decode
 from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
+from occtool.observation import (
+    BIN_CENTRE,
+    NO_OBSTACLE,
+    OFFSET_STEPS,
+    REACH_UNIT,
+    is_scanning_laser,
+    nearest_returns,
+    observed_reach,
+    returns_per_degree,
+)
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
 
 FloatArray = NDArray[np.float64]
 #: What :meth:`WorldMap._near_segments` yields: points' rows, segments, offsets across and along.
@@ -98,17 +110,10 @@ REGION_REACH = 8.0
 #: A wall is drawn in the raster when at least this share of the positions that returned
 #: from it or saw through it returned from it (as :data:`occtool.fuse.RETURN_SHARE`).
 WALL_SHARE = 0.5
-#: Coordinates are stored in this unit (metres): 5 mm.
-UNIT = 0.005
 #: Pan bins of the positions' nearest returns the walls are fitted to, for a scanning laser
 #: (half a degree: every beam at that spacing; chosen on inner splits, docs/map.md) ...
 SIGHTING_BINS = 720
-#: ... told by at most this many returns a degree in the body band (median over positions:
-#: 1.1-2 on the bench's CARMEN logs, 6 on FR-079, whose positions group a few scans); denser
-#: clouds (a depth camera's rows: 130 on fixtures/tum-fr3-cabinet) keep their nearest per
-#: degree (the return guard's bins), as the nearest of many noisy returns in a finer bin is
-#: drawn nearer than the wall.
-LASER_RETURNS_PER_DEGREE = 10.0
+#: ... (:data:`occtool.observation.LASER_RETURNS_PER_DEGREE` tells a scanning laser's positions).
 #: Segment middles searched around a query point (the ridges of more never overlap there).
 NEIGHBOURS = 12
 
@@ -194,12 +199,27 @@ class WorldMap:
         self.wall_share = float(wall_share)
         self.wall_rim = float(wall_rim)
         self.doubted_wall_rim = float(doubted_wall_rim)
-        #: The file's grid (:func:`occtool.formats.occmap.quantise` sets them): unit, metres, and
+        #: The file's grid (:meth:`quantised` and :func:`load_map` set them): unit, metres, and
         #: origin; the unit of segments' half-lengths (``None`` in a version 1 file).
         self.unit: float | None = None
         self.origin: FloatArray | None = None
         self.half_unit: float | None = None
         self._index: Any = None
+
+    @classmethod
+    def from_arrays(cls, arrays: MapArrays) -> WorldMap:
+        """The map of numbers at the file's precision (:func:`occtool.formats.occmap.quantise`,
+        :func:`occtool.formats.occmap.decode`), on the file's grid."""
+        world = cls(arrays.start, arrays.end, arrays.thickness, arrays.trust, arrays.region, band=arrays.band,
+                    positions=arrays.positions, facing=arrays.facing, **arrays.settings)
+        world.unit, world.origin, world.half_unit = arrays.unit, arrays.origin, arrays.half_unit
+        return world
+
+    def quantised(self, unit: float | None = None) -> WorldMap:
+        """This map with its numbers rounded to what its file stores (a unit of ``unit``
+        metres, default :data:`UNIT`) and its segments listed in the file's order: a map read
+        back from its file answers as this one, bit for bit."""
+        return WorldMap.from_arrays(quantise(self, unit))
 
     def __len__(self) -> int:
         return int(self.start.shape[0])
@@ -459,8 +479,6 @@ class RunReturns:
 
     def return_points(self, within: float) -> tuple[FloatArray, NDArray[np.int64]]:
         """World ``(N, 2)`` returns no farther than ``within`` from their position, and the position of each."""
-        from occtool.fuse._reach import OFFSET_STEPS
-
         bins = self.ranges.shape[1]
         k, b = np.nonzero(self.returned & (self.ranges <= within))
         alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
@@ -472,8 +490,6 @@ class RunReturns:
 def returns_of_fused(fused: Any) -> RunReturns:
     """:class:`RunReturns` of a :class:`FusedMap`'s own positions: its returns, and where a
     bin has none the model's reach there (:func:`position_ranges`)."""
-    from occtool.fuse._reach import BIN_CENTRE, NO_OBSTACLE
-
     ranges = position_ranges(fused)
     offsets = (fused.return_offsets if fused.return_offsets is not None
                else np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8))
@@ -485,12 +501,11 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
                          level: float | None = None, bins: int | None = None) -> RunReturns:
     """:class:`RunReturns` of a log's positions (each with features and a pose), fitted or
     not: their nearest returns in each of ``bins`` pan bins
-    (:func:`occtool.fuse._reach.nearest_returns` at ``level``) and their reach
-    (:func:`occtool.fuse._reach.observed_reach`). A run's keyframes are a share of its
+    (:func:`occtool.observation.nearest_returns` at ``level``) and their reach
+    (:func:`occtool.observation.observed_reach`). A run's keyframes are a share of its
     positions; the others' returns still place walls. ``bins=None``: :data:`SIGHTING_BINS`
     for a scanning laser's positions, the return guard's one a degree for denser clouds
     (:data:`LASER_RETURNS_PER_DEGREE`)."""
-    from occtool.fuse._reach import NO_OBSTACLE, nearest_returns, observed_reach
     from occtool.guard import GUARD_BINS
 
     positions = list(positions)
@@ -509,25 +524,6 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
     stacked = np.stack(returns)
     return RunReturns(poses, _ranges(stacked, np.stack(reaches)), stacked != NO_OBSTACLE, np.stack(offsets),
                       scanning_laser=laser)
-
-
-def is_scanning_laser(densities: Any) -> bool:
-    """Whether positions of these :func:`returns_per_degree` are a scanning laser's (their
-    median at most :data:`LASER_RETURNS_PER_DEGREE`), not a depth camera's denser clouds."""
-    return float(np.median(np.asarray(densities, dtype=np.float64))) <= LASER_RETURNS_PER_DEGREE
-
-
-def returns_per_degree(features: Any, robot: Any, level: float | None = None) -> float:
-    """A position's returns in the body band per degree of pan they occupy (0 without any;
-    ``level``: the evidence a return needs, ``None``: any above 0)."""
-    low, high = robot.body_band
-    x, y, z = features.points.T
-    returned = features.evidence > 0 if level is None else features.evidence >= level
-    keep = returned & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
-    if not keep.any():
-        return 0.0
-    degree = np.floor(np.degrees(np.arctan2(y[keep], x[keep]))).astype(np.int64)
-    return float(keep.sum()) / float(np.unique(degree).size)
 
 
 def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
@@ -557,8 +553,6 @@ def position_ranges(fused: Any) -> FloatArray:
 def _ranges(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatArray:
     """Nearest returns ``(P, bins)`` (millimetres) where a bin has one, else the reach
     (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres."""
-    from occtool.fuse._reach import NO_OBSTACLE, REACH_UNIT
-
     bins = returns.shape[1]
     reach = reaches[:, 0].astype(np.float64) * REACH_UNIT
     centre = (np.arange(bins) + 0.5) / bins
@@ -571,7 +565,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
                     region_reach: float = REGION_REACH, simplify: float = 0.03, one_sided: bool | None = None,
                     **params: Any) -> WorldMap:
     """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
-    (:func:`occtool.formats.occmap.quantise`).
+    (:meth:`WorldMap.quantised`).
 
     ``sightings`` is what every position of the run saw (:func:`returns_of_positions`; by
     default ``fused``'s own positions, :func:`returns_of_fused`): the walls are fitted to
@@ -590,8 +584,6 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     four CARMEN logs (docs/map.md).
     """
     import shapely
-
-    from occtool.formats.occmap import quantise
 
     for name, value in (("reach", reach), ("region_reach", region_reach)):
         if not value > 0:
@@ -612,8 +604,28 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
                      positions=own.poses[:, :2], facing=segments.facing, **params)
     # Rounded to the file's precision now, so that the map written is the map used.
-    return quantise(world)
+    return world.quantised()
 
 
-__all__ = ["LASER_RETURNS_PER_DEGREE", "RunReturns", "WorldMap", "build_world_map", "is_scanning_laser",
-           "position_ranges", "returns_of_fused", "returns_of_positions", "returns_per_degree"]
+def decode_map(data: bytes, name: str = "occmap") -> WorldMap:
+    """The :class:`WorldMap` of a ``.occmap`` file's bytes (:func:`occtool.formats.occmap.decode`);
+    a damaged or foreign file is one :class:`InputError` naming ``name``."""
+    return _from_file(occmap_decode(data, name), name)
+
+
+def load_map(path: Any) -> WorldMap:
+    """Read a ``.occmap`` file written by :meth:`WorldMap.save` (``occtool map`` writes
+    ``DIR/world.occmap``); a damaged file is an :class:`InputError`."""
+    return _from_file(read_map(path), str(path))
+
+
+def _from_file(arrays: MapArrays, name: str) -> WorldMap:
+    try:
+        return WorldMap.from_arrays(arrays)
+    except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
+        # Numbers the file holds that no map takes (a band upside down, a facing of 2).
+        raise unreadable(name, str(exc)) from None
+
+
+__all__ = ["UNIT", "RunReturns", "WorldMap", "build_world_map", "decode_map", "load_map", "position_ranges",
+           "returns_of_fused", "returns_of_positions"]
