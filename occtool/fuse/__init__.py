@@ -23,22 +23,25 @@ nearest return per pan degree (:func:`nearest_returns`: 720 bytes of distances a
 angles within the bin; a model read from a file, the :class:`Observation` a model set's
 file keeps, or in older files and single fits its return guard's distances at the bins'
 centres): :meth:`FusedMap.predict` joins them to the
-models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
-unknown grid over the robot's body band with its walls where the returns fall.
+models' occupancy, and the world map refitted from them (:func:`build_world_map`)
+draws the free / occupied / unknown grid over the robot's body band
+(:meth:`WorldMap.rasterise`) with its walls where the returns fall.
 :func:`fuse_log` fits only the log's keyframes (:func:`select_keyframes`).
 
 The parts, one concept a module (private; everything public is imported from here):
 
 ==============  =======================================================================
-``_combine``  the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
-``_map``      :class:`FusedMap`: storage, where each model speaks, queries, rasterising
-``_build``    :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
-``_walls``    walls as linear pieces: the returns summarised into segments, and who saw through them
-``_world``    :class:`WorldMap`: the run refitted in the world frame, a few kilobytes; its raster
+``_combine``    the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
+``_map``        :class:`FusedMap`: storage, where each model speaks, queries
+``_build``      :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
+``_walls``      walls as linear pieces: the returns summarised into segments, and who saw through them
+``_sightings``  :class:`RunReturns`: what every position of the run saw, per pan bin
+``_world``      :class:`WorldMap`: the run in the world frame, a few kilobytes; its raster; its file
+``_refit``      :func:`build_world_map`: a fused map (and its sightings) refitted as a :class:`WorldMap`
 ``_keyframes``  the positions of a log worth fitting (:func:`select_keyframes`)
-``_run``      :func:`map_of_run`: the map of a run (world map, raster, navigation region, frontiers)
-``_outputs``  :func:`write_run_map`: its files (world map, Nav2, MCAP, GeoJSON, summary)
-``_mapping``  :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
+``_run``        :func:`map_of_run`: the map of a run (world map, raster, navigation region, frontiers)
+``_outputs``    :func:`write_run_map`: its files (world map, Nav2, MCAP, GeoJSON, summary)
+``_mapping``    :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
 ==============  =======================================================================
 
 Below it, and below :mod:`occtool.formats` which writes its files: :mod:`occtool.observation`
@@ -68,8 +71,10 @@ from occtool.fuse._combine import (
     Evidence,
 )
 from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
-from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
-from occtool.fuse._world import RunReturns, WorldMap, build_world_map, decode_map, load_map, returns_of_positions
+from occtool.fuse._map import FRONT_MARGIN, FusedMap
+from occtool.fuse._refit import build_world_map
+from occtool.fuse._sightings import RunReturns, returns_of_positions
+from occtool.fuse._world import WorldMap, decode_map, load_map
 from occtool.observation import (
     LASER_RETURNS_PER_DEGREE,
     NO_OBSTACLE,
@@ -149,7 +154,6 @@ __all__ = [
     "REACH_BINS",
     "REACH_UNIT",
     "RETURN_KERNEL",
-    "RETURN_SHARE",
     "UNKNOWN",
     "Evidence",
     "FuseReport",

@@ -21,7 +21,9 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse._map import FusedMap
-from occtool.fuse._world import RunReturns, WorldMap, build_world_map
+from occtool.fuse._refit import build_world_map
+from occtool.fuse._sightings import RunReturns
+from occtool.fuse._world import WorldMap
 from occtool.raster import FREE, UNKNOWN, Raster
 from occtool.robot import Robot
 
