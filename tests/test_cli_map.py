@@ -226,8 +226,11 @@ def test_evaluate_log_prints_the_figures(mapped):
 
     if octomap_available():
         expected.add("octomap")
-        assert figures["octomap_bytes"] > 0 and figures["octomap_s"] >= 0
-        assert figures["auc"]["octomap"] > 0.5
+        # A build that was timed (not a default 0) and took less than the whole command.
+        assert figures["octomap_bytes"] > 0 and 0 < figures["octomap_s"] < 60
+        # OctoMap's defaults (0.7 / 0.4, clamped to [0.1192, 0.971]) are the textbook grid's fixed
+        # settings at the same 5 cm: scored on the same points, the two maps agree.
+        assert figures["auc"]["octomap"] == pytest.approx(figures["auc"]["textbook_fixed_0.05m"], abs=0.01)
     assert set(figures["auc"]) == expected
     assert figures["auc"]["fused_log_odds"] > 0.9
     assert figures["auc"]["textbook_0.05m"] > 0.5 and figures["textbook"]["textbook_0.1m"]["bytes"] > 0

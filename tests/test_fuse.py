@@ -259,6 +259,34 @@ def test_keyframes_skip_positions_that_see_nothing_new(room):
         select_keyframes(positions, LASER_ROBOT, cell=0.0)
 
 
+def test_keyframes_of_a_known_small_case():
+    from occtool.features import Features, Pose, Position
+
+    def wall(x, y, z=0.0, evidence=0.9):
+        """Returns along a wall at x (local frame), at heights z."""
+        return Features.from_xyz(np.full(y.size, x), y, np.full(y.size, z), evidence)
+
+    y = np.round(np.arange(-1.0, 1.0001, 0.05), 2)
+    longer = np.round(np.arange(-1.0, 1.4001, 0.05), 2)
+    positions = [
+        Position(0, wall(2.1, y), Pose(0.0, 0.0, 0.0, 0.0)),         # the first: kept
+        Position(1, wall(2.1, y), Pose(0.0, 0.0, 0.0, 0.0)),         # the same cells again: not kept
+        Position(2, wall(2.1, y), Pose(0.0, 0.0, 0.0, np.pi / 2)),   # turned: another wall, all new
+        Position(3, wall(1.1, y), Pose(1.0, 0.0, 0.0, 0.0)),         # closer, the first wall again: not kept
+        Position(4, wall(2.1, longer), Pose(0.0, 0.0, 0.0, 0.0)),    # 1-2 of 13 cells new: over 5 %, under 20 %
+        Position(5, wall(2.1, y), None),                            # no pose: kept, the fit decides
+        Position(6, wall(2.1, y, z=1.0), Pose(0.0, 0.0, 0.0, 0.0)),  # returns above the body band only: kept
+        Position(7, wall(2.1, y, evidence=0.0), Pose()),             # free rays only, no returns: kept
+    ]
+    assert select_keyframes(positions, LASER_ROBOT) == [0, 2, 4, 5, 6, 7]
+    assert select_keyframes(positions, LASER_ROBOT, new_share=0.2) == [0, 2, 5, 6, 7]
+    # Share 0 keeps every position; share 1 only those whose every cell is new.
+    assert select_keyframes(positions, LASER_ROBOT, new_share=0.0) == list(range(8))
+    assert select_keyframes(positions, LASER_ROBOT, new_share=1.0) == [0, 2, 5, 6, 7]
+    # Cells wide enough to hold the whole first wall in one: the longer one adds none.
+    assert 4 not in select_keyframes(positions, LASER_ROBOT, cell=5.0)
+
+
 def test_a_model_set_keeps_what_each_position_observed_and_maps_as_its_log(room, tmp_path):
     from occtool.fuse import fuse_model_set, reach_from_guard
     from occtool.modelset import fit_model_set
