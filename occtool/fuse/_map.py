@@ -54,8 +54,8 @@ class FusedMap:
         ``(len(trees), guard bins)`` uint16 millimetres from :func:`returns_from_guard`:
         each position's nearest return per pan bin (its return guard): :meth:`predict`
         joins them, and the world map (:func:`build_world_map`, which needs them) fits its
-        walls to them and draws its raster. :func:`fuse_log` keeps each bin's own nearest return instead
-        (:func:`nearest_returns`), with ``return_offsets``.
+        walls to them and draws its raster. :func:`fuse_log` keeps each bin's own nearest
+        return instead (:func:`nearest_returns`), with ``return_offsets``.
     return_offsets
         ``(len(trees), guard bins)`` uint8: each return's pan angle within its bin, in
         :data:`OFFSET_STEPS` steps (:func:`nearest_returns`); without, the returns lie at
@@ -65,9 +65,9 @@ class FusedMap:
         world map's walls seen from one side fall steeply on that side.
     return_reach
         Returns farther than this from their position (metres; :func:`fuse_log`: the fit's
-        focus range plus the robot's radius, the return guard's reach) mark the raster's
-        walls where they fall, but lend no occupancy to :meth:`predict` and clear no cells
-        past this distance: a far return's angle and its pose's error place it less surely.
+        focus range plus the robot's radius, the return guard's reach) lend no occupancy to
+        :meth:`predict`: a far return's angle and its pose's error place it less surely (the
+        world map's walls take them up to its own ``reach``).
 
     The trees' coefficients are kept as float32 (half the bytes; an occupancy moves by
     under 1e-6) and each tree is rebuilt in float64 for a query.

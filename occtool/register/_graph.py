@@ -47,6 +47,9 @@ def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool,
             if travel[k] >= mark:
                 queries.append(k)
                 mark = travel[k] + settings.loop_every
+        # Not occtool.neighbours: its queries are nearest-k below a reach (strictly), where
+        # this wants every pose within loop_radius (cKDTree's ball includes the boundary)
+        # in cKDTree's order, which picks the nearest among equally near poses.
         from scipy.spatial import cKDTree
 
         tree = cKDTree(xy)
