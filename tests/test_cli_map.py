@@ -312,3 +312,28 @@ def test_plot_map_draws_a_scale_map_in_greys(mapped, tmp_path):
     # Graded cells in greys other than black and white; unknown in pale blue, not grey.
     assert (grey & (pixels[:, 0] > 20) & (pixels[:, 0] < 235)).any()
     assert (np.abs(pixels - [199, 217, 237]).max(axis=1) <= 3).any()
+
+
+def test_the_library_map_writes_what_the_command_writes(mapped, tmp_path):
+    from occtool.fit import OccupancyRegressor
+    from occtool.fuse import map_log
+    from occtool.robot import Robot
+
+    log, out = mapped
+    estimator = OccupancyRegressor(robot=Robot(sensor_height=0.3, body_height=0.5))
+    result = map_log(log, tmp_path / "lib", estimator=estimator)
+    assert [p.name for p in result.written] == ["world.occmap", "map.yaml", "map.pgm", "map.mcap", "navigation.geojson",
+                                               "obstacles.geojson", "frontiers.geojson", "summary.json"]
+    for name in ("world.occmap", "map.pgm", "navigation.geojson", "obstacles.geojson", "frontiers.geojson"):
+        assert (tmp_path / "lib" / name).read_bytes() == (out / name).read_bytes(), name
+    assert json.loads((tmp_path / "lib" / "summary.json").read_text()) == json.loads(json.dumps(result.summary))
+    assert result.report is not None and result.registration is None
+    assert result.summary["positions"] == len(result.models) == result.report.positions
+
+
+def test_robot_overrides_name_robot_fields(model_set, tmp_path):
+    from occtool.errors import InputError
+    from occtool.fuse import map_model_set
+
+    with pytest.raises(InputError, match="no robot field wheels"):
+        map_model_set(model_set, tmp_path / "out", robot_overrides={"wheels": 4.0})
