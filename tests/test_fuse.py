@@ -13,7 +13,6 @@ from occtool.fit import OccupancyRegressor
 from occtool.fuse import (
     FREE,
     OCCUPIED,
-    UNKNOWN,
     FusedMap,
     build_world_map,
     fuse_log,
@@ -110,13 +109,13 @@ def test_float32_trees_read_as_the_models_within_1e6(room):
 
 def test_raster_rows_grow_with_y_and_walls_are_occupied(room):
     _, _, fused, _, _ = room
-    raster = fused.rasterise(0.05)
+    raster = build_world_map(fused).rasterise(0.05)
     _x0, _y0, x1, y1 = ROOM
     row, col, inside = raster.cell_of(np.array([[1.0, y1 + 0.02], [1.0, 0.25], [x1 + 1.5, 0.3]]))
-    assert inside.all()
+    # Behind the wall nothing was observed: off the raster, which Nav2 reads as unknown.
+    assert inside.tolist() == [True, True, False]
     assert raster.cells[row[0], col[0]] == OCCUPIED
     assert raster.cells[row[1], col[1]] == FREE
-    assert raster.cells[row[2], col[2]] == UNKNOWN
     # Rows go up in y: the top wall lies in a higher row than the robot's path.
     assert row[0] > row[1]
 
@@ -178,26 +177,23 @@ def test_evaluate_log_scores_the_fused_map(room):
 
 def test_occupied_cells_are_where_the_returns_are(room):
     _, _, fused, _, _ = room
-    raster = fused.rasterise(0.05)
+    raster = build_world_map(fused).rasterise(0.05)
     occupied = np.argwhere(raster.cells == OCCUPIED)
     centres = np.array(raster.origin) + (occupied[:, ::-1] + 0.5) * raster.resolution
     x0, y0, x1, y1 = ROOM
     to_wall = np.min(np.abs(np.column_stack([centres[:, 0] - x0, centres[:, 0] - x1,
                                              centres[:, 1] - y0, centres[:, 1] - y1])), axis=1)
-    # Every occupied cell holds a wall's return (its centre within a cell diagonal of it).
-    assert len(occupied) > 100 and to_wall.max() <= 0.05
-    # The models' own walls (their level crossing) lie in front: thicker.
-    model = fused.rasterise(0.05, from_returns=False)
-    assert (model.cells == OCCUPIED).sum() > len(occupied)
+    # Every occupied cell lies on a wall's band (its centre within WorldMap.wall_half_width of it
+    # past its thickness, on the 5 cm grid: 7.5 cm at most here).
+    assert len(occupied) > 100 and to_wall.max() <= 0.075 + 1e-9
 
 
-def test_raster_from_returns_needs_returns(room):
+def test_the_raster_needs_returns(room):
     _, _, fused, _, _ = room
     bare = FusedMap(fused.trees, fused.poses, fused.reaches, fused.robot)
     assert bare.returns is None
-    assert (bare.rasterise(0.1).cells == OCCUPIED).any()
     with pytest.raises(InputError, match="no returns"):
-        bare.rasterise(0.1, from_returns=True)
+        build_world_map(bare)
 
 
 def test_returns_are_the_guard_in_whole_millimetres():
@@ -263,6 +259,34 @@ def test_keyframes_skip_positions_that_see_nothing_new(room):
         select_keyframes(positions, LASER_ROBOT, cell=0.0)
 
 
+def test_keyframes_of_a_known_small_case():
+    from occtool.features import Features, Pose, Position
+
+    def wall(x, y, z=0.0, evidence=0.9):
+        """Returns along a wall at x (local frame), at heights z."""
+        return Features.from_xyz(np.full(y.size, x), y, np.full(y.size, z), evidence)
+
+    y = np.round(np.arange(-1.0, 1.0001, 0.05), 2)
+    longer = np.round(np.arange(-1.0, 1.4001, 0.05), 2)
+    positions = [
+        Position(0, wall(2.1, y), Pose(0.0, 0.0, 0.0, 0.0)),         # the first: kept
+        Position(1, wall(2.1, y), Pose(0.0, 0.0, 0.0, 0.0)),         # the same cells again: not kept
+        Position(2, wall(2.1, y), Pose(0.0, 0.0, 0.0, np.pi / 2)),   # turned: another wall, all new
+        Position(3, wall(1.1, y), Pose(1.0, 0.0, 0.0, 0.0)),         # closer, the first wall again: not kept
+        Position(4, wall(2.1, longer), Pose(0.0, 0.0, 0.0, 0.0)),    # 1-2 of 13 cells new: over 5 %, under 20 %
+        Position(5, wall(2.1, y), None),                            # no pose: kept, the fit decides
+        Position(6, wall(2.1, y, z=1.0), Pose(0.0, 0.0, 0.0, 0.0)),  # returns above the body band only: kept
+        Position(7, wall(2.1, y, evidence=0.0), Pose()),             # free rays only, no returns: kept
+    ]
+    assert select_keyframes(positions, LASER_ROBOT) == [0, 2, 4, 5, 6, 7]
+    assert select_keyframes(positions, LASER_ROBOT, new_share=0.2) == [0, 2, 5, 6, 7]
+    # Share 0 keeps every position; share 1 only those whose every cell is new.
+    assert select_keyframes(positions, LASER_ROBOT, new_share=0.0) == list(range(8))
+    assert select_keyframes(positions, LASER_ROBOT, new_share=1.0) == [0, 2, 5, 6, 7]
+    # Cells wide enough to hold the whole first wall in one: the longer one adds none.
+    assert 4 not in select_keyframes(positions, LASER_ROBOT, cell=5.0)
+
+
 def test_a_model_set_keeps_what_each_position_observed_and_maps_as_its_log(room, tmp_path):
     from occtool.fuse import fuse_model_set, reach_from_guard
     from occtool.modelset import fit_model_set
@@ -311,9 +335,9 @@ def test_fuse_log_fits_only_keyframes(room):
 
 
 def test_a_model_set_fuses_from_its_folder_as_from_its_models(room, tmp_path):
-    from occtool.formats.model import load_model, read_model_set
+    from occtool.formats.model import load_model
     from occtool.fuse import fuse_model_set
-    from occtool.modelset import fit_model_set
+    from occtool.modelset import fit_model_set, read_model_set
 
     path, *_ = room
     summary = fit_model_set(path, tmp_path / "models", estimator=OccupancyRegressor(robot=LASER_ROBOT), jobs=1)

@@ -24,7 +24,6 @@ from occtool.formats.model import (
     RUN_PLACEHOLDER,
     load_model,
     model_text,
-    read_model_set,
     with_run,
 )
 from occtool.modelset import (
@@ -32,6 +31,7 @@ from occtool.modelset import (
     find_model_sets,
     fit_model_set,
     log_set_name,
+    read_model_set,
 )
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -76,7 +76,8 @@ def test_degraded_intel_poses_are_registered_back(intel_slice, loop_closure, sca
 
 
 def test_the_ccny_scans_without_any_pose_are_registered_onto_one_another(shared_data):
-    from occtool.register import _in_world, _matrix, matched_share, scan_points
+    from occtool.register import matched_share, scan_points
+    from occtool.register._core import _in_world, _matrix
 
     log = read_log(shared_data / CCNY, group_by="message")
     log.positions = log.positions[:100]

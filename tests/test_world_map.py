@@ -15,14 +15,19 @@ from hypothesis import strategies as st
 from occtool.cli.main import cli
 from occtool.errors import InputError
 from occtool.fit import OccupancyRegressor
-from occtool.formats.occmap import decode, encode, quantise
-from occtool.fuse import FREE, OCCUPIED, UNKNOWN, WorldMap, build_world_map, fuse_log, load_map
+from occtool.formats.occmap import encode
+from occtool.fuse import FREE, OCCUPIED, UNKNOWN, WorldMap, build_world_map, decode_map, fuse_log, load_map
 from occtool.fuse._walls import fit_segments, seen_through
 from occtool.io import read_log
 from occtool.robot import Robot
 
 LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
 BAND = (-0.25, 0.2)
+
+
+def quantise(world):
+    """``world`` rounded to its file's precision (what build_world_map returns)."""
+    return world.quantised()
 
 
 def test_returns_on_a_line_make_one_segment_end_to_end():
@@ -129,7 +134,7 @@ def test_a_segment_turned_round_by_the_file_keeps_the_side_it_faces():
     assert (coded.end - coded.start)[0, 0] > 0 and coded.facing.tolist() == [-1]
     points = np.array([[0.0, -0.15, 0.0], [0.0, 0.15, 0.0], [0.3, 0.3, 0.0]])
     assert np.allclose(coded.predict(points), world.predict(points))
-    assert np.array_equal(decode(encode(coded)).facing, coded.facing)
+    assert np.array_equal(decode_map(encode(coded)).facing, coded.facing)
 
 
 def test_free_space_reads_less_sure_away_from_the_positions():
@@ -179,7 +184,7 @@ def test_walls_few_positions_saw_through_read_less_occupied():
 def test_frontiers_ignore_a_walls_uncertain_edge():
     """An unknown cell the run observed (a wall's edge) is no frontier; one nothing observed is."""
     from occtool.fuse import Raster
-    from occtool.mapping import PlacedMap, _frontiers
+    from occtool.fuse._run import PlacedMap, _frontiers
 
     cells = np.full((1, 40), FREE, dtype=np.uint8)
     cells[0, 20:23] = UNKNOWN  # a wall's edge, observed
@@ -252,7 +257,7 @@ def test_segments_keep_their_geometry_in_six_bytes_and_two_bits():
     # A box's five vertices are anchors (its sides are longer than a step), in uint16; its
     # ring, part and geometry offsets uint16 too.
     assert coded.nbytes == 6 * 200 + 200 // 4 + tiles + 5 * (2 + 4) + 3 * 2 * 2
-    assert np.array_equal(decode(encode(coded)).end, coded.end)
+    assert np.array_equal(decode_map(encode(coded)).end, coded.end)
 
 
 def test_a_crowded_tile_and_long_steps_round_trip():
@@ -264,7 +269,7 @@ def test_a_crowded_tile_and_long_steps_round_trip():
     start = rng.uniform(0, 1.0, (400, 2))
     world = quantise(WorldMap(start, start + [0.05, 0.0], np.full(400, 0.01), np.ones(400),
                               shapely.MultiPolygon([shapely.Point(0.5, 0.5).buffer(20.0, 64)]), band=BAND))
-    loaded = decode(encode(world))
+    loaded = decode_map(encode(world))
     assert np.array_equal(loaded.start, world.start) and loaded.region.equals_exact(world.region, 0)
     counts = dict(_arrays(world)[1])["tile_counts"]
     assert counts.dtype == np.uint16 and counts.max() > 255
@@ -313,13 +318,13 @@ def test_version_3_files_answer_as_they_did_and_are_rewritten_smaller():
     for name in ("start", "end", "thickness", "trust", "facing"):
         setattr(shuffled, name, getattr(world, name)[order])
     old_bytes = _version_3(shuffled)
-    old = decode(old_bytes, "old.occmap")
+    old = decode_map(old_bytes, "old.occmap")
     points = np.column_stack([rng.uniform(-8, 8, (4000, 2)), np.zeros(4000)])
     assert np.array_equal(old.predict(points), world.predict(points))
     # Read into the file's order: tile by tile, as fitted within a tile.
     rows = lambda m: np.hstack([m.start, m.end, m.thickness[:, None], m.trust[:, None], m.facing[:, None]])  # noqa: E731
     assert np.array_equal(np.unique(rows(old), axis=0), np.unique(rows(world), axis=0))
-    assert encode(old) == encode(decode(encode(old)))
+    assert encode(old) == encode(decode_map(encode(old)))
     assert len(encode(old)) == len(encode(world)) < 0.85 * len(old_bytes)
 
 
@@ -344,15 +349,15 @@ def _version_1(world):
 
 def test_version_1_files_still_load_and_later_ones_are_refused():
     world = quantise(WorldMap([[0.0, 0.0]], [[1.0, 0.0]], [0.01], [1.0], shapely.MultiPolygon(), band=BAND))
-    old = decode(_version_1(world), "old.occmap")
+    old = decode_map(_version_1(world), "old.occmap")
     assert np.allclose(old.start, world.start, atol=0.003) and np.allclose(old.end, world.end, atol=0.003)
-    assert old.half_unit is None and decode(encode(old)).half_unit is not None  # rewritten as version 4
+    assert old.half_unit is None and decode_map(encode(old)).half_unit is not None  # rewritten as version 4
     newer = _version_1(world).replace(b'"version": 1', b'"version": 9')
     import struct
     import zlib
     newer = newer[:-4] + struct.pack("<I", zlib.crc32(newer[:-4]))
     with pytest.raises(InputError, match="format version 9, this occtool reads 1, 2, 3 and 4"):
-        decode(newer, "new.occmap")
+        decode_map(newer, "new.occmap")
 
 
 @pytest.fixture(scope="module")
@@ -397,12 +402,12 @@ def test_damaged_files_are_one_line_errors(room_map, tmp_path):
     for bad, why in ((data[:-10], "checksum"), (data[:20], "checksum"), (b"", "signature"),
                      (b"PK\x03\x04" + data[4:], "signature")):
         with pytest.raises(InputError, match=why) as caught:
-            decode(bad, "world.occmap")
+            decode_map(bad, "world.occmap")
         assert "\n" not in str(caught.value)
     flipped = bytearray(data)
     flipped[len(data) // 2] ^= 0x10
     with pytest.raises(InputError, match="damaged"):
-        decode(bytes(flipped))
+        decode_map(bytes(flipped))
     with pytest.raises(InputError, match="cannot read"):
         load_map(tmp_path / "absent.occmap")
     # Codes no writer makes, under a valid checksum: a facing code 3, a tile holding more
@@ -411,7 +416,7 @@ def test_damaged_files_are_one_line_errors(room_map, tmp_path):
                              ("tile_counts", 0xFF, "segment arrays missing or misshapen: tile counts for"),
                              ("region_steps", 0x00, "observed region is malformed: .* anchor codes")):
         with pytest.raises(InputError, match=why) as caught:
-            decode(_with_byte(data, name, value), "world.occmap")
+            decode_map(_with_byte(data, name, value), "world.occmap")
         assert "\n" not in str(caught.value)
 
 
@@ -443,7 +448,7 @@ def test_fuzzed_files_never_escape_as_another_error(room_map, data):
     for at, value in edits:
         raw[at] = value
     try:
-        decoded = decode(bytes(raw[:cut]) if cut < len(raw) else bytes(raw))
+        decoded = decode_map(bytes(raw[:cut]) if cut < len(raw) else bytes(raw))
     except InputError as exc:
         assert "\n" not in str(exc)
     else:

@@ -22,6 +22,38 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
     return float(value)
 
 
+#: What a model set's map takes from the command line: the map's own options and the robot's
+#: (its navigation maps'); the fit, log, keyframe and registration options apply to a log.
+MODEL_SET_OPTIONS = frozenset({
+    "source", "output", "resolution", "nav2_mode", "threshold", "combination", "max_range", "simplify", "precision",
+    "origin", "mcap", "overwrite", "config", "register",
+})
+#: The robot options and the :class:`occtool.robot.Robot` fields they set.
+ROBOT_FIELDS = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
+                "ground_clearance": "ground_clearance"}
+
+
+def _given(ctx: click.Context) -> dict[str, click.Parameter]:
+    """The parameters set on the command line or in a --config file (not left at their defaults)."""
+    from click.core import ParameterSource
+
+    return {p.name: p for p in ctx.command.params
+            if p.name and ctx.get_parameter_source(p.name) not in (ParameterSource.DEFAULT, None)}
+
+
+def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, float]:
+    """The robot fields a model set's map overrides; a usage error naming the first option
+    given that cannot apply to a set (its models are fitted already)."""
+    given = _given(ctx)
+    for name, param in given.items():
+        if name in MODEL_SET_OPTIONS or name in ROBOT_FIELDS:
+            continue
+        flags = param.opts if not (param.secondary_opts and ctx.params.get(name) is False) else param.secondary_opts
+        flag = max(flags, key=len) if flags else name
+        raise click.UsageError(f"{flag} applies to a log, not to a model set (its models are fitted already)", ctx)
+    return {field: kwargs[name] for name, field in ROBOT_FIELDS.items() if name in given}
+
+
 @click.command(short_help="Fuse every position of a log into one world map (Nav2, Foxglove, GeoJSON).")
 @click.argument("source", metavar="LOG|MODELS", type=click.Path(exists=True, dir_okay=True))
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
@@ -73,19 +105,21 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
     obstacle, within its reach); places no position observed stay unknown (205 in the
     Nav2 map), never free. For a 2D laser give its height: --sensor-height 0.3
     --body-height 0.5 --no-return-range 5 (docs/map.md).
+
+    MODELS were fitted already: the robot options given replace the fitted robot's in the
+    navigation maps (the navigation region, obstacles and frontiers), and the fit, log,
+    keyframe and registration options are refused.
     """
     import logging
     from pathlib import Path
 
-    from occtool.cli.options import fit_from_kwargs
-    from occtool.cli.register_options import read_map_log, trajectory, write_map_poses
-    from occtool.errors import InputError
-    from occtool.fuse import fuse_log, fuse_model_set
-    from occtool.mapping import map_of_run, output_paths, write_run_map
+    from occtool import fuse
+    from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs, read_log_from_kwargs
 
     logger = logging.getLogger("occtool.map")
     georeference = None
     if origin is not None:
+        from occtool.errors import InputError
         from occtool.formats.wgs84 import Georeference, parse_origin
 
         try:
@@ -100,48 +134,45 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
             raise click.ClickException("--nav2-mode scale writes a PNG and needs Pillow: "
                                        "pip install 'occtool[png]'") from None
     if not overwrite:
-        for path in output_paths(output, nav2_mode):
+        for path in fuse.output_paths(output, nav2_mode):
             if path.exists():
                 raise click.ClickException(f"{path} exists already (pass --overwrite to replace it)")
     if Path(output).exists() and not Path(output).is_dir():
         raise click.ClickException(f"{output} exists and is not a folder")
-    is_models = Path(source).is_dir() or Path(source).name == "index.json"
-    registration = None
-    if is_models and kwargs.get("register"):
-        raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
-    if is_models:
-        fused, models, positions = fuse_model_set(source, combination=combination, threshold=threshold)
-        sightings = None
-        logger.info("%d models read from %s", len(models), source)
-        extra = {"source": str(source), "fitted_here": False}
+    written: dict[str, Any] = {
+        "resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
+        "max_range": max_range, "simplify": simplify, "precision": precision, "georeference": georeference,
+        "mcap": mcap, "overwrite": overwrite}
+    if Path(source).is_dir() or Path(source).name == "index.json":
+        if kwargs.get("register"):
+            raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
+        robot = _model_set_robot(click.get_current_context(), kwargs)
+        result = fuse.map_model_set(source, output, robot_overrides=robot, **written)
+        logger.info("%d models read from %s", len(result.models), source)
     else:
-        template = fit_from_kwargs(kwargs, seed=seed)
-        log, registration = read_map_log(source, kwargs)
-        fused, models, report = fuse_log(log, template, combination=combination, threshold=threshold,
-                                         keyframe_share=keyframe_share)
+        from occtool.register import RegistrationSettings
+
+        estimator = fit_from_kwargs(kwargs, seed=seed)
+        registration = RegistrationSettings(loop_closure=kwargs.pop("loop_closure", True))
+        register = kwargs.pop("register", None)
+        read_options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
+        if "topics" in read_options:
+            read_options["topics"] = list(read_options["topics"]) or None
+        log = read_log_from_kwargs(source, read_options) if str(source) == "-" else source
+        result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
+                              registration=registration, keyframe_share=keyframe_share, **written)
+        report = result.report
+        assert report is not None
         for note in report.notes:
             logger.warning("%s: %s", Path(source).name, note)
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
-        positions = list(zip(report.fitted, fused.poses, fused.stamps))
-        sightings = report.sightings
         logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,
                     report.fit_seconds, len(report.not_keyframes))
-        extra = {"source": str(source), "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
-                 "skipped_positions": [index for index, _ in report.skipped],
-                 "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
-    run = map_of_run(fused, models, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold}, sightings=sightings)
-    run.trajectory = trajectory(registration)
-    if registration is not None:
-        extra["registration"] = registration.to_dict()
-    written = write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
-                            georeference=georeference, extra_summary=extra, nav2_mode=nav2_mode)
-    written += [p for p in [write_map_poses(registration, output, overwrite)] if p is not None]
-    summary = run.summary()
+    summary = result.summary
     logger.info("fused map: %d positions, %.1f KB; world map %s: %d wall segments, %.1f KB; raster %dx%d: %s",
                 summary["positions"], summary["fused_map_bytes"] / 1e3, Path(output) / "world.occmap",
                 summary["world_map"]["segments"], summary["world_map"]["bytes"] / 1e3, summary["raster"]["columns"],
                 summary["raster"]["rows"], summary["raster"]["cells"])
-    for path in written:
+    for path in result.written:
         logger.debug("wrote %s", path)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from occtool.errors import MissingDependencyError
-from occtool.fuse import FREE, OCCUPIED
+from occtool.raster import FREE, OCCUPIED
 
 GRID_TOPIC = "/map"
 SCENE_TOPIC = "/positions"
@@ -59,7 +59,7 @@ def _nanoseconds(stamp: float | None, fallback: int) -> int:
 
 
 def run_map_mcap_bytes(run: Any) -> bytes:
-    """The MCAP file of a :class:`occtool.mapping.RunMap`, as bytes (the caller writes them atomically)."""
+    """The MCAP file of a :class:`occtool.fuse.RunMap`, as bytes (the caller writes them atomically)."""
     (Color_pb2, Grid_pb2, LinePrimitive_pb2, PackedElementField_pb2, Point3_pb2, Pose_pb2, Quaternion_pb2,
      SceneEntity_pb2, SceneUpdate_pb2, SpherePrimitive_pb2, Vector2_pb2, Vector3_pb2, Writer) = _imports()
     from google.protobuf.timestamp_pb2 import Timestamp

@@ -16,15 +16,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import stat
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from occtool._files import atomic_write
-from occtool._json import loads, read_json
+from occtool._json import read_json
 from occtool.errors import InputError, ModelFormatError
 from occtool.robot import Robot
 from occtool.sensor import SensorModel
@@ -32,8 +30,6 @@ from occtool.tree import InverseTree, MinMaxTree
 
 MODEL_FORMAT = "occtool-model"
 INVERSE_FORMAT = "occtool-inverse"
-#: The index of a model set: one model per robot position (``occtool fit LOG -o DIR/``).
-MODEL_SET_FORMAT = "occtool-model-set"
 #: The newest format version this occtool writes and reads.
 FORMAT_VERSION = 1
 
@@ -55,7 +51,7 @@ def _fit_params() -> tuple[str, ...]:
 
 def model_to_dict(model: Any, *, run: dict | None = None, observed: Any | None = None) -> dict[str, Any]:
     """The JSON-ready content of a model file for a fitted :class:`OccupancyRegressor`;
-    ``observed``: what its position observed (:class:`occtool.fuse.Observation`; by default
+    ``observed``: what its position observed (:class:`occtool.observation.Observation`; by default
     the model's own ``observed_``, read from a file, if any)."""
     model._check_fitted()
     tree = model.tree_
@@ -94,9 +90,9 @@ def _optional_block(data: dict[str, Any], key: str, reader: Any, source: str) ->
 
 
 def _observed_from(data: dict[str, Any], source: str) -> Any:
-    """The file's :class:`occtool.fuse.Observation` (``None`` when it has none: a single fit,
+    """The file's :class:`occtool.observation.Observation` (``None`` when it has none: a single fit,
     files written before model sets kept one)."""
-    from occtool.fuse._reach import Observation
+    from occtool.observation import Observation
 
     return _optional_block(data, "observed", Observation.from_dict, source)
 
@@ -456,125 +452,16 @@ def read_navigable(path: str | os.PathLike[str]) -> Navigable:
                      robot, _guard_from(data, str(path)))
 
 
-def save_model_set_index(folder: str | os.PathLike[str], entries: list[dict[str, Any]], *, source: str,
-                         complete: bool = True, failed: list[dict[str, Any]] | None = None) -> None:
-    """Write ``folder/index.json`` for a model set (one model file per robot position), atomically.
-
-    Each entry has ``position``, ``file``, ``pose`` (a dict in the world frame, or
-    ``None``), ``stamp`` and ``features``; :func:`read_model_set` reads it back.
-    ``complete`` is false while a fit is running or after it was interrupted;
-    ``failed`` lists ``{"position", "reason"}`` of positions that could not be fitted.
-    """
-    header = json.dumps({"format": MODEL_SET_FORMAT, "format_version": 1, "source": source,
-                         "frame": "base_link", "poses_frame": "map", "complete": bool(complete),
-                         "failed": list(failed or []), "models": "@@models@@"}, indent=1)
-    # One entry a line, by the C encoder: a running fit rewrites the index often.
-    models = "[\n  " + ",\n  ".join(json.dumps(entry) for entry in entries) + "\n ]" if entries else "[]"
-    with atomic_write(Path(folder) / "index.json", "w") as handle:
-        handle.write(header.replace('"@@models@@"', models, 1) + "\n")
-
-
-#: Largest index.json read (a set of a million positions takes about 300 MB).
-MAX_INDEX_BYTES = 512 * 1024 * 1024
-
-
-def _set_member(folder: Path, name: str, where: str) -> Path:
-    """``folder / name`` if it names a regular file inside the set's folder, else InputError.
-
-    Checked with ``os.stat`` before anything opens it: a FIFO or device would block or
-    never end, and ``../x.json``, an absolute path or a link out of the folder would read
-    files the set does not own.
-    """
-    relative = Path(name)
-    if not name or relative.is_absolute() or ".." in relative.parts or "\x00" in name:
-        raise InputError(f"{where}: file {name!r} must be a name inside the set's folder")
-    target = folder / relative
-    try:
-        inside = target.resolve().is_relative_to(folder.resolve())
-        mode = os.stat(target).st_mode
-    except FileNotFoundError:
-        raise InputError(f"{where}: file {name!r} does not exist") from None
-    except (OSError, RuntimeError) as exc:  # a loop of links, a name too long
-        raise InputError(f"{where}: file {name!r} cannot be read ({exc})") from None
-    if not inside:
-        raise InputError(f"{where}: file {name!r} leads out of the set's folder")
-    if not stat.S_ISREG(mode):
-        raise InputError(f"{where}: file {name!r} is not a regular file")
-    return target
-
-
-def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, Any]]]:
-    """The folder and entries of a model set (``occtool fit -o DIR/``): ``DIR`` or ``DIR/index.json``.
-
-    Returns
-    -------
-    folder, entries
-        Each entry has ``position``, ``file`` and ``pose`` (a dict or ``None``); every
-        ``file`` is a regular file inside ``folder`` and no position appears twice.
-
-    Raises
-    ------
-    InputError
-        If the index is missing or malformed, or an entry names a file outside the
-        folder, a missing or non-regular file, or a position listed before; the message
-        names the file.
-    """
-    index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
-    try:
-        mode = os.stat(index).st_mode
-    except OSError:
-        mode = 0
-    if not stat.S_ISREG(mode):
-        raise InputError(
-            f"{path}: a folder without index.json is not a model set (write one with `occtool fit -o DIR/`)"
-        )
-    if os.stat(index).st_size > MAX_INDEX_BYTES:
-        raise InputError(f"{index}: larger than {MAX_INDEX_BYTES >> 20} MB, not a model-set index")
-    try:
-        data = loads(index.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{index}: not valid JSON ({exc})") from None
-    is_index = isinstance(data, dict) and data.get("format") == MODEL_SET_FORMAT
-    if not (is_index and isinstance(data.get("models"), list)):
-        raise InputError(f"{index}: not an occtool model-set index")
-    folder = index.parent
-    entries = []
-    positions: set[int] = set()
-    files: set[str] = set()
-    for number, entry in enumerate(data["models"], start=1):
-        named = isinstance(entry, dict) and isinstance(entry.get("file"), str)
-        if not (named and isinstance(entry.get("position"), int) and not isinstance(entry.get("position"), bool)):
-            raise InputError(f"{index}: model entry {number} needs an integer 'position' and a 'file'")
-        if entry["position"] < 0:
-            raise InputError(f"{index}: model entry {number}'s position {entry['position']} is negative")
-        if entry.get("pose") is not None and not isinstance(entry["pose"], dict):
-            raise InputError(f"{index}: model entry {number}'s 'pose' is not an object")
-        if entry["position"] in positions:
-            raise InputError(f"{index}: position {entry['position']} is listed twice")
-        _set_member(folder, entry["file"], f"{index}: model entry {number}")
-        if os.path.normpath(entry["file"]) in files:
-            raise InputError(f"{index}: file {entry['file']!r} is listed twice")
-        positions.add(entry["position"])
-        files.add(os.path.normpath(entry["file"]))
-        entries.append(entry)
-    if not entries:
-        raise InputError(f"{index}: the model set lists no models")
-    return folder, entries
-
-
 __all__ = [
     "FORMAT_VERSION",
     "INVERSE_FORMAT",
     "MODEL_FORMAT",
-    "MODEL_SET_FORMAT",
     "inverse_to_dict",
     "load_inverse",
     "load_model",
     "model_from_dict",
     "model_to_dict",
     "read_any",
-    "read_model_set",
     "save_inverse",
     "save_model",
-    "save_model_set_index",
 ]

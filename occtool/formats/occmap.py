@@ -1,4 +1,4 @@
-"""The ``.occmap`` file: one :class:`~occtool.fuse._world.WorldMap` on disk, versioned and checked.
+"""The ``.occmap`` file: one world map (:class:`occtool.fuse.WorldMap`) on disk, versioned and checked.
 
 Layout (little-endian)::
 
@@ -31,8 +31,13 @@ units; version 3 stored every vertex as ``region_coords`` uint16), and its
 quantised to this precision when it is built (:func:`quantise`, which also lists its
 segments in the file's order), so a map read back answers exactly as the one written;
 files of versions 1-3 are read into that order too.
-:func:`load_map` checks the magic, the version, the sizes, the checksum and every value:
+:func:`decode` checks the magic, the version, the sizes, the checksum and every value:
 a damaged or foreign file is one :class:`~occtool.errors.InputError`.
+
+This module knows the file, not the map: :func:`encode` takes anything with a world map's
+attributes, and :func:`quantise` and :func:`decode` give the numbers as :class:`MapArrays`,
+which :mod:`occtool.fuse` makes a :class:`~occtool.fuse.WorldMap` of
+(:func:`occtool.fuse.load_map`).
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ import math
 import os
 import struct
 import zlib
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -63,6 +69,38 @@ DIRECTION_STEPS = 256
 #: A header longer than this is not an occmap header (bytes).
 MAX_HEADER = 1 << 20
 _DTYPES = {"int8": np.int8, "uint8": np.uint8, "uint16": np.uint16, "uint32": np.uint32}
+#: Coordinates are stored in this unit (metres) unless a map is too wide for it: 5 mm.
+UNIT = 0.005
+
+
+@dataclass
+class MapArrays:
+    """A world map's numbers at the file's precision, its segments in the file's order:
+    what :func:`quantise` rounds a map to and :func:`decode` reads, the keywords of
+    :class:`occtool.fuse.WorldMap` (``settings`` the scalar ones but ``band``) and the
+    file's grid (``unit``, ``origin``; ``half_unit`` ``None`` in a version 1 file)."""
+
+    start: np.ndarray
+    end: np.ndarray
+    thickness: np.ndarray
+    trust: np.ndarray
+    region: Any
+    band: tuple[float, float]
+    positions: np.ndarray | None
+    facing: np.ndarray
+    settings: dict[str, float]
+    unit: float
+    origin: np.ndarray
+    half_unit: float | None
+
+    def params(self) -> dict[str, Any]:
+        """The scalar settings as a map's ``params()`` gives them (the header's ``settings``)."""
+        return {"band": list(self.band), **self.settings}
+
+
+def unreadable(name: str, why: str) -> InputError:
+    """The one error a damaged or foreign map file gives."""
+    return InputError(f"{name}: not a readable occtool map ({why})")
 
 
 def _grid(lower: np.ndarray, upper: np.ndarray, unit: float) -> tuple[np.ndarray, float]:
@@ -155,12 +193,10 @@ def _stepped_vertices(steps: np.ndarray, anchors: np.ndarray) -> np.ndarray:
     return coords
 
 
-def quantise(world: Any, unit: float | None = None) -> Any:
-    """``world`` with its numbers rounded to what the file stores and its segments listed tile
-    by tile, as the file lists them (a new map; same settings)."""
+def quantise(world: Any, unit: float | None = None) -> MapArrays:
+    """``world``'s numbers rounded to what the file stores and its segments listed tile by
+    tile, as the file lists them (same settings)."""
     import shapely
-
-    from occtool.fuse._world import UNIT, WorldMap
 
     unit = UNIT if unit is None else float(unit)
     lower, upper = world.bounds
@@ -186,10 +222,8 @@ def quantise(world: Any, unit: float | None = None) -> Any:
         region = _areal(shapely.transform(_areal(shapely.set_precision(region, unit)), snap))
     params = world.params()
     band = params.pop("band")
-    quantised = WorldMap(start, end, thickness, trust, region, band=band, positions=snap(world.positions),
-                         facing=facing, **params)
-    quantised.unit, quantised.origin, quantised.half_unit = unit, origin, half_unit
-    return quantised
+    return MapArrays(start, end, thickness, trust, region, (band[0], band[1]), snap(world.positions), facing, params,
+                     unit, origin, half_unit)
 
 
 def _pack_facing(facing: np.ndarray) -> np.ndarray:
@@ -283,14 +317,12 @@ def save_map(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True
     return len(data)
 
 
-def decode(data: bytes, name: str = "occmap") -> Any:
-    """A :class:`WorldMap` from the file's bytes; :class:`InputError` naming ``name`` if damaged."""
+def decode(data: bytes, name: str = "occmap") -> MapArrays:
+    """A world map's numbers from the file's bytes; :class:`InputError` naming ``name`` if damaged."""
     import shapely
 
-    from occtool.fuse._world import WorldMap
-
     def fail(why: str) -> InputError:
-        return InputError(f"{name}: not a readable occtool map ({why})")
+        return unreadable(name, why)
 
     if len(data) < len(MAGIC) + 8 or not data.startswith(MAGIC):
         raise fail("no occmap signature")
@@ -370,17 +402,16 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         band = settings.pop("band")
         positions = (origin + arrays["positions"].reshape(-1, 2).astype(np.float64) * unit
                      if "positions" in arrays else None)
-        world = WorldMap(first, last, thickness, trust, region, positions=positions, facing=facing,
-                         band=(float(band[0]), float(band[1])), **{k: float(v) for k, v in settings.items()})
-    except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
+        band = (float(band[0]), float(band[1]))
+        scalars = {k: float(v) for k, v in settings.items()}
+    except (TypeError, KeyError, IndexError, ValueError) as exc:
         raise fail(str(exc)) from None
-    world.unit, world.origin, world.half_unit = unit, origin, half_unit
-    return world
+    return MapArrays(first, last, thickness, trust, region, band, positions, facing, scalars, unit, origin, half_unit)
 
 
-def load_map(path: str | os.PathLike[str]) -> Any:
-    """Read a ``.occmap`` file written by :meth:`WorldMap.save` (``occtool map`` writes
-    ``DIR/world.occmap``); a damaged file is an :class:`InputError`."""
+def read_map(path: str | os.PathLike[str]) -> MapArrays:
+    """:func:`decode` of a ``.occmap`` file (``occtool map`` writes ``DIR/world.occmap``);
+    a file that cannot be read or is damaged is an :class:`InputError`."""
     try:
         with open(path, "rb") as stream:
             data = stream.read()
@@ -389,4 +420,5 @@ def load_map(path: str | os.PathLike[str]) -> Any:
     return decode(data, str(path))
 
 
-__all__ = ["FORMAT_VERSION", "MAGIC", "array_bytes", "decode", "encode", "load_map", "quantise", "save_map"]
+__all__ = ["FORMAT_VERSION", "MAGIC", "UNIT", "MapArrays", "array_bytes", "decode", "encode", "quantise", "read_map",
+           "save_map", "unreadable"]

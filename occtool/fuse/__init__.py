@@ -23,30 +23,43 @@ nearest return per pan degree (:func:`nearest_returns`: 720 bytes of distances a
 angles within the bin; a model read from a file, the :class:`Observation` a model set's
 file keeps, or in older files and single fits its return guard's distances at the bins'
 centres): :meth:`FusedMap.predict` joins them to the
-models' occupancy, and :meth:`FusedMap.rasterise` draws the map as a free / occupied /
-unknown grid over the robot's body band with its walls where the returns fall.
-:func:`fuse_log` fits only the log's keyframes (:mod:`occtool.keyframes`).
+models' occupancy, and the world map refitted from them (:func:`build_world_map`)
+draws the free / occupied / unknown grid over the robot's body band
+(:meth:`WorldMap.rasterise`) with its walls where the returns fall.
+:func:`fuse_log` fits only the log's keyframes (:func:`select_keyframes`).
 
 The parts, one concept a module (private; everything public is imported from here):
 
-============  =========================================================================
-``_reach``    what a position observed: reach and first obstacle per pan bin, returns
-``_combine``  the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
-``_map``      :class:`FusedMap`: storage, where each model speaks, queries, rasterising
-``_raster``   :class:`Raster` and the Nav2 pixel values
-``_build``    :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
-``_walls``    walls as linear pieces: the returns summarised into segments, and who saw through them
-``_world``    :class:`WorldMap`: the run refitted in the world frame, a few kilobytes; its raster
-``_occmap``   the ``.occmap`` file: :meth:`WorldMap.save`, :func:`load_map`
-============  =========================================================================
+==============  =======================================================================
+``_combine``    the combination rules (log-odds, Dempster-Shafer, mean) and :class:`Evidence`
+``_map``        :class:`FusedMap`: storage, where each model speaks, queries
+``_build``      :func:`fuse_log`, :func:`fuse_models`, :func:`fuse_model_set` and :class:`FuseReport`
+``_walls``      walls as linear pieces: the returns summarised into segments, and who saw through them
+``_sightings``  :class:`RunReturns`: what every position of the run saw, per pan bin
+``_world``      :class:`WorldMap`: the run in the world frame, a few kilobytes; its raster; its file
+``_refit``      :func:`build_world_map`: a fused map (and its sightings) refitted as a :class:`WorldMap`
+``_keyframes``  the positions of a log worth fitting (:func:`select_keyframes`)
+``_run``        :func:`map_of_run`: the map of a run (world map, raster, navigation region, frontiers)
+``_outputs``    :func:`write_run_map`: its files (world map, Nav2, MCAP, GeoJSON, summary)
+``_mapping``    :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
+==============  =======================================================================
+
+Below it, and below :mod:`occtool.formats` which writes its files: :mod:`occtool.observation`
+(what a position observed: reach and first obstacle per pan bin, returns; the
+:class:`Observation` a model file keeps) and :mod:`occtool.raster` (:class:`Raster` and the
+Nav2 pixel values). :mod:`occtool.formats.occmap` reads and writes the ``.occmap`` file's
+numbers; :func:`load_map` makes a :class:`WorldMap` of them.
 
 A :class:`FusedMap` is the run as its local models saw it (a megabyte and more for a
 building); :func:`build_world_map` refits it into a :class:`WorldMap` (walls as MIN nodes
 over linear pieces in world x, y under one MAX, over the region some position observed),
 the map ``occtool map`` writes as ``world.occmap`` and draws for Nav2 (docs/map.md).
+:func:`map_log` and :func:`map_model_set` are ``occtool map`` as library calls.
 """
 
-from occtool.formats.occmap import load_map
+from typing import TYPE_CHECKING
+
+from occtool._lazy import lazy_attributes
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set, fuse_models
 from occtool.fuse._combine import (
     CLAMP,
@@ -57,32 +70,76 @@ from occtool.fuse._combine import (
     RETURN_KERNEL,
     Evidence,
 )
-from occtool.fuse._map import FRONT_MARGIN, RETURN_SHARE, FusedMap
-from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
-from occtool.fuse._reach import (
+from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
+from occtool.fuse._map import FRONT_MARGIN, FusedMap
+from occtool.fuse._refit import build_world_map
+from occtool.fuse._sightings import RunReturns, returns_of_positions
+from occtool.fuse._world import WorldMap, decode_map, load_map
+from occtool.observation import (
+    LASER_RETURNS_PER_DEGREE,
     NO_OBSTACLE,
     OFFSET_STEPS,
     REACH_BINS,
     REACH_UNIT,
     Observation,
+    is_scanning_laser,
     nearest_returns,
     observe,
     observed_reach,
     reach_from_guard,
     returns_from_guard,
-)
-from occtool.fuse._world import (
-    LASER_RETURNS_PER_DEGREE,
-    RunReturns,
-    WorldMap,
-    build_world_map,
-    is_scanning_laser,
-    returns_of_positions,
     returns_per_degree,
 )
-from occtool.keyframes import select_keyframes
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+
+# The map of a run and its writers, imported on first use (PEP 562): they import shapely
+# at their top, and `import occtool.fuse` stays as light as it was without them.
+_LAZY: dict[str, str] = {
+    "FRONTIER_LOOKAHEAD": "occtool.fuse._run",
+    "PlacedMap": "occtool.fuse._run",
+    "RunMap": "occtool.fuse._run",
+    "map_of_run": "occtool.fuse._run",
+    "LAYERS": "occtool.fuse._outputs",
+    "NAV2_MODES": "occtool.fuse._outputs",
+    "check_outputs": "occtool.fuse._outputs",
+    "layer_collections": "occtool.fuse._outputs",
+    "output_paths": "occtool.fuse._outputs",
+    "write_run_map": "occtool.fuse._outputs",
+    "MapResult": "occtool.fuse._mapping",
+    "map_log": "occtool.fuse._mapping",
+    "map_model_set": "occtool.fuse._mapping",
+}
+
+if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checkers and IDEs
+    from occtool.fuse._mapping import MapResult, map_log, map_model_set
+    from occtool.fuse._outputs import (
+        LAYERS,
+        NAV2_MODES,
+        check_outputs,
+        layer_collections,
+        output_paths,
+        write_run_map,
+    )
+    from occtool.fuse._run import FRONTIER_LOOKAHEAD, PlacedMap, RunMap, map_of_run
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
+    "FRONTIER_LOOKAHEAD",
+    "KEYFRAME_CELL",
+    "KEYFRAME_NEW_SHARE",
+    "LAYERS",
+    "NAV2_MODES",
+    "MapResult",
+    "PlacedMap",
+    "RunMap",
+    "check_outputs",
+    "layer_collections",
+    "map_log",
+    "map_model_set",
+    "map_of_run",
+    "output_paths",
+    "write_run_map",
     "CLAMP",
     "COMBINATIONS",
     "CONFLICT_FLAG",
@@ -97,7 +154,6 @@ __all__ = [
     "REACH_BINS",
     "REACH_UNIT",
     "RETURN_KERNEL",
-    "RETURN_SHARE",
     "UNKNOWN",
     "Evidence",
     "FuseReport",
@@ -107,6 +163,7 @@ __all__ = [
     "RunReturns",
     "WorldMap",
     "build_world_map",
+    "decode_map",
     "fuse_log",
     "fuse_model_set",
     "fuse_models",

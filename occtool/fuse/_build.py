@@ -14,10 +14,10 @@ from numpy.typing import ArrayLike
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
+from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.fuse._map import FusedMap
-from occtool.fuse._reach import observe, reach_from_guard, returns_from_guard
-from occtool.fuse._world import RunReturns, is_scanning_laser, returns_of_positions
-from occtool.keyframes import KEYFRAME_NEW_SHARE, select_keyframes
+from occtool.fuse._sightings import RunReturns, returns_of_positions
+from occtool.observation import is_scanning_laser, observe, reach_from_guard, returns_from_guard
 from occtool.robot import Robot
 
 
@@ -156,10 +156,11 @@ def fuse_model_set(path: Any, *, combination: str = DEFAULT_COMBINATION,
     Raises
     ------
     InputError
-        If the set is malformed (:func:`occtool.formats.model.read_model_set`) or a position has
+        If the set is malformed (:func:`occtool.modelset.read_model_set`) or a position has
         no pose: a world map needs every model placed.
     """
-    from occtool.formats.model import load_model, read_model_set
+    from occtool.formats.model import load_model
+    from occtool.modelset import read_model_set
 
     folder, entries = read_model_set(path)
     models, poses, stamps, positions = [], [], [], []

@@ -1,4 +1,5 @@
-"""The fused map itself: local trees, poses, reaches and returns; its queries and its raster."""
+"""The fused map itself: local trees, poses, reaches and returns, and its queries (its raster
+is the world map's: :meth:`occtool.fuse.WorldMap.rasterise`)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse._combine import COMBINATIONS, DEFAULT_COMBINATION, RETURN_KERNEL, Evidence, _Sums
-from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
-from occtool.fuse._reach import NO_OBSTACLE, OFFSET_STEPS, REACH_UNIT
+from occtool.observation import NO_OBSTACLE, OFFSET_STEPS, REACH_UNIT
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
@@ -21,10 +21,6 @@ FloatArray = NDArray[np.float64]
 #: A model's occupied reading more than this in front of its first obstacle (its crossing
 #: placed short of the wall, a coarse piece) is not an observation: the model is silent there.
 FRONT_MARGIN = 0.05
-#: A raster cell is occupied where the positions whose returns fall in it make at least this
-#: share of those that returned from it or saw through it (docs/map.md: 0.5 put 96.5 % of
-#: the Intel returns on occupied cells and kept 86.5 % of the beams clear).
-RETURN_SHARE = 0.5
 
 
 def _nodes(node: Any) -> int:
@@ -56,11 +52,10 @@ class FusedMap:
         first obstacle it saw at that pan bin (``inf``: never).
     returns
         ``(len(trees), guard bins)`` uint16 millimetres from :func:`returns_from_guard`:
-        each position's nearest return per pan bin (its return guard). With them the
-        raster's occupied cells are where the positions' returns fall (see
-        :meth:`rasterise`); without, where the fused occupancy reaches ``threshold``.
-        :func:`fuse_log` keeps each bin's own nearest return instead
-        (:func:`nearest_returns`), with ``return_offsets``.
+        each position's nearest return per pan bin (its return guard): :meth:`predict`
+        joins them, and the world map (:func:`build_world_map`, which needs them) fits its
+        walls to them and draws its raster. :func:`fuse_log` keeps each bin's own nearest
+        return instead (:func:`nearest_returns`), with ``return_offsets``.
     return_offsets
         ``(len(trees), guard bins)`` uint8: each return's pan angle within its bin, in
         :data:`OFFSET_STEPS` steps (:func:`nearest_returns`); without, the returns lie at
@@ -70,9 +65,9 @@ class FusedMap:
         world map's walls seen from one side fall steeply on that side.
     return_reach
         Returns farther than this from their position (metres; :func:`fuse_log`: the fit's
-        focus range plus the robot's radius, the return guard's reach) mark the raster's
-        walls where they fall, but lend no occupancy to :meth:`predict` and clear no cells
-        past this distance: a far return's angle and its pose's error place it less surely.
+        focus range plus the robot's radius, the return guard's reach) lend no occupancy to
+        :meth:`predict`: a far return's angle and its pose's error place it less surely (the
+        world map's walls take them up to its own ``reach``).
 
     The trees' coefficients are kept as float32 (half the bytes; an occupancy moves by
     under 1e-6) and each tree is rebuilt in float64 for a query.
@@ -238,79 +233,6 @@ class FusedMap:
         occupancy the positions' nearest returns lend a point near them (:data:`RETURN_KERNEL`)."""
         return self.evidence(points_world, combination=combination).probability
 
-    # ------------------------------------------------------------------ raster
-    def rasterise(self, resolution: float = 0.05, *, heights: ArrayLike | None = None,
-                  combination: str | None = None, max_cells: int = 50_000_000,
-                  from_returns: bool | None = None) -> Raster:
-        """Free / occupied / unknown cells over the body band, in the world frame.
-
-        Each cell centre is queried at ``heights`` (sensor-frame, relative to the poses'
-        z; default: the sensor's plane if it lies in the body band, else the band's
-        midpoint). Free where some height was observed and the cell is not occupied,
-        unknown where no position observed it. Occupied, ``from_returns`` (the default
-        when the map holds :attr:`returns`): where the positions' nearest returns fall,
-        unless more positions saw through the cell than returned from it
-        (:data:`RETURN_SHARE`): walls where the returns are, not where the models' level
-        crossing sits (in front of them, by design); a cell the models read occupied is
-        free only where some position saw through it, else unknown. Otherwise: occupied
-        where any height's fused occupancy reaches the threshold.
-        """
-        if from_returns is None:
-            from_returns = self.returns is not None
-        if from_returns and self.returns is None:
-            raise InputError("this fused map keeps no returns: rasterise it with from_returns=False")
-        if not (math.isfinite(resolution) and resolution > 0):
-            raise InputError(f"resolution must be a positive number of metres, got {resolution}")
-        combination = combination or self.combination
-        low, high = self.robot.body_band
-        if heights is None:
-            heights = [0.0] if low <= 0.0 <= high else [0.5 * (low + high)]
-        heights = np.asarray(heights, dtype=np.float64).reshape(-1)
-        lower, upper = self.bounds
-        origin = np.floor(lower / resolution) * resolution
-        nx, ny = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
-        if nx * ny * max(1, heights.size) > max_cells:
-            raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells x {heights.size} heights: "
-                             "use a coarser resolution")
-        occupied = np.zeros(ny * nx, dtype=bool)
-        observed = np.zeros(ny * nx, dtype=bool)
-        conflict = np.zeros(ny * nx, dtype=bool)
-        best = np.full(ny * nx, np.nan)
-        z0 = float(np.median(self._pose_array[:, 2]))
-        for h in heights:
-            sums = _Sums(ny * nx)
-            for k in range(len(self)):
-                r = self._radius[k]
-                if r <= 0:
-                    continue
-                x, y = self._pose_array[k, :2]
-                ii, jj = _cells_around(x, y, r, origin, resolution, nx, ny)
-                pts = np.column_stack([origin[0] + (ii + 0.5) * resolution, origin[1] + (jj + 0.5) * resolution,
-                                       np.full(ii.size, z0 + h)])
-                # Heights are relative to each pose: a robot whose z varies keeps its band.
-                pts[:, 2] += self._pose_array[k, 2] - z0
-                speaks, occupancy = self._speak(k, pts)
-                if speaks.any():
-                    sums.add((jj * nx + ii)[speaks], occupancy)
-            ev = sums.evidence(combination)
-            occupied |= ev.observed & (ev.probability >= self.threshold)
-            observed |= ev.observed
-            conflict |= ev.contradicted
-            best = np.where(ev.observed, np.fmax(best, ev.probability), best)
-        if from_returns:
-            hits, through = self._return_counts(origin, nx, ny, resolution)
-            # Free: observed, and read free by the models or seen through by some position
-            # (the crossing's margin in front of a wall); what the models read occupied and
-            # no position saw through (behind a wall, within the reach's window) stays unknown.
-            observed = (observed & ~occupied) | (through > 0) | (hits > 0)
-            occupied = (hits > 0) & (hits >= RETURN_SHARE * (hits + through))
-        cells = np.full(ny * nx, UNKNOWN, dtype=np.uint8)
-        cells[observed] = FREE
-        cells[occupied] = OCCUPIED
-        return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
-                      np.nan_to_num(best, nan=0.5).reshape(ny, nx).astype(np.float32), conflict.reshape(ny, nx))
-
-
     def return_points(self, k: int, within: float = math.inf) -> FloatArray:
         """World ``(M, 2)`` x, y of position ``k``'s nearest returns no farther than ``within``
         from it (at their own pan angles with :attr:`return_offsets`, else at the bins' centres)."""
@@ -322,47 +244,3 @@ class FusedMap:
         alpha = -math.pi + (held + within) * (2.0 * math.pi / bins)
         distance = millimetres[held].astype(np.float64) / 1000.0
         return self.poses[k].to_world(np.column_stack([distance * np.cos(alpha), distance * np.sin(alpha)]))
-
-    def _return_counts(self, origin: FloatArray, nx: int, ny: int,
-                       resolution: float) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
-        """Per raster cell: positions whose returns fall in it, and positions that saw
-        through it (its centre lies more than a cell in front of their return at that pan bin,
-        and no farther than :attr:`return_reach`)."""
-        assert self.returns is not None
-        hits = np.zeros(ny * nx, dtype=np.int32)
-        through = np.zeros(ny * nx, dtype=np.int32)
-        bins = self.returns.shape[1]
-        for k in range(len(self)):  # a loop over positions, each vectorised over its cells
-            millimetres = self.returns[k]
-            held = millimetres != NO_OBSTACLE
-            if not held.any():
-                continue
-            world = self.return_points(k)
-            col = np.floor((world[:, 0] - origin[0]) / resolution).astype(np.int64)
-            row = np.floor((world[:, 1] - origin[1]) / resolution).astype(np.int64)
-            inside = (row >= 0) & (row < ny) & (col >= 0) & (col < nx)
-            hits[np.unique(row[inside] * nx + col[inside])] += 1
-            distance = np.where(held, np.minimum(millimetres.astype(np.float64) / 1000.0, self.return_reach), -np.inf)
-            r = float(distance.max())
-            x, y, _, yaw = self._pose_array[k]
-            ii, jj = _cells_around(x, y, r, origin, resolution, nx, ny)
-            dx = origin[0] + (ii + 0.5) * resolution - x
-            dy = origin[1] + (jj + 0.5) * resolution - y
-            c, s = math.cos(yaw), math.sin(yaw)
-            lx, ly = c * dx + s * dy, -s * dx + c * dy
-            b = np.clip(np.floor((np.arctan2(ly, lx) + math.pi) / (2.0 * math.pi) * bins).astype(np.intp), 0, bins - 1)
-            seen_through = np.hypot(lx, ly) < distance[b] - resolution
-            through[(jj * nx + ii)[seen_through]] += 1
-        return hits, through
-
-
-def _cells_around(x: float, y: float, r: float, origin: Any, resolution: float, nx: int,
-                  ny: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Column and row indices of the raster cells (``nx`` x ``ny`` from ``origin``) of the
-    square of half-side ``r`` around ``(x, y)``, clipped to the raster."""
-    i0 = max(0, math.floor((x - r - origin[0]) / resolution))
-    i1 = min(nx - 1, math.floor((x + r - origin[0]) / resolution))
-    j0 = max(0, math.floor((y - r - origin[1]) / resolution))
-    j1 = min(ny - 1, math.floor((y + r - origin[1]) / resolution))
-    jj, ii = np.mgrid[j0:j1 + 1, i0:i1 + 1]
-    return ii.ravel(), jj.ravel()

@@ -33,15 +33,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.fuse._raster import FREE, OCCUPIED, UNKNOWN, Raster
-from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
+from occtool.formats.occmap import UNIT, MapArrays, quantise, read_map, unreadable
+from occtool.formats.occmap import decode as occmap_decode
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
 
 FloatArray = NDArray[np.float64]
 #: What :meth:`WorldMap._near_segments` yields: points' rows, segments, offsets across and along.
@@ -61,8 +61,6 @@ FREE_SLOPE = 0.01
 FREE_CAP = 0.45
 #: Occupancy where no position observed.
 UNKNOWN_LEVEL = 0.5
-#: A beam passing a segment's middle more than this in front of its own return saw through it (metres).
-THROUGH_MARGIN = 0.1
 #: The Nav2 raster's cells are occupied where the map's occupancy at their centre reaches
 #: this (map_server's own ``occupied_thresh``) ...
 RASTER_OCCUPIED = 0.65
@@ -90,25 +88,9 @@ DOUBTED_WALL_RIM = 0.05
 #: of fixtures/tum-fr3-cabinet are untrusted, most under 0.3; all of them would take 12 % of
 #: its free floor, these 3.5 %).
 DOUBTED_TRUST = 0.3
-#: Returns no farther than this from their position place walls (metres).
-WALL_REACH = 16.0
-#: Beams sweep the observed region and see through walls no farther than this from their
-#: position (metres): a far beam's angle and its pose's error place it less surely.
-REGION_REACH = 8.0
 #: A wall is drawn in the raster when at least this share of the positions that returned
-#: from it or saw through it returned from it (as :data:`occtool.fuse.RETURN_SHARE`).
+#: from it or saw through it returned from it.
 WALL_SHARE = 0.5
-#: Coordinates are stored in this unit (metres): 5 mm.
-UNIT = 0.005
-#: Pan bins of the positions' nearest returns the walls are fitted to, for a scanning laser
-#: (half a degree: every beam at that spacing; chosen on inner splits, docs/map.md) ...
-SIGHTING_BINS = 720
-#: ... told by at most this many returns a degree in the body band (median over positions:
-#: 1.1-2 on the bench's CARMEN logs, 6 on FR-079, whose positions group a few scans); denser
-#: clouds (a depth camera's rows: 130 on fixtures/tum-fr3-cabinet) keep their nearest per
-#: degree (the return guard's bins), as the nearest of many noisy returns in a finer bin is
-#: drawn nearer than the wall.
-LASER_RETURNS_PER_DEGREE = 10.0
 #: Segment middles searched around a query point (the ridges of more never overlap there).
 NEIGHBOURS = 12
 
@@ -194,12 +176,27 @@ class WorldMap:
         self.wall_share = float(wall_share)
         self.wall_rim = float(wall_rim)
         self.doubted_wall_rim = float(doubted_wall_rim)
-        #: The file's grid (:func:`occtool.formats.occmap.quantise` sets them): unit, metres, and
+        #: The file's grid (:meth:`quantised` and :func:`load_map` set them): unit, metres, and
         #: origin; the unit of segments' half-lengths (``None`` in a version 1 file).
         self.unit: float | None = None
         self.origin: FloatArray | None = None
         self.half_unit: float | None = None
         self._index: Any = None
+
+    @classmethod
+    def from_arrays(cls, arrays: MapArrays) -> WorldMap:
+        """The map of numbers at the file's precision (:func:`occtool.formats.occmap.quantise`,
+        :func:`occtool.formats.occmap.decode`), on the file's grid."""
+        world = cls(arrays.start, arrays.end, arrays.thickness, arrays.trust, arrays.region, band=arrays.band,
+                    positions=arrays.positions, facing=arrays.facing, **arrays.settings)
+        world.unit, world.origin, world.half_unit = arrays.unit, arrays.origin, arrays.half_unit
+        return world
+
+    def quantised(self, unit: float | None = None) -> WorldMap:
+        """This map with its numbers rounded to what its file stores (a unit of ``unit``
+        metres, default :data:`UNIT`) and its segments listed in the file's order: a map read
+        back from its file answers as this one, bit for bit."""
+        return WorldMap.from_arrays(quantise(self, unit))
 
     def __len__(self) -> int:
         return int(self.start.shape[0])
@@ -435,185 +432,24 @@ class WorldMap:
         return save_map(self, path, overwrite=overwrite)
 
 
-@dataclass
-class RunReturns:
-    """What every position of a run saw, per pan bin: the world frame's input to :func:`build_world_map`.
-
-    ``poses`` ``(P, 4)`` x, y, z, yaw; ``ranges`` ``(P, bins)`` the horizontal distance to
-    each bin's nearest return, or where the bin has none how far the position saw (its
-    farthest free ray, or a model's reach; 0 where it saw nothing); ``returned`` ``(P, bins)``
-    whether the bin holds a return; ``offsets`` ``(P, bins)`` uint8 its pan angle within the
-    bin in :data:`occtool.fuse.OFFSET_STEPS` steps (the centre where unknown);
-    ``scanning_laser`` whether the positions' returns are a scanning laser's (few a degree,
-    :data:`LASER_RETURNS_PER_DEGREE`), whose walls :func:`build_world_map` lets face one side.
-    """
-
-    poses: FloatArray
-    ranges: FloatArray
-    returned: NDArray[np.bool_]
-    offsets: NDArray[np.uint8]
-    scanning_laser: bool = False
-
-    def __len__(self) -> int:
-        return int(self.poses.shape[0])
-
-    def return_points(self, within: float) -> tuple[FloatArray, NDArray[np.int64]]:
-        """World ``(N, 2)`` returns no farther than ``within`` from their position, and the position of each."""
-        from occtool.fuse._reach import OFFSET_STEPS
-
-        bins = self.ranges.shape[1]
-        k, b = np.nonzero(self.returned & (self.ranges <= within))
-        alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
-        r = self.ranges[k, b]
-        return (np.column_stack([self.poses[k, 0] + r * np.cos(alpha), self.poses[k, 1] + r * np.sin(alpha)]),
-                k.astype(np.int64))
+def decode_map(data: bytes, name: str = "occmap") -> WorldMap:
+    """The :class:`WorldMap` of a ``.occmap`` file's bytes (:func:`occtool.formats.occmap.decode`);
+    a damaged or foreign file is one :class:`InputError` naming ``name``."""
+    return _from_file(occmap_decode(data, name), name)
 
 
-def returns_of_fused(fused: Any) -> RunReturns:
-    """:class:`RunReturns` of a :class:`FusedMap`'s own positions: its returns, and where a
-    bin has none the model's reach there (:func:`position_ranges`)."""
-    from occtool.fuse._reach import BIN_CENTRE, NO_OBSTACLE
-
-    ranges = position_ranges(fused)
-    offsets = (fused.return_offsets if fused.return_offsets is not None
-               else np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8))
-    return RunReturns(fused._pose_array.copy(), ranges, fused.returns != NO_OBSTACLE, np.asarray(offsets),
-                      scanning_laser=bool(fused.scanning_laser))
+def load_map(path: Any) -> WorldMap:
+    """Read a ``.occmap`` file written by :meth:`WorldMap.save` (``occtool map`` writes
+    ``DIR/world.occmap``); a damaged file is an :class:`InputError`."""
+    return _from_file(read_map(path), str(path))
 
 
-def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = math.inf,
-                         level: float | None = None, bins: int | None = None) -> RunReturns:
-    """:class:`RunReturns` of a log's positions (each with features and a pose), fitted or
-    not: their nearest returns in each of ``bins`` pan bins
-    (:func:`occtool.fuse._reach.nearest_returns` at ``level``) and their reach
-    (:func:`occtool.fuse._reach.observed_reach`). A run's keyframes are a share of its
-    positions; the others' returns still place walls. ``bins=None``: :data:`SIGHTING_BINS`
-    for a scanning laser's positions, the return guard's one a degree for denser clouds
-    (:data:`LASER_RETURNS_PER_DEGREE`)."""
-    from occtool.fuse._reach import NO_OBSTACLE, nearest_returns, observed_reach
-    from occtool.guard import GUARD_BINS
-
-    positions = list(positions)
-    if not positions:
-        raise InputError("no positions to read returns from")
-    laser = is_scanning_laser([returns_per_degree(p.features, robot, level) for p in positions])
-    if bins is None:
-        bins = SIGHTING_BINS if laser else GUARD_BINS
-    returns, offsets, reaches = [], [], []
-    for item in positions:  # a loop over positions, each vectorised over its features
-        nearest, offset = nearest_returns(item.features, robot, level=level, bins=bins)
-        returns.append(nearest)
-        offsets.append(offset)
-        reaches.append(observed_reach(item.features, robot, focus_range))
-    poses = np.array([[p.pose.x, p.pose.y, p.pose.z, p.pose.yaw] for p in positions], dtype=np.float64)
-    stacked = np.stack(returns)
-    return RunReturns(poses, _ranges(stacked, np.stack(reaches)), stacked != NO_OBSTACLE, np.stack(offsets),
-                      scanning_laser=laser)
+def _from_file(arrays: MapArrays, name: str) -> WorldMap:
+    try:
+        return WorldMap.from_arrays(arrays)
+    except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:
+        # Numbers the file holds that no map takes (a band upside down, a facing of 2).
+        raise unreadable(name, str(exc)) from None
 
 
-def is_scanning_laser(densities: Any) -> bool:
-    """Whether positions of these :func:`returns_per_degree` are a scanning laser's (their
-    median at most :data:`LASER_RETURNS_PER_DEGREE`), not a depth camera's denser clouds."""
-    return float(np.median(np.asarray(densities, dtype=np.float64))) <= LASER_RETURNS_PER_DEGREE
-
-
-def returns_per_degree(features: Any, robot: Any, level: float | None = None) -> float:
-    """A position's returns in the body band per degree of pan they occupy (0 without any;
-    ``level``: the evidence a return needs, ``None``: any above 0)."""
-    low, high = robot.body_band
-    x, y, z = features.points.T
-    returned = features.evidence > 0 if level is None else features.evidence >= level
-    keep = returned & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
-    if not keep.any():
-        return 0.0
-    degree = np.floor(np.degrees(np.arctan2(y[keep], x[keep]))).astype(np.int64)
-    return float(keep.sum()) / float(np.unique(degree).size)
-
-
-def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
-    """Union of what each position (``poses`` ``(P, 4)`` x, y, z, yaw) saw: rays up to
-    ``distances`` (``(P, bins)``, at most ``reach``) at the bins' centres."""
-    import shapely
-
-    bins = distances.shape[1]
-    angles = -math.pi + (np.arange(bins) + 0.5) * (2.0 * math.pi / bins)
-    r = np.minimum(distances, reach)
-    seen = (r > 0).any(axis=1)
-    if not seen.any():
-        return shapely.MultiPolygon()
-    a = angles[None, :] + poses[seen, 3:4]
-    rings = np.stack([poses[seen, 0:1] + r[seen] * np.cos(a), poses[seen, 1:2] + r[seen] * np.sin(a)], axis=-1)
-    return shapely.union_all(shapely.make_valid(shapely.polygons(rings)))
-
-
-def position_ranges(fused: Any) -> FloatArray:
-    """``(P, bins)`` each position's range per return bin: its nearest return, or where it had
-    none its reach in that direction (0 where it saw nothing), metres."""
-    if fused.returns is None:
-        raise InputError("this fused map keeps no returns: a world map needs them")
-    return _ranges(fused.returns, fused.reaches)
-
-
-def _ranges(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatArray:
-    """Nearest returns ``(P, bins)`` (millimetres) where a bin has one, else the reach
-    (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres."""
-    from occtool.fuse._reach import NO_OBSTACLE, REACH_UNIT
-
-    bins = returns.shape[1]
-    reach = reaches[:, 0].astype(np.float64) * REACH_UNIT
-    centre = (np.arange(bins) + 0.5) / bins
-    coarse = np.minimum((centre * reach.shape[1]).astype(np.intp), reach.shape[1] - 1)
-    return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
-
-
-def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: float = CELL,
-                    max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS, reach: float = WALL_REACH,
-                    region_reach: float = REGION_REACH, simplify: float = 0.03, one_sided: bool | None = None,
-                    **params: Any) -> WorldMap:
-    """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
-    (:func:`occtool.formats.occmap.quantise`).
-
-    ``sightings`` is what every position of the run saw (:func:`returns_of_positions`; by
-    default ``fused``'s own positions, :func:`returns_of_fused`): the walls are fitted to
-    its returns and its beams see through them; the observed region is swept by ``fused``'s
-    positions (a :class:`FusedMap`), which hold the run's local models.
-    The walls are fitted to the returns no farther than ``reach`` from their position
-    (:func:`occtool.fuse._walls.fit_segments`
-    with ``cell``, ``max_thickness`` and ``min_returns``); the beams up to ``region_reach``
-    see through them and sweep the observed region, which is
-    simplified by ``simplify`` metres (Douglas-Peucker, topology kept). ``one_sided``: let
-    walls seen from one side face it (``None``: when ``sightings`` are a scanning laser's;
-    on the noisy clouds of fixtures/tum-fr3-cabinet facing walls lowered the world map's
-    AUC on each of five splits, docs/map.md). The map speaks for
-    ``fused``'s robot's body band. ``params`` go to :class:`WorldMap` (``width``,
-    ``free_level``...). The defaults were chosen on inner splits of the training scans of
-    four CARMEN logs (docs/map.md).
-    """
-    import shapely
-
-    from occtool.formats.occmap import quantise
-
-    for name, value in (("reach", reach), ("region_reach", region_reach)):
-        if not value > 0:
-            raise InputError(f"{name} must be a positive number of metres, got {value}")
-    own = returns_of_fused(fused)
-    run = own if sightings is None else sightings
-    points, owner = run.return_points(reach)
-    one_sided = run.scanning_laser if one_sided is None else one_sided
-    segments: Segments = fit_segments(points, owner, viewpoints=run.poses[owner, :2] if one_sided else None,
-                                      cell=cell, max_thickness=max_thickness, min_returns=min_returns)
-    through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
-    trust = segments.hits / np.maximum(segments.hits + through, 1)
-    region = _observed_region(own.ranges, own.poses, region_reach)
-    if simplify > 0 and not region.is_empty:
-        region = shapely.simplify(region, simplify, preserve_topology=True)
-    low, high = fused.robot.body_band
-    z0 = float(np.median(fused._pose_array[:, 2]))
-    world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
-                     positions=own.poses[:, :2], facing=segments.facing, **params)
-    # Rounded to the file's precision now, so that the map written is the map used.
-    return quantise(world)
-
-
-__all__ = ["LASER_RETURNS_PER_DEGREE", "RunReturns", "WorldMap", "build_world_map", "is_scanning_laser",
-           "position_ranges", "returns_of_fused", "returns_of_positions", "returns_per_degree"]
+__all__ = ["UNIT", "WorldMap", "decode_map", "load_map"]

@@ -8,6 +8,8 @@ position's file, pose, stamp, feature count and the digest of its features.
   into the folder itself; several write one sub-folder each, named after the log's file
   without its format and compression suffixes (``intel-corrected.log.gz`` ->
   ``DIR/intel-corrected/``).
+- :func:`read_model_set` reads a set's index back, checked; :func:`save_model_set_index`
+  writes it.
 - :func:`extract_model_set` extracts the navigation map of every position of one or more
   sets (a folder of sub-folder sets counts as all of them).
 - The positions run on an :mod:`occtool.executor` (``jobs`` local processes, or a Dask
@@ -40,6 +42,10 @@ _LAZY: dict[str, str] = {
     "find_model_sets": "occtool.modelset._common",
     "log_set_name": "occtool.modelset._common",
     "read_set_state": "occtool.modelset._common",
+    "MAX_INDEX_BYTES": "occtool.modelset._index",
+    "MODEL_SET_FORMAT": "occtool.modelset._index",
+    "read_model_set": "occtool.modelset._index",
+    "save_model_set_index": "occtool.modelset._index",
     "extract_model_set": "occtool.modelset._extract",
     "navigation_map_of_file": "occtool.modelset._extract",
     "fit_model_set": "occtool.modelset._fit",
@@ -48,6 +54,7 @@ _LAZY: dict[str, str] = {
 }
 
 __all__ = [
+    "MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "read_model_set", "save_model_set_index",
     "Failure", "ProgressEvent", "SetSummary", "estimator_for_log", "extract_model_set", "find_model_sets",
     "fit_model_set",
     "log_set_name", "navigation_map_of_file", "read_set_state", "settings_digest",
@@ -64,6 +71,7 @@ if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checke
     )
     from occtool.modelset._extract import extract_model_set, navigation_map_of_file
     from occtool.modelset._fit import fit_model_set
+    from occtool.modelset._index import MAX_INDEX_BYTES, MODEL_SET_FORMAT, read_model_set, save_model_set_index
     from occtool.modelset._settings import estimator_for_log, settings_digest
 
 

@@ -104,7 +104,7 @@ class _IndexWriter:
         now = time.monotonic()
         if not force and (not self.dirty or now - self.last_write < INDEX_INTERVAL):
             return
-        from occtool.formats.model import save_model_set_index
+        from occtool.modelset._index import save_model_set_index
 
         entries = [self.entries[k] for k in sorted(self.entries)]
         failed = [{"position": k, "reason": v}

@@ -124,7 +124,7 @@ def extract_model_set(
     from occtool.executor import check_jobs, make_executor
     from occtool.features import Pose
     from occtool.formats.geojson import write_navigation, write_navigation_set
-    from occtool.formats.model import read_model_set
+    from occtool.modelset._index import read_model_set
 
     start = time.perf_counter()
     given = list(model_sets) if isinstance(model_sets, (list, tuple)) else [model_sets]

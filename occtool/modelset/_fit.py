@@ -61,7 +61,7 @@ def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
 
     from occtool.fit import OccupancyRegressor
     from occtool.formats.model import RUN_PLACEHOLDER, model_text
-    from occtool.fuse import observe
+    from occtool.observation import observe
 
     out: list[Any] = []
     for features in chunk:
@@ -204,7 +204,7 @@ def fit_model_set(
     from occtool.executor import check_jobs, make_executor
     from occtool.fit import OccupancyRegressor, features_digest
     from occtool.formats.model import save_model_text, with_run
-    from occtool.fuse import returns_per_degree
+    from occtool.observation import returns_per_degree
     from occtool.robot import Robot
 
     start = time.perf_counter()

@@ -175,7 +175,7 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
     test = [s for s, out in zip(scans, held) if out]
     train_log = build_log([Scan(s.features.points, s.features.evidence, s.pose, s.stamp, s.source) for s in train],
                           source=str(path), tolerance=tolerance)
-    from occtool.keyframes import KEYFRAME_NEW_SHARE
+    from occtool.fuse import KEYFRAME_NEW_SHARE
 
     share = KEYFRAME_NEW_SHARE if keyframe_share is None else keyframe_share
     fused, _, report = fuse_log(train_log, template, threshold=threshold, keyframe_share=share)

@@ -1,7 +1,10 @@
 """What one position observed: its reach and first obstacle per pan bin, its nearest returns.
 
 A local model only speaks where its position observed; these few hundred bytes, kept next
-to the model, say where that is (:class:`occtool.fuse.FusedMap` reads them).
+to the model (:class:`Observation`, in a model set's files), say where that is
+(:class:`occtool.fuse.FusedMap` reads them). Also how many returns a degree a position
+holds, which tells a scanning laser from a depth camera's clouds. Below :mod:`occtool.formats`
+and :mod:`occtool.fuse`, which both use it.
 """
 
 from __future__ import annotations
@@ -196,9 +199,41 @@ class Observation:
         return cls(reach, returns, offsets)
 
 
+#: A scanning laser's positions hold at most this many returns a degree in the body band
+#: (median over positions: 1.1-2 on the bench's CARMEN logs, 6 on FR-079, whose positions group a few scans); denser
+#: clouds (a depth camera's rows: 130 on fixtures/tum-fr3-cabinet) keep their nearest per
+#: degree (the return guard's bins), as the nearest of many noisy returns in a finer bin is
+#: drawn nearer than the wall.
+LASER_RETURNS_PER_DEGREE = 10.0
+
+
+def is_scanning_laser(densities: Any) -> bool:
+    """Whether positions of these :func:`returns_per_degree` are a scanning laser's (their
+    median at most :data:`LASER_RETURNS_PER_DEGREE`), not a depth camera's denser clouds."""
+    return float(np.median(np.asarray(densities, dtype=np.float64))) <= LASER_RETURNS_PER_DEGREE
+
+
+def returns_per_degree(features: Any, robot: Any, level: float | None = None) -> float:
+    """A position's returns in the body band per degree of pan they occupy (0 without any;
+    ``level``: the evidence a return needs, ``None``: any above 0)."""
+    low, high = robot.body_band
+    x, y, z = features.points.T
+    returned = features.evidence > 0 if level is None else features.evidence >= level
+    keep = returned & (z >= low) & (z <= high) & (np.hypot(x, y) > robot.radius)
+    if not keep.any():
+        return 0.0
+    degree = np.floor(np.degrees(np.arctan2(y[keep], x[keep]))).astype(np.int64)
+    return float(keep.sum()) / float(np.unique(degree).size)
+
+
 def observe(model: Any, features: Features) -> Observation:
     """The :class:`Observation` of the position a fitted ``model`` was fitted to from
     ``features``: within the model's focus range (none without focus), returns at its level."""
     focus_range = float(model.focus_range) if model.focus else math.inf
     returns, offsets = nearest_returns(features, model.robot_, level=model.level)
     return Observation(observed_reach(features, model.robot_, focus_range), returns, offsets)
+
+
+__all__ = ["BIN_CENTRE", "LASER_RETURNS_PER_DEGREE", "NO_OBSTACLE", "OFFSET_STEPS", "REACH_BINS", "REACH_UNIT",
+           "Observation", "is_scanning_laser", "nearest_returns", "observe", "observed_reach", "reach_from_guard",
+           "returns_from_guard", "returns_per_degree"]

@@ -1,0 +1,162 @@
+"""The library ``occtool map``: a log or a model set in, every output of its map written.
+
+:func:`map_log` reads a log (registering its scans when it needs it), fits its keyframes,
+fuses them, builds the map of the run and writes it (:func:`occtool.fuse.write_run_map`,
+and ``poses.csv`` when the poses were registered); :func:`map_model_set` does the same
+from the models of ``occtool fit LOG -o DIR/``. Both return a :class:`MapResult`; the
+command line only parses its options, calls one of them and reports.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from occtool.features import RangeLog
+from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set
+from occtool.fuse._combine import DEFAULT_COMBINATION
+from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE
+from occtool.fuse._outputs import _write_run_map, check_outputs
+from occtool.fuse._run import RunMap, map_of_run
+
+
+@dataclass
+class MapResult:
+    """What :func:`map_log` or :func:`map_model_set` made and wrote."""
+
+    #: The map of the run (fused map, world map, raster, navigation region, points).
+    run: RunMap
+    #: The files written, ``world.occmap`` first.
+    written: list[Path]
+    #: What ``summary.json`` holds.
+    summary: dict[str, Any]
+    #: The fitted (or read) models, one per position of the fused map.
+    models: list[Any] = field(default_factory=list)
+    #: :func:`fuse_log`'s report (``None`` for a model set).
+    report: FuseReport | None = None
+    #: The registration's report (``None`` when the log's own poses were kept).
+    registration: Any | None = None
+
+
+def _write(run: RunMap, output: str | os.PathLike[str], extra: dict[str, Any], registration: Any, *,
+           overwrite: bool, simplify: float | None, precision: int | None, mcap: bool, georeference: Any | None,
+           nav2_mode: str) -> tuple[list[Path], dict[str, Any]]:
+    from occtool.register import trajectory, write_map_poses
+
+    run.trajectory = trajectory(registration)
+    if registration is not None:
+        extra["registration"] = registration.to_dict()
+    written, summary = _write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision,
+                                      mcap=mcap, georeference=georeference, extra_summary=extra,
+                                      nav2_mode=nav2_mode)
+    poses = write_map_poses(registration, output, overwrite=overwrite)
+    return written + ([poses] if poses is not None else []), summary
+
+
+def map_log(source: str | os.PathLike[str] | RangeLog, output: str | os.PathLike[str], *,
+            estimator: Any | None = None, read_options: Mapping[str, Any] | None = None,
+            register: bool | None = None, registration: Any | None = None,
+            combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
+            keyframe_share: float = KEYFRAME_NEW_SHARE, resolution: float = 0.05, max_range: float = 1.5,
+            nav2_mode: str = "trinary", simplify: float | None = None, precision: int | None = None,
+            georeference: Any | None = None, mcap: bool = True, overwrite: bool = True,
+            progress: Callable[[int, int], None] | None = None) -> MapResult:
+    """Map a log: what ``occtool map LOG -o OUTPUT`` does.
+
+    Parameters
+    ----------
+    source
+        A log file (read with :func:`occtool.io.read_log` and ``read_options``), or a
+        :class:`~occtool.features.RangeLog` read already (mapped on its own poses).
+    output
+        The folder the map is written into (created if missing): ``world.occmap``, the
+        Nav2 map, ``map.mcap``, the GeoJSON layers, ``summary.json``, and ``poses.csv``
+        when the poses were registered (:func:`occtool.fuse.write_run_map`).
+    estimator
+        The unfitted :class:`~occtool.fit.OccupancyRegressor` every keyframe is fitted with
+        (default: one with its defaults); its robot is the map's.
+    read_options
+        Keywords of :func:`occtool.io.read_log` (``no_return_range``, ``format``, ...).
+    register, registration
+        Register the scans (``True``), keep the log's poses (``False``) or register when the
+        log has no poses or only odometry (``None``); ``registration`` is the
+        :class:`occtool.register.RegistrationSettings` (default: its defaults).
+    combination, threshold, keyframe_share
+        As for :func:`occtool.fuse.fuse_log`; ``threshold`` also cuts the navigation maps.
+    resolution, max_range
+        The raster's cell size and each position's navigation polygon's radius, metres.
+    nav2_mode, simplify, precision, georeference, mcap, overwrite
+        As for :func:`occtool.fuse.write_run_map`.
+    progress
+        Called with ``(done, total)`` as the keyframes are fitted.
+
+    Raises
+    ------
+    InputError
+        A log that cannot be read, placed or fitted, or outputs that cannot be written;
+        ``FileExistsError`` for an existing output without ``overwrite``. Checked before
+        any work where it can be.
+    """
+    from occtool.errors import InputError
+
+    check_outputs(output, nav2_mode=nav2_mode, overwrite=overwrite)
+    if estimator is None:
+        from occtool.fit import OccupancyRegressor
+
+        estimator = OccupancyRegressor()
+    report_of_registration = None
+    if isinstance(source, RangeLog):
+        if register:
+            raise InputError("register=True needs the log's file (its scans are read one by one)")
+        log, name = source, source.source or "log"
+    else:
+        from occtool.register import RegistrationSettings, read_map_log
+
+        log, report_of_registration = read_map_log(source, read_options, register=register,
+                                                   settings=registration or RegistrationSettings())
+        name = str(source)
+    fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
+                                     keyframe_share=keyframe_share, progress=progress)
+    positions = list(zip(report.fitted, fused.poses, fused.stamps))
+    run = map_of_run(fused, models, positions, resolution=resolution,
+                     navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings)
+    extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
+             "skipped_positions": [index for index, _ in report.skipped],
+             "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
+    written, summary = _write(run, output, extra, report_of_registration, overwrite=overwrite, simplify=simplify,
+                              precision=precision, mcap=mcap, georeference=georeference, nav2_mode=nav2_mode)
+    return MapResult(run, written, summary, models, report, report_of_registration)
+
+
+def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str], *,
+                  combination: str = DEFAULT_COMBINATION, threshold: float = 0.6, resolution: float = 0.05,
+                  max_range: float = 1.5, robot_overrides: Mapping[str, float] | None = None,
+                  nav2_mode: str = "trinary",
+                  simplify: float | None = None, precision: int | None = None, georeference: Any | None = None,
+                  mcap: bool = True, overwrite: bool = True) -> MapResult:
+    """Map a model set: what ``occtool map MODELS/ -o OUTPUT`` does.
+
+    ``models`` is a set written by ``occtool fit LOG -o DIR/`` (``DIR`` or
+    ``DIR/index.json``), fused by :func:`occtool.fuse.fuse_model_set`; the other
+    keywords are :func:`map_log`'s. Its models are fitted already: their fit settings
+    are the ones they were fitted with, and so is their robot but for ``robot_overrides``,
+    :class:`~occtool.robot.Robot` fields (``radius``, ``sensor_height``, ``body_height``,
+    ``ground_clearance``) that replace the fitted robot's in the navigation maps (the
+    navigation region, obstacles and frontiers; the fused and world maps keep the band the
+    models were fitted for).
+    """
+    check_outputs(output, nav2_mode=nav2_mode, overwrite=overwrite)
+    fused, fitted, positions = fuse_model_set(models, combination=combination, threshold=threshold)
+    run = map_of_run(fused, fitted, positions, resolution=resolution,
+                     navigation={"max_range": max_range, "threshold": threshold},
+                     robot_overrides=robot_overrides)
+    extra: dict[str, Any] = {"source": str(models), "fitted_here": False}
+    written, summary = _write(run, output, extra, None, overwrite=overwrite, simplify=simplify, precision=precision,
+                              mcap=mcap, georeference=georeference, nav2_mode=nav2_mode)
+    return MapResult(run, written, summary, fitted)
+
+
+__all__ = ["MapResult", "map_log", "map_model_set"]

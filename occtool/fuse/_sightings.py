@@ -1,0 +1,122 @@
+"""What every position of a run saw, per pan bin: the world map's input (:class:`RunReturns`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.errors import InputError
+from occtool.observation import (
+    BIN_CENTRE,
+    NO_OBSTACLE,
+    OFFSET_STEPS,
+    REACH_UNIT,
+    is_scanning_laser,
+    nearest_returns,
+    observed_reach,
+    returns_per_degree,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Pan bins of the positions' nearest returns the walls are fitted to, for a scanning laser
+#: (half a degree: every beam at that spacing; chosen on inner splits, docs/map.md; a
+#: scanning laser's positions hold at most
+#: :data:`occtool.observation.LASER_RETURNS_PER_DEGREE` returns a degree).
+SIGHTING_BINS = 720
+
+
+@dataclass
+class RunReturns:
+    """What every position of a run saw, per pan bin: the world frame's input to :func:`build_world_map`.
+
+    ``poses`` ``(P, 4)`` x, y, z, yaw; ``ranges`` ``(P, bins)`` the horizontal distance to
+    each bin's nearest return, or where the bin has none how far the position saw (its
+    farthest free ray, or a model's reach; 0 where it saw nothing); ``returned`` ``(P, bins)``
+    whether the bin holds a return; ``offsets`` ``(P, bins)`` uint8 its pan angle within the
+    bin in :data:`occtool.fuse.OFFSET_STEPS` steps (the centre where unknown);
+    ``scanning_laser`` whether the positions' returns are a scanning laser's (few a degree,
+    :data:`LASER_RETURNS_PER_DEGREE`), whose walls :func:`build_world_map` lets face one side.
+    """
+
+    poses: FloatArray
+    ranges: FloatArray
+    returned: NDArray[np.bool_]
+    offsets: NDArray[np.uint8]
+    scanning_laser: bool = False
+
+    def __len__(self) -> int:
+        return int(self.poses.shape[0])
+
+    def return_points(self, within: float) -> tuple[FloatArray, NDArray[np.int64]]:
+        """World ``(N, 2)`` returns no farther than ``within`` from their position, and the position of each."""
+        bins = self.ranges.shape[1]
+        k, b = np.nonzero(self.returned & (self.ranges <= within))
+        alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
+        r = self.ranges[k, b]
+        return (np.column_stack([self.poses[k, 0] + r * np.cos(alpha), self.poses[k, 1] + r * np.sin(alpha)]),
+                k.astype(np.int64))
+
+
+def returns_of_fused(fused: Any) -> RunReturns:
+    """:class:`RunReturns` of a :class:`FusedMap`'s own positions: its returns, and where a
+    bin has none the model's reach there (:func:`position_ranges`)."""
+    ranges = position_ranges(fused)
+    offsets = (fused.return_offsets if fused.return_offsets is not None
+               else np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8))
+    return RunReturns(fused._pose_array.copy(), ranges, fused.returns != NO_OBSTACLE, np.asarray(offsets),
+                      scanning_laser=bool(fused.scanning_laser))
+
+
+def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = math.inf,
+                         level: float | None = None, bins: int | None = None) -> RunReturns:
+    """:class:`RunReturns` of a log's positions (each with features and a pose), fitted or
+    not: their nearest returns in each of ``bins`` pan bins
+    (:func:`occtool.observation.nearest_returns` at ``level``) and their reach
+    (:func:`occtool.observation.observed_reach`). A run's keyframes are a share of its
+    positions; the others' returns still place walls. ``bins=None``: :data:`SIGHTING_BINS`
+    for a scanning laser's positions, the return guard's one a degree for denser clouds
+    (:data:`LASER_RETURNS_PER_DEGREE`)."""
+    from occtool.guard import GUARD_BINS
+
+    positions = list(positions)
+    if not positions:
+        raise InputError("no positions to read returns from")
+    laser = is_scanning_laser([returns_per_degree(p.features, robot, level) for p in positions])
+    if bins is None:
+        bins = SIGHTING_BINS if laser else GUARD_BINS
+    returns, offsets, reaches = [], [], []
+    for item in positions:  # a loop over positions, each vectorised over its features
+        nearest, offset = nearest_returns(item.features, robot, level=level, bins=bins)
+        returns.append(nearest)
+        offsets.append(offset)
+        reaches.append(observed_reach(item.features, robot, focus_range))
+    poses = np.array([[p.pose.x, p.pose.y, p.pose.z, p.pose.yaw] for p in positions], dtype=np.float64)
+    stacked = np.stack(returns)
+    return RunReturns(poses, _ranges(stacked, np.stack(reaches)), stacked != NO_OBSTACLE, np.stack(offsets),
+                      scanning_laser=laser)
+
+
+def position_ranges(fused: Any) -> FloatArray:
+    """``(P, bins)`` each position's range per return bin: its nearest return, or where it had
+    none its reach in that direction (0 where it saw nothing), metres."""
+    if fused.returns is None:
+        raise InputError("this fused map keeps no returns: a world map needs them")
+    return _ranges(fused.returns, fused.reaches)
+
+
+def _ranges(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatArray:
+    """Nearest returns ``(P, bins)`` (millimetres) where a bin has one, else the reach
+    (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres."""
+    bins = returns.shape[1]
+    reach = reaches[:, 0].astype(np.float64) * REACH_UNIT
+    centre = (np.arange(bins) + 0.5) / bins
+    coarse = np.minimum((centre * reach.shape[1]).astype(np.intp), reach.shape[1] - 1)
+    return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
+
+
+__all__ = ["SIGHTING_BINS", "RunReturns", "position_ranges", "returns_of_fused", "returns_of_positions"]

@@ -1,0 +1,192 @@
+"""Registering scans and whole logs: the sequential scan-to-map registration, and a log read
+for ``occtool map`` with its poses registered when it needs them."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import InputError
+from occtool.features import Pose, Position, RangeLog
+from occtool.register._core import (
+    MAX_REFUSED_SHARE,
+    PLANAR_SPREAD,
+    FloatArray,
+    RegistrationReport,
+    RegistrationSettings,
+    _Aligner,
+    _extruded,
+    _in_world,
+    _matrix,
+    _pose,
+    compose,
+    matched_share,
+    relative,
+    scan_points,
+)
+from occtool.register._graph import close_loops
+
+
+# ---------------------------------------------------------------------- registration
+def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] | None = None, *,
+                   settings: RegistrationSettings | None = None,
+                   report: RegistrationReport | None = None) -> list[Pose]:
+    """The world pose of every scan (the first at its odometry pose, or the origin).
+
+    Parameters
+    ----------
+    scans
+        ``(N_k, 3)`` returns of each scan in its sensor-centred robot frame.
+    odometry
+        Each scan's odometry pose or ``None``; relative odometry between consecutive scans
+        seeds each registration, else the previous step's motion does.
+    """
+    settings = settings or RegistrationSettings()
+    count = len(scans)
+    if count == 0:
+        return []
+    odometry = list(odometry) if odometry is not None else [None] * count
+    if len(odometry) != count:
+        raise InputError(f"{count} scans but {len(odometry)} odometry poses")
+    planar = all(len(p) == 0 or float(np.ptp(p[:, 2])) <= PLANAR_SPREAD for p in scans)
+    aligner = _Aligner(settings)
+    started = time.process_time()
+    prepared = [_extruded(p) if planar else p for p in scans]
+    poses: list[Pose] = [odometry[0] if odometry[0] is not None else Pose()]
+    submap: list[int] = [0]
+    refused = 0
+    for k in range(1, count):
+        if odometry[k] is not None and odometry[k - 1] is not None:
+            step = relative(odometry[k - 1], odometry[k])  # type: ignore[arg-type]
+        elif k >= 2:
+            step = relative(poses[k - 2], poses[k - 1])
+        else:
+            step = Pose()
+        guess = compose(poses[k - 1], step)
+        source = prepared[k]
+        if len(scans[k]) < 10:
+            poses.append(guess)
+            refused += 1
+            continue
+        target = np.concatenate([_in_world(prepared[i], poses[i]) for i in submap])
+        matrix = aligner.align(target, source, _matrix(guess))
+        if matched_share(target, source, matrix, settings.max_correspondence) >= settings.min_inliers:
+            poses.append(_pose(matrix, planar))
+        else:
+            poses.append(guess)
+            refused += 1
+        last = poses[submap[-1]]
+        moved = relative(last, poses[k])
+        if math.hypot(moved.x, moved.y) >= settings.submap_step or abs(moved.yaw) >= settings.submap_turn:
+            submap.append(k)
+            if len(submap) > settings.submap_scans:
+                submap.pop(0)
+    if report is not None:
+        report.refused += refused
+        report.seconds["registration"] = time.process_time() - started
+    if settings.loop_closure and count > 2:
+        poses = close_loops(prepared, poses, planar, aligner, settings, report)
+    return poses
+
+
+# ---------------------------------------------------------------------- whole logs
+def register_log(log: RangeLog, *, settings: RegistrationSettings | None = None,
+                 position_tolerance: Sequence[float] | None = None, use_odometry: bool = True,
+                 max_range: float | None = None) -> tuple[RangeLog, RegistrationReport]:
+    """Register the scans of ``log`` (one scan a position: ``read_log(..., group_by="message")``)
+    and group them into positions on the registered poses.
+
+    The log's poses, where it has them, seed the registration as odometry
+    (``use_odometry=False`` ignores them). Returns the regrouped log (its notes say how
+    its poses were made) and the report, whose ``poses`` hold every scan's registered pose.
+    """
+    from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+
+    if not log.positions:
+        raise InputError(f"{log.source or 'the log'} holds no range data")
+    odometry = [p.pose for p in log.positions] if use_odometry else [None] * len(log.positions)
+    seeded = "seeded by the log's poses" if any(o is not None for o in odometry) else "no odometry: constant velocity"
+    settings = settings or RegistrationSettings()
+    report = RegistrationReport(scans=len(log.positions), seeded_by=seeded, backend=settings.backend)
+    points = [scan_points(p.features, max_range) for p in log.positions]
+    poses = register_scans(points, odometry, settings=settings, report=report)
+    if len(points) > 1 and report.refused > MAX_REFUSED_SHARE * (len(points) - 1):
+        what = ("the log has no poses and its scans" if all(o is None for o in odometry)
+                else "the log's scans")
+        raise InputError(
+            f"{log.source or 'the log'}: {what} could not be registered ({report.refused} of {len(points) - 1} "
+            "refused: too few returns, or too little overlap from one scan to the next); "
+            "map it without registration (--no-register, register=False)")
+    report.poses = poses
+    report.stamps = [p.stamp for p in log.positions]
+    report.odometry = [p.pose for p in log.positions]
+    scans = [Scan(p.features.points, p.features.evidence, pose, p.stamp, p.source)
+             for p, pose in zip(log.positions, poses)]
+    notes = [n for n in log.notes if not n.startswith("the log has no poses")]
+    notes.append(f"poses registered: {report.describe()}")
+    regrouped = build_log(scans, source=log.source, tolerance=position_tolerance or DEFAULT_POSITION_TOLERANCE,
+                          notes=notes)
+    regrouped.pose_kind = "registered"
+    return regrouped, report
+
+
+def pose_kind(log: RangeLog) -> str | None:
+    """What a log's poses are: its reader's word (``log.pose_kind``), else from its notes
+    (``"odometry"``, ``"tf"``), else ``"log"`` (its own pose fields), ``None`` without poses."""
+    if not log.has_poses:
+        return None
+    if log.pose_kind:
+        return log.pose_kind
+    if any(n.startswith("poses from odometry") for n in log.notes):
+        return "odometry"
+    if any(n.startswith("poses from /tf") for n in log.notes):
+        return "tf"
+    return "log"
+
+
+def needs_registration(log: RangeLog) -> bool:
+    """Whether ``occtool map`` registers a log by default: it has no poses, or only odometry."""
+    return pose_kind(log) in (None, "odometry")
+
+
+def read_registered_log(path: str, read_options: dict[str, Any], register: bool | None = None, *,
+                        settings: RegistrationSettings | None = None
+                        ) -> tuple[RangeLog, RegistrationReport | None]:
+    """Read a log for ``occtool map``: scan by scan, registered when ``register`` is true,
+    or by default (``None``) when :func:`needs_registration`; grouped into positions as
+    ``read_options`` ask either way. Returns the log and the report (``None`` when the
+    log's own poses are kept)."""
+    from occtool.io import read_log
+    from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+
+    options = dict(read_options)
+    group_by = options.pop("group_by", "position") or "position"
+    tolerance = options.get("position_tolerance") or DEFAULT_POSITION_TOLERANCE
+    if register is False:
+        return read_log(path, group_by=group_by, **options), None
+    scans = read_log(path, group_by="message", **options)
+    if register is None and not needs_registration(scans):
+        regrouped = build_log([Scan(p.features.points, p.features.evidence, p.pose, p.stamp, p.source)
+                               for p in scans.positions], source=scans.source, tolerance=tolerance,
+                              group_by=group_by, notes=scans.notes)
+        regrouped.pose_kind = scans.pose_kind
+        return regrouped, None
+    registered, report = register_log(scans, settings=settings, position_tolerance=tolerance)
+    if group_by == "message":
+        registered = positions_with_poses(scans, report.poses)
+        registered.notes.append(f"poses registered: {report.describe()}")
+        registered.pose_kind = "registered"
+    return registered, report
+
+
+
+def positions_with_poses(log: RangeLog, poses: Sequence[Pose]) -> RangeLog:
+    """``log`` (one scan a position) with its poses replaced by ``poses``."""
+    if len(poses) != len(log.positions):
+        raise InputError(f"{len(log.positions)} scans but {len(poses)} poses")
+    return RangeLog([Position(p.index, p.features, pose, p.stamp, p.source) for p, pose in zip(log.positions, poses)],
+                    source=log.source, notes=list(log.notes))
