@@ -185,7 +185,7 @@ def test_malformed_files_are_rejected_with_the_reason(tmp_path, text, message):
 def small_run_map():
     """A run map's layers by hand: a region of two parts, one with a hole and a clockwise
     shell, points that need rounding (the raster and world map are not written here)."""
-    from occtool.mapping import RunMap
+    from occtool.fuse import RunMap
 
     hollow = shapely.Polygon([(0, 0), (0, 2.00049), (3.123456, 2), (3, 0)],  # clockwise shell
                              [[(1, 0.5), (2, 0.5), (2, 1.5), (1, 1.5)]])
@@ -199,7 +199,7 @@ def small_run_map():
 @pytest.mark.parametrize("options", [{}, {"precision": 3}, {"simplify": 0.2}, {"simplify": 0.0, "precision": 2}])
 def test_the_run_map_layers_are_the_json_mapping_writes(options):
     from occtool.formats.geojson import RUN_MAP_LAYERS, run_map_layers
-    from occtool.mapping import LAYERS, layer_collections
+    from occtool.fuse import LAYERS, layer_collections
 
     run = small_run_map()
     layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, **options)
@@ -235,7 +235,7 @@ def test_the_run_map_layers_in_wgs84_are_the_json_mapping_writes():
     pytest.importorskip("pyproj")
     from occtool.formats.geojson import run_map_layers
     from occtool.formats.wgs84 import Georeference
-    from occtool.mapping import layer_collections
+    from occtool.fuse import layer_collections
 
     run = small_run_map()
     where = Georeference(48.0, 7.8, 30.0)
