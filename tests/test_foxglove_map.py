@@ -18,8 +18,7 @@ from mcap_protobuf.decoder import DecoderFactory  # noqa: E402
 
 from occtool.features import Pose  # noqa: E402
 from occtool.formats.foxglove import BASE_FRAME, FRAME, GRID_TOPIC, SCENE_TOPIC, TF_TOPIC, run_map_mcap_bytes  # noqa: E402
-from occtool.fuse import FREE, OCCUPIED, UNKNOWN, Raster  # noqa: E402
-from occtool.fuse import PlacedMap, RunMap  # noqa: E402
+from occtool.fuse import FREE, OCCUPIED, UNKNOWN, PlacedMap, Raster, RunMap  # noqa: E402  # noqa: E402
 from occtool.navigation import navigation_map  # noqa: E402
 from occtool.robot import Robot  # noqa: E402
 

@@ -99,10 +99,8 @@ _LAZY: dict[str, str] = {
     "PlacedMap": "occtool.fuse._run",
     "RunMap": "occtool.fuse._run",
     "map_of_run": "occtool.fuse._run",
-    "LAYERS": "occtool.fuse._outputs",
     "NAV2_MODES": "occtool.fuse._outputs",
     "check_outputs": "occtool.fuse._outputs",
-    "layer_collections": "occtool.fuse._outputs",
     "output_paths": "occtool.fuse._outputs",
     "write_run_map": "occtool.fuse._outputs",
     "MapResult": "occtool.fuse._mapping",
@@ -113,10 +111,8 @@ _LAZY: dict[str, str] = {
 if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checkers and IDEs
     from occtool.fuse._mapping import MapResult, map_log, map_model_set
     from occtool.fuse._outputs import (
-        LAYERS,
         NAV2_MODES,
         check_outputs,
-        layer_collections,
         output_paths,
         write_run_map,
     )
@@ -128,13 +124,11 @@ __all__ = [
     "FRONTIER_LOOKAHEAD",
     "KEYFRAME_CELL",
     "KEYFRAME_NEW_SHARE",
-    "LAYERS",
     "NAV2_MODES",
     "MapResult",
     "PlacedMap",
     "RunMap",
     "check_outputs",
-    "layer_collections",
     "map_log",
     "map_model_set",
     "map_of_run",

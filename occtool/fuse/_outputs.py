@@ -7,13 +7,11 @@ a JSON summary (:func:`write_run_map`).
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import shapely
 from numpy.typing import NDArray
 
 from occtool._files import atomic_write
@@ -21,58 +19,6 @@ from occtool.errors import InputError
 from occtool.fuse._run import RunMap
 
 FloatArray = NDArray[np.float64]
-LAYERS = ("navigation", "obstacles", "frontiers")
-
-
-# ---------------------------------------------------------------------- GeoJSON
-def _polygons(geometry: Any) -> list[Any]:
-    if geometry is None or geometry.is_empty:
-        return []
-    if geometry.geom_type == "Polygon":
-        return [geometry]
-    return [g for g in getattr(geometry, "geoms", []) if g.geom_type == "Polygon" and not g.is_empty]
-
-
-def layer_collections(run: RunMap, *, simplify: float | None = None, precision: int | None = None,
-                      georeference: Any | None = None) -> dict[str, dict[str, Any]]:
-    """The three GeoJSON layers, one geometry type each: ``navigation`` (Polygon),
-    ``obstacles`` and ``frontiers`` (Point), metric x, y in the ``map`` frame, or WGS84
-    longitude/latitude (RFC 7946) with a :class:`occtool.formats.wgs84.Georeference`.
-    ``simplify`` is in metres either way."""
-    region = run.navigation
-    if simplify is not None:
-        if not (math.isfinite(simplify) and simplify >= 0):
-            raise InputError(f"simplify tolerance must be a number of metres >= 0, got {simplify}")
-        region = shapely.simplify(region, simplify, preserve_topology=True)
-    polygons = [shapely.orient_polygons(p) if hasattr(shapely, "orient_polygons") else p for p in _polygons(region)]
-    obstacles, frontiers = run.obstacles, run.frontiers
-    properties: dict[str, Any] = {"frame": "map", "units": "m",
-                                  "crs_note": "metric x, y in the map frame, not longitude/latitude"}
-    if georeference is not None:
-        polygons = [shapely.transform(p, georeference.to_lonlat) for p in polygons]
-        obstacles, frontiers = georeference.to_lonlat(obstacles), georeference.to_lonlat(frontiers)
-        properties = {"frame": "WGS84", "units": "degrees",
-                      "origin": {"lat": georeference.lat, "lon": georeference.lon, "heading": georeference.heading}}
-    if precision is not None:
-        polygons = [shapely.set_precision(p, 10.0 ** -precision) for p in polygons]
-
-    def rounded(values: FloatArray) -> list[list[float]]:
-        out = np.asarray(values, dtype=np.float64).reshape(-1, 2)
-        return (np.round(out, precision) if precision is not None else out).tolist()
-
-    return {
-        "navigation": {"type": "FeatureCollection", "properties": {**properties, "kind": "navigation"},
-                       "features": [{"type": "Feature", "properties": {"kind": "navigation"},
-                                     "geometry": shapely.geometry.mapping(p)} for p in polygons]},
-        "obstacles": {"type": "FeatureCollection", "properties": {**properties, "kind": "obstacle"},
-                      "features": [{"type": "Feature", "properties": {"kind": "obstacle"},
-                                    "geometry": {"type": "Point", "coordinates": xy}}
-                                   for xy in rounded(obstacles)]},
-        "frontiers": {"type": "FeatureCollection", "properties": {**properties, "kind": "frontier"},
-                      "features": [{"type": "Feature", "properties": {"kind": "frontier"},
-                                    "geometry": {"type": "Point", "coordinates": xy}}
-                                   for xy in rounded(frontiers)]},
-    }
 
 
 #: The Nav2 map's modes (map_server's): three values, or the fused occupancy graded.
@@ -129,12 +75,14 @@ def _write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bo
                    precision: int | None, mcap: bool, georeference: Any | None,
                    extra_summary: dict[str, Any] | None, nav2_mode: str) -> tuple[list[Path], dict[str, Any]]:
     """:func:`write_run_map`, and the summary it wrote (``summary.json``)."""
+    from occtool.formats.geojson import run_map_layers
     from occtool.formats.nav2 import write_nav2, write_nav2_scale
     from occtool.formats.occmap import encode
 
     check_outputs(folder, nav2_mode=nav2_mode, overwrite=overwrite)  # before any file is written
     folder = Path(folder)
-    layers = layer_collections(run, simplify=simplify, precision=precision, georeference=georeference)
+    layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, simplify=simplify, precision=precision,
+                            georeference=georeference)
     world_bytes = encode(run.world)
     summary = {**run.summary(), **(extra_summary or {})}
     summary["world_map"]["file_bytes"] = len(world_bytes)
@@ -169,4 +117,4 @@ def _write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bo
     return written, summary
 
 
-__all__ = ["LAYERS", "NAV2_MODES", "check_outputs", "layer_collections", "output_paths", "write_run_map"]
+__all__ = ["NAV2_MODES", "check_outputs", "output_paths", "write_run_map"]
