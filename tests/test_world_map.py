@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from occtool.fuse._walls import fit_segments, seen_through
 from occtool.io import read_log
 from occtool.robot import Robot
 
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 LASER_ROBOT = Robot(radius=0.25, sensor_height=0.3, body_height=0.5)
 BAND = (-0.25, 0.2)
 
@@ -181,31 +183,42 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     assert raster.cells[edge_row, edge_col].tolist() == [OCCUPIED, UNKNOWN, FREE]
 
 
-def test_frontiers_ignore_a_walls_uncertain_edge():
-    """An unknown cell the run observed (a wall's edge) is no frontier; one nothing observed is."""
+def _frontier_raster(cells, explored):
     from occtool.fuse import Raster
-    from occtool.fuse._run import PlacedMap, _frontiers
 
-    cells = np.full((1, 40), FREE, dtype=np.uint8)
-    cells[0, 20:23] = UNKNOWN  # a wall's edge, observed
-    cells[0, 23] = OCCUPIED
-    cells[0, 30:] = UNKNOWN  # never observed
-    explored = np.ones((1, 40), dtype=bool)
-    explored[0, 30:] = False
-    raster = Raster(cells, 0.05, (0.0, 0.0), np.zeros((1, 40), dtype=np.float32), np.zeros((1, 40), dtype=bool),
-                    explored=explored)
+    shape = cells.shape
+    return Raster(cells, 0.05, (0.0, 0.0), np.zeros(shape, dtype=np.float32), np.zeros(shape, dtype=bool),
+                  explored=explored)
 
-    class Nav:
-        def __init__(self, points):
-            self.exploration_points = points
 
-    from occtool.features import Pose
-    towards_wall = PlacedMap(0, Pose(x=0.0, y=0.025), None, Nav([[0.9, 0.025]]))
-    towards_unseen = PlacedMap(1, Pose(x=1.2, y=0.025), None, Nav([[1.4, 0.025]]))
-    found = _frontiers(raster, [towards_wall, towards_unseen], lookahead=1.0)
-    assert found.tolist() == [[1.4, 0.025]]
-    raster.explored = None  # without the mask every unknown cell is unexplored
-    assert len(_frontiers(raster, [towards_wall, towards_unseen], lookahead=1.0)) == 2
+def test_frontiers_lie_where_observed_free_space_meets_unexplored_space():
+    """An unknown cell the run observed (a wall's edge) is no frontier; one nothing observed is;
+    a gap narrower than the robot is no frontier; the point is the frontier's middle cell."""
+    from occtool.fuse import frontiers_of
+
+    cells = np.full((40, 60), FREE, dtype=np.uint8)
+    explored = np.ones((40, 60), dtype=bool)
+    cells[:, 0] = OCCUPIED  # walls round the room but the right side
+    cells[0, :] = cells[-1, :] = OCCUPIED
+    cells[1:-1, 1:3] = UNKNOWN  # the left wall's uncertain edge: observed
+    cells[:, 50:] = UNKNOWN  # past x = 2.5 m nothing observed...
+    explored[:, 50:] = False
+    cells[1:-1, 49] = OCCUPIED  # ...behind a wall with a doorway 0.5 m wide (rows 10-19)
+    cells[10:20, 49] = FREE
+    cells[30:33, 49] = FREE  # and a 0.15 m gap: too narrow to be a frontier
+    raster = _frontier_raster(cells, explored)
+    found = frontiers_of(raster)
+    # Cell (row 14, column 49): of the doorway's two middle cells, the first.
+    assert found == pytest.approx(np.array([[2.475, 0.725]]))
+    assert frontiers_of(raster, min_length=0.1) == pytest.approx(np.array([[2.475, 0.725], [2.475, 1.575]]))
+    # Without the observed mask, the wall's uncertain edge is unexplored too.
+    raster.explored = None
+    assert frontiers_of(raster) == pytest.approx(np.array([[0.175, 0.975], [2.475, 0.725]]))
+    # A raster with no free cell, or no unexplored cell, has no frontier.
+    assert frontiers_of(_frontier_raster(np.full((5, 5), UNKNOWN, dtype=np.uint8), None)).shape == (0, 2)
+    closed = np.full((5, 5), OCCUPIED, dtype=np.uint8)
+    closed[1:-1, 1:-1] = FREE
+    assert frontiers_of(_frontier_raster(closed, np.ones((5, 5), dtype=bool))).shape == (0, 2)
 
 
 def test_quantised_map_round_trips_bit_for_bit(tmp_path):
@@ -567,3 +580,21 @@ def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_the
     # drawn, unknown on its line, free 10 cm off it, away from the other.
     row, col, _ = raster.cell_of([[2.2, 1.0], [2.1, 1.0]])
     assert raster.cells[row, col].tolist() == [UNKNOWN, FREE]
+
+
+@pytest.mark.parametrize("name", ["intel", "fr079"])
+def test_a_real_runs_map_has_frontiers_on_the_boundary_of_what_it_observed(name):
+    """Intel's and FR-079's rooms were not all looked into: their Nav2 rasters have exploration
+    points, each a free cell beside a cell nothing observed."""
+    from occtool.fuse import frontiers_of, load_map
+
+    raster = load_map(FIXTURES / "maps" / f"{name}.occmap").rasterise(0.05)
+    found = frontiers_of(raster)
+    assert len(found) >= 10
+    row, col, inside = raster.cell_of(found)
+    assert inside.all() and (raster.cells[row, col] == FREE).all()
+    unexplored = (raster.cells == UNKNOWN) & ~raster.explored
+    beside = np.zeros(len(found), dtype=bool)
+    for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        beside |= unexplored[np.clip(row + d_row, 0, raster.shape[0] - 1), np.clip(col + d_col, 0, raster.shape[1] - 1)]
+    assert beside.all()

@@ -95,7 +95,8 @@ from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
 # The map of a run and its writers, imported on first use (PEP 562): they import shapely
 # at their top, and `import occtool.fuse` stays as light as it was without them.
 _LAZY: dict[str, str] = {
-    "FRONTIER_LOOKAHEAD": "occtool.fuse._run",
+    "FRONTIER_MIN_LENGTH": "occtool.fuse._run",
+    "frontiers_of": "occtool.fuse._run",
     "PlacedMap": "occtool.fuse._run",
     "RunMap": "occtool.fuse._run",
     "map_of_run": "occtool.fuse._run",
@@ -116,12 +117,12 @@ if TYPE_CHECKING:  # pragma: no cover - what the lazy names are, for type checke
         output_paths,
         write_run_map,
     )
-    from occtool.fuse._run import FRONTIER_LOOKAHEAD, PlacedMap, RunMap, map_of_run
+    from occtool.fuse._run import FRONTIER_MIN_LENGTH, PlacedMap, RunMap, frontiers_of, map_of_run
 
 __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
-    "FRONTIER_LOOKAHEAD",
+    "FRONTIER_MIN_LENGTH",
     "KEYFRAME_CELL",
     "KEYFRAME_NEW_SHARE",
     "NAV2_MODES",
@@ -129,6 +130,7 @@ __all__ = [
     "PlacedMap",
     "RunMap",
     "check_outputs",
+    "frontiers_of",
     "map_log",
     "map_model_set",
     "map_of_run",

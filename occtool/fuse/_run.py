@@ -28,8 +28,9 @@ from occtool.raster import FREE, UNKNOWN, Raster
 from occtool.robot import Robot
 
 FloatArray = NDArray[np.float64]
-#: How far past an exploration point the raster is walked for unknown space, metres.
-FRONTIER_LOOKAHEAD = 1.0
+#: Shortest frontier kept, metres of boundary: explore_lite's ``min_frontier_size`` default,
+#: about a robot's width (a shorter gap is one the robot could not drive through to look).
+FRONTIER_MIN_LENGTH = 0.5
 
 
 @dataclass
@@ -79,36 +80,45 @@ class RunMap:
         }
 
 
-def _frontiers(raster: Raster, placed: list[PlacedMap], lookahead: float) -> FloatArray:
-    """Exploration points past which no position saw: walking on from each, away from the
-    position that found it, the fused raster turns unknown before it turns occupied
-    (within ``lookahead`` metres)."""
-    points, outward = [], []
-    for item in placed:
-        pts = np.asarray(item.nav.exploration_points, dtype=np.float64).reshape(-1, 2)
-        if len(pts):
-            direction = pts - np.array([item.pose.x, item.pose.y])
-            direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
-            points.append(pts)
-            outward.append(direction)
-    if not points:
+def frontiers_of(raster: Raster, min_length: float = FRONTIER_MIN_LENGTH) -> FloatArray:
+    """Exploration points: where free space the run observed meets space nothing observed.
+
+    A frontier cell is a free cell with an unexplored 4-neighbour (an unknown cell outside
+    :attr:`Raster.explored`, or the raster's edge): the unknown rims round walls were
+    observed and are no frontier. Frontier cells that touch (8-connected) form a frontier;
+    one shorter than ``min_length`` metres (its cell count times the resolution) is
+    dropped, and each other gives one point, its cell nearest the frontier's centroid,
+    so the point lies on the boundary itself (as explore_lite's frontier search does).
+    Points are ordered by frontier size, largest first, then by position.
+    """
+    from scipy import ndimage
+
+    unexplored = raster.cells == UNKNOWN
+    if raster.explored is not None:
+        unexplored &= ~raster.explored
+    beyond = np.pad(unexplored, 1, constant_values=True)
+    touches = beyond[:-2, 1:-1] | beyond[2:, 1:-1] | beyond[1:-1, :-2] | beyond[1:-1, 2:]
+    labels, count = ndimage.label((raster.cells == FREE) & touches, structure=np.ones((3, 3), dtype=bool))
+    if count == 0:
         return np.zeros((0, 2))
-    pts, direction = np.concatenate(points), np.concatenate(outward)
-    steps = np.arange(1, max(2, int(np.ceil(lookahead / raster.resolution))) + 1) * raster.resolution
-    walk = pts[:, None, :] + steps[None, :, None] * direction[:, None, :]
-    row, col, inside = raster.cell_of(walk.reshape(-1, 2))
-    cells = np.where(inside, raster.cells[row, col], UNKNOWN).reshape(len(pts), len(steps))
-    # Off the raster is unexplored; an unknown cell the run observed (a wall's uncertain edge) is not.
-    unexplored = np.where(inside, raster.unexplored(row, col), True).reshape(len(pts), len(steps))
-    not_free = cells != FREE
-    first = np.argmax(not_free, axis=1)
-    reached = not_free.any(axis=1)
-    return pts[reached & unexplored[np.arange(len(pts)), first]]
+    rows, cols = np.nonzero(labels)
+    group = labels[rows, cols] - 1
+    sizes = np.bincount(group, minlength=count)
+    centre_row = np.bincount(group, rows, count) / sizes
+    centre_col = np.bincount(group, cols, count) / sizes
+    spread = (rows - centre_row[group]) ** 2 + (cols - centre_col[group]) ** 2
+    # Each frontier's cell nearest its centroid (ties: the first in row-major order).
+    order = np.lexsort((np.arange(len(group)), spread, group))
+    nearest = order[np.r_[0, np.flatnonzero(np.diff(group[order])) + 1]]
+    keep = nearest[sizes[group[nearest]] * raster.resolution >= min_length]
+    keep = keep[np.lexsort((cols[keep], rows[keep], -sizes[group[keep]]))]
+    return np.column_stack([raster.origin[0] + (cols[keep] + 0.5) * raster.resolution,
+                            raster.origin[1] + (rows[keep] + 0.5) * raster.resolution])
 
 
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
-               lookahead: float = FRONTIER_LOOKAHEAD, sightings: RunReturns | None = None,
+               frontier_min_length: float = FRONTIER_MIN_LENGTH, sightings: RunReturns | None = None,
                robot_overrides: Mapping[str, float] | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
@@ -128,6 +138,8 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     sightings
         What every position of the run saw (:attr:`occtool.fuse.FuseReport.sightings`), for
         the world map's walls; ``None``: the fused map's own positions.
+    frontier_min_length
+        Shortest frontier kept, metres (:func:`frontiers_of`).
     robot_overrides
         :class:`~occtool.robot.Robot` fields (``radius``, ``sensor_height``, ...) that
         replace those of each model's own robot (or ``navigation``'s) in its navigation map.
@@ -161,9 +173,9 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])
     obstacles = np.concatenate([np.asarray(p.nav.obstacle_points, dtype=np.float64).reshape(-1, 2)
                                 for p in placed]) if placed else np.zeros((0, 2))
-    frontiers = _frontiers(raster, placed, lookahead)
+    frontiers = frontiers_of(raster, frontier_min_length)
     seconds["union_frontiers"] = time.perf_counter() - started
     return RunMap(fused, world, raster, placed, region, obstacles, frontiers, seconds)
 
 
-__all__ = ["FRONTIER_LOOKAHEAD", "PlacedMap", "RunMap", "map_of_run"]
+__all__ = ["FRONTIER_MIN_LENGTH", "PlacedMap", "RunMap", "frontiers_of", "map_of_run"]
