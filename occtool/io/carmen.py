@@ -37,9 +37,9 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
-from occtool.io import check_no_return_range
 from occtool.io.csv import open_text
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, group_scans
+from occtool.io.positions import Scan, group_scans
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE, check_no_return_range
 
 # The largest reading of a file is taken as the no-return sentinel when it occurs this
 # often (or, in short logs, at least twice and in 1% of the readings).

@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, assign_positions, to_reference_frame
+from occtool.io.positions import assign_positions, to_reference_frame
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE
 from occtool.limits import MAX_COORDINATE
 
 logger = logging.getLogger(__name__)

@@ -24,7 +24,8 @@ from occtool.io.csv import (
     open_text,
     read_csv,
 )
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, to_reference_frame
+from occtool.io.positions import to_reference_frame
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE
 
 #: Text parsed at a time when a CSV log is streamed (:func:`iter_csv`): about 4 MB, tens
 #: of thousands of rows.
@@ -157,7 +158,8 @@ class _RowGatherer:
     at a new ``position`` id, or at a pose run that starts a new position (tolerance)."""
 
     def __init__(self, name: str, layout: _Layout, tolerance: Sequence[float], group_by: str) -> None:
-        from occtool.io.positions import GROUP_BY_CHOICES, check_tolerance
+        from occtool.io.positions import check_tolerance
+        from occtool.io.read_options import GROUP_BY_CHOICES
 
         if group_by not in GROUP_BY_CHOICES:
             raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {group_by!r}")

@@ -47,10 +47,12 @@ from occtool.io.depth import (
     back_project,
     camera_scan,
     check_rigid,
+    estimate_floor,
     level_rotation,
     rotation_from_quaternion,
 )
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE
 
 FloatArray = NDArray[np.float64]
 
@@ -314,48 +316,6 @@ def _check_pinhole(k: FloatArray, where: Path) -> None:
         PinholeCamera.from_matrix(1, 1, k)
     except InputError as exc:
         raise InputError(f"{where}: {exc}") from None
-
-
-def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0,
-                   tolerance: float = 0.03) -> tuple[FloatArray, float, int] | None:
-    """The floor plane of world points: the plane of most inliers (within ``tolerance``)
-    whose normal lies within 30 degrees of ``up_guess``, among the lowest 40 % of the points.
-
-    Returns ``(unit normal pointing up, offset d with n . p = d on the floor, inliers)``, or
-    ``None`` when no such plane holds 5 % of the points.
-    """
-    if points.shape[0] < 50:
-        return None
-    up = up_guess / np.linalg.norm(up_guess)
-    heights = points @ up
-    low = points[heights <= np.quantile(heights, 0.4)]
-    rng = np.random.default_rng(seed)
-    best: tuple[FloatArray, float, int] | None = None
-    cos_limit = math.cos(math.radians(30.0))
-    for _ in range(300):
-        a, b, c = low[rng.choice(low.shape[0], 3, replace=False)]
-        normal = np.cross(b - a, c - a)
-        length = float(np.linalg.norm(normal))
-        if length < 1e-9:
-            continue
-        normal /= length
-        if normal @ up < 0:
-            normal = -normal
-        if normal @ up < cos_limit:
-            continue
-        offset = float(normal @ a)
-        inliers = int(np.count_nonzero(np.abs(points @ normal - offset) < tolerance))
-        if best is None or inliers > best[2]:
-            best = (normal, offset, inliers)
-    if best is None or best[2] < 0.05 * points.shape[0]:
-        return None
-    # Refine: the least-squares plane of the inliers.
-    normal, offset, _ = best
-    inlier_points = points[np.abs(points @ normal - offset) < tolerance]
-    centre = inlier_points.mean(axis=0)
-    _, _, vt = np.linalg.svd(inlier_points - centre, full_matrices=False)
-    refined = vt[2] if vt[2] @ up > 0 else -vt[2]
-    return refined, float(refined @ centre), int(inlier_points.shape[0])
 
 
 class DepthFolderScans:

@@ -30,10 +30,10 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.io.csv import open_text
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import DEFAULT_CONSTANT_EVIDENCE, DEFAULT_POSITION_TOLERANCE
 from occtool.limits import MAX_COORDINATE
 
-DEFAULT_CONSTANT_EVIDENCE = 0.9
 _PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
     "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",

@@ -22,7 +22,8 @@ import numpy as np
 
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE
 
 #: Fields before the ranges, the ranges, and the trailing value of a line.
 HEADER_FIELDS = 24

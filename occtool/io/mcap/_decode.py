@@ -25,8 +25,7 @@ from occtool.io.mcap._channels import (
     _stamp_seconds,
 )
 from occtool.io.mcap._transforms import _IDENTITY, _Rigid, _rotation_from_quaternion, _strip_frame, _vector
-
-DEFAULT_CONSTANT_EVIDENCE = 0.9
+from occtool.io.read_options import DEFAULT_CONSTANT_EVIDENCE
 
 # ROS sensor_msgs/PointField datatypes and foxglove PackedElementField numeric types.
 _ROS_DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}

@@ -21,7 +21,7 @@ from occtool.io.mcap._channels import (
     _protobuf_available,
     channel_kind,
 )
-from occtool.io.mcap._decode import _DECODERS, DEFAULT_CONSTANT_EVIDENCE, _decode_occtool, _Decoded, _Options
+from occtool.io.mcap._decode import _DECODERS, _decode_occtool, _Decoded, _Options
 from occtool.io.mcap._depth import DepthSettings, add_camera_info, decode_depth, depth_notes
 from occtool.io.mcap._file import ChannelRow, _Reader
 from occtool.io.mcap._transforms import (
@@ -34,8 +34,15 @@ from occtool.io.mcap._transforms import (
     _strip_frame,
     _transforms_of,
 )
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
-from occtool.io.read_options import DEFAULT_DEPTH_FEATURES, DEFAULT_DEPTH_MAX_RANGE, DEFAULT_DEPTH_NOISE
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import (
+    DEFAULT_CONSTANT_EVIDENCE,
+    DEFAULT_DEPTH_FEATURES,
+    DEFAULT_DEPTH_MAX_RANGE,
+    DEFAULT_DEPTH_NOISE,
+    DEFAULT_POSITION_TOLERANCE,
+    check_no_return_range,
+)
 
 
 def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path: str) -> list[ChannelRow]:
@@ -413,8 +420,6 @@ class McapScans:
                  no_return_range: float | None = None, depth_features: int = DEFAULT_DEPTH_FEATURES,
                  depth_noise: float = DEFAULT_DEPTH_NOISE, depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
                  opener: Callable[[str | os.PathLike[str]], Any] | None = None) -> None:
-        from occtool.io import check_no_return_range
-
         self.path = path
         self.name = str(path)
         self.topics = topics
