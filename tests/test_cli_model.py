@@ -185,3 +185,34 @@ def test_every_shared_option_is_named_and_defaulted_as_its_library_keyword() -> 
             checked.add(param.name)
     assert set(options.LOG_OPTION_NAMES) <= checked
     assert set(options.ROBOT_FIELDS) <= checked
+
+
+def test_each_commands_own_options_default_as_the_library_function_it_calls() -> None:
+    import dataclasses
+    import inspect
+
+    from occtool.compare import compare_grid
+    from occtool.log_score import evaluate_log
+    from occtool.robot import Robot
+    from occtool.simulate import simulate_scene
+
+    def keywords(function) -> dict[str, object]:
+        return {n: p.default for n, p in inspect.signature(function).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+
+    robot = {f.name: f.default for f in dataclasses.fields(Robot)}
+    # command -> (library keywords, option name -> keyword where they differ)
+    calls = {
+        "compare-grid": (keywords(compare_grid), {"use_octomap": "octomap"}),
+        "evaluate-log": (keywords(evaluate_log), {}),
+        "simulate": ({**keywords(simulate_scene), **robot}, {"features": "n_features", "noise": "range_noise"}),
+    }
+    commands = dict(_commands())
+    for name, (library, renamed) in calls.items():
+        matched = 0
+        for param in commands[name].params:
+            keyword = renamed.get(param.name, param.name)
+            if keyword in library and param.default is not None:
+                assert param.default == library[keyword], (name, param.name, param.default, library[keyword])
+                matched += 1
+        assert matched >= 3, name
