@@ -47,6 +47,7 @@ from occtool.io.read_options import (
     ReadOptions,
     as_read_options,
     check_no_return_range,
+    options_as_keywords,
 )
 
 if TYPE_CHECKING:
@@ -218,22 +219,8 @@ def _checked(path: str | os.PathLike[str], options: ReadOptions | None,
     return fmt, checked
 
 
-def _options_as_keywords(function: Any) -> None:
-    """Give ``function(path, options=None, **keywords)`` the signature it accepts: each
-    :class:`ReadOptions` field a keyword-only parameter with the field's default, read from
-    the dataclass (for ``help()``, editors, and the test holding the readers to them)."""
-    import dataclasses
-    import inspect  # loaded already by dataclasses
-
-    signature = inspect.signature(function)
-    parameters = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
-    parameters += [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
-                   for f in dataclasses.fields(ReadOptions)]
-    function.__signature__ = signature.replace(parameters=parameters)
-
-
-_options_as_keywords(read_log)
-_options_as_keywords(iter_positions)
+options_as_keywords(read_log)
+options_as_keywords(iter_positions)
 
 
 @contextlib.contextmanager

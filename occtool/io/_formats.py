@@ -3,11 +3,9 @@
 :func:`occtool.io.read_log` calls :data:`READERS` [format] and
 :class:`~occtool.io.position_stream.PositionStream` calls :data:`STREAMS` [format] (a
 format without one is read whole there). Every entry takes ``(path, format, options)``
-with :class:`~occtool.io.read_options.ReadOptions` and hands the reader the fields its
-signature names (:meth:`ReadOptions.keywords`), so no option is listed here: a new
-option reaches the readers that declare a keyword for it. The readers are imported
-only when their format is read (numpy and each reader are milliseconds of every fresh
-process).
+and hands the format's reader the :class:`~occtool.io.read_options.ReadOptions` whole,
+so no option is listed here. The readers are imported only when their format is read
+(numpy and each reader are milliseconds of every fresh process).
 
 A stream entry returns a *source*: ``notes`` (complete after a full iteration) and
 ``positions()``, an iterator of positions, or ``None`` when the file is better read
@@ -32,7 +30,7 @@ PathLike = str | os.PathLike[str]
 def _read_csv(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
     from occtool.io.csv import read_csv
 
-    return read_csv(path, **options.keywords(read_csv))
+    return read_csv(path, options)
 
 
 def _read_mcap(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
@@ -43,31 +41,31 @@ def _read_mcap(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
         from occtool.io.rosbag import BagReader
 
         opener = BagReader
-    return read_mcap(path, **options.keywords(read_mcap, opener=opener))
+    return read_mcap(path, options, opener=opener)
 
 
 def _read_carmen(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
     from occtool.io.carmen import read_carmen
 
-    return read_carmen(path, **options.keywords(read_carmen, evidence=options.constant_evidence))
+    return read_carmen(path, options)
 
 
 def _read_urg(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
     from occtool.io.urg import read_urg
 
-    return read_urg(path, **options.keywords(read_urg))
+    return read_urg(path, options)
 
 
 def _read_depth_folder(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
     from occtool.io.depth_folders import read_depth_folder
 
-    return read_depth_folder(path, **options.keywords(read_depth_folder, format=fmt))
+    return read_depth_folder(path, options, format=fmt)
 
 
 def _read_pointcloud(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
     from occtool.io.pointcloud import read_pointcloud
 
-    return read_pointcloud(path, **options.keywords(read_pointcloud, format=fmt))
+    return read_pointcloud(path, options, format=fmt)
 
 
 class _Grouped:
@@ -103,7 +101,7 @@ class _CsvRows:
         from occtool.io.csv_stream import iter_csv
 
         self.notes = []  # each iteration notes afresh
-        return iter_csv(self.path, **self.options.keywords(iter_csv, notes=self.notes))
+        return iter_csv(self.path, self.options, notes=self.notes)
 
 
 def _stream_csv(path: PathLike, fmt: str, options: ReadOptions) -> _CsvRows:
@@ -113,7 +111,7 @@ def _stream_csv(path: PathLike, fmt: str, options: ReadOptions) -> _CsvRows:
 def _stream_carmen(path: PathLike, fmt: str, options: ReadOptions) -> _Grouped:
     from occtool.io.carmen import CarmenScans
 
-    return _Grouped(CarmenScans(path, **options.keywords(CarmenScans, evidence=options.constant_evidence)), options)
+    return _Grouped(CarmenScans(path, options), options)
 
 
 def _stream_mcap(path: PathLike, fmt: str, options: ReadOptions) -> _Grouped:
@@ -124,13 +122,13 @@ def _stream_mcap(path: PathLike, fmt: str, options: ReadOptions) -> _Grouped:
         from occtool.io.rosbag import BagReader
 
         opener = BagReader
-    return _Grouped(McapScans(path, **options.keywords(McapScans, opener=opener)), options)
+    return _Grouped(McapScans(path, options, opener=opener), options)
 
 
 def _stream_depth_folder(path: PathLike, fmt: str, options: ReadOptions) -> _Grouped:
     from occtool.io.depth_folders import DepthFolderScans
 
-    return _Grouped(DepthFolderScans(path, **options.keywords(DepthFolderScans, format=fmt)), options)
+    return _Grouped(DepthFolderScans(path, options, format=fmt), options)
 
 
 Reader = Callable[[PathLike, str, "ReadOptions"], "RangeLog"]

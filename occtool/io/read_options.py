@@ -1,16 +1,16 @@
 """The options every range-log reader shares, declared once: :class:`ReadOptions`.
 
 Each field holds one option with its default, and :meth:`ReadOptions.__post_init__` its
-check, so a new reader option is a new field here, the reader that uses it (its
-keyword, passed on by :mod:`occtool.io._formats` by name) and its entry in the command
-line's table (``occtool.cli.options.LOG_FLAGS``); nothing else repeats the list.
+check. Every reader (:func:`occtool.io.read_log`, :func:`~occtool.io.iter_positions` and
+each format's: :func:`~occtool.io.csv.read_csv`, :func:`~occtool.io.mcap.read_mcap`,
+:func:`~occtool.io.carmen.read_carmen`, ...) is called ``reader(path, options=None,
+**keywords)``: a :class:`ReadOptions`, or its fields by name, and reads the fields its
+format has from it. :func:`options_as_keywords` gives each such reader the signature of
+the fields, from the dataclass.
 
-:func:`occtool.io.read_log` and :func:`occtool.io.iter_positions` take a
-:class:`ReadOptions` or the same names as keywords. Each format's reader
-(:func:`~occtool.io.csv.read_csv`, :func:`~occtool.io.mcap.read_mcap`,
-:func:`~occtool.io.carmen.read_carmen`, :func:`~occtool.io.pointcloud.read_pointcloud`, ...)
-takes the fields its format has, as keywords with the same names and defaults (a test
-holds them to it).
+So a new reader option is a new field here (default and check), its use in the reader
+of the format that has it, and its entry in the command line's table
+(``occtool.cli.options.LOG_FLAGS``); nothing else lists the options.
 
 This module is light (no numpy at import): the command line reads its defaults for
 ``--help``.
@@ -212,19 +212,6 @@ class ReadOptions:
 
         return dataclasses.replace(self, **changes) if changes else self
 
-    def keywords(self, function: Any, **given: Any) -> dict[str, Any]:
-        """The keyword arguments of a reader ``function``: the fields its signature names, then ``given``.
-
-        A reader takes the options its format has as keyword-only parameters named as the
-        fields; this passes them on by name, so a new option reaches the reader that
-        declares it without a line here or in the registry.
-        """
-        import inspect  # already loaded by dataclasses; named here for the reader
-
-        wanted = [name for name, parameter in inspect.signature(function).parameters.items()
-                  if parameter.kind is inspect.Parameter.KEYWORD_ONLY and name in OPTION_NAMES]
-        return {**{name: getattr(self, name) for name in wanted}, **given}
-
 
 #: The field names, in declaration order (the keywords of :func:`occtool.io.read_log`).
 OPTION_NAMES: tuple[str, ...] = tuple(f.name for f in fields(ReadOptions))
@@ -244,13 +231,29 @@ def as_read_options(options: ReadOptions | None = None, /, **keywords: Any) -> R
         raise TypeError(f"options must be a ReadOptions, got {type(options).__name__}")
     unknown = [name for name in keywords if name not in OPTION_NAMES]
     if unknown:
-        raise TypeError(f"read_log() got an unexpected keyword argument '{unknown[0]}'")
+        raise TypeError(f"unexpected keyword argument '{unknown[0]}': the reading options are "
+                        f"{', '.join(OPTION_NAMES)}")
     if options is None:
         return ReadOptions(**keywords)
     return options.replace(**keywords)
 
 
+def options_as_keywords(function: Any) -> Any:
+    """Give ``function(path, options=None, **keywords)`` (or such a class) the signature it
+    accepts: each :class:`ReadOptions` field a keyword-only parameter with the field's
+    default, read from the dataclass (for ``help()``, editors, and the tests holding the
+    readers' keywords to the fields). Returns ``function``."""
+    import inspect  # loaded already by dataclasses
+
+    signature = inspect.signature(function)
+    parameters = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+    parameters += [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
+                   for f in fields(ReadOptions)]
+    function.__signature__ = signature.replace(parameters=parameters)
+    return function
+
+
 __all__ = ["DEFAULT_CONSTANT_EVIDENCE", "DEFAULT_DEPTH_FEATURES", "DEFAULT_DEPTH_MAX_RANGE", "DEFAULT_DEPTH_MIN_RANGE",
            "DEFAULT_DEPTH_NOISE", "DEFAULT_POSITION_TOLERANCE", "FORMATS", "GROUP_BY_CHOICES", "OPTION_NAMES",
            "ReadOptions", "as_read_options", "check_depth_features", "check_depth_max_range", "check_depth_noise", "check_format",
-           "check_no_return_range"]
+           "check_no_return_range", "options_as_keywords"]
