@@ -99,3 +99,120 @@ def test_fit_writes_model_set_for_positions(tmp_path):
         assert load_model(out / entry["file"]).n_features_ == 600
     result = CliRunner().invoke(cli, ["fit", str(log), "-o", str(tmp_path / "one.json")])
     assert result.exit_code == 1 and "--position" in result.output
+
+
+# --- the command line's options map onto the library's keywords ---------------------------
+
+
+def _commands():
+    """Every command and subcommand: (name, click command)."""
+    import importlib
+
+    import click
+
+    from occtool.cli.main import COMMANDS
+
+    found = []
+    for name, (module, attribute, _) in COMMANDS.items():
+        command = getattr(importlib.import_module(module), attribute)
+        found.append((name, command))
+        if isinstance(command, click.Group):
+            found += [(f"{name} {sub}", c) for sub, c in command.commands.items()]
+    return found
+
+
+def _library_defaults() -> dict[str, dict[str, object]]:
+    """The library keywords the options map onto, by owner: name -> default."""
+    import dataclasses
+    import inspect
+
+    from occtool.fit import OccupancyRegressor
+    from occtool.io import ReadOptions
+    from occtool.navigation import navigation_map
+    from occtool.robot import Robot
+    from occtool.sensor import SensorModel
+
+    def keywords(function) -> dict[str, object]:
+        return {n: p.default for n, p in inspect.signature(function).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+
+    return {
+        "read": {f.name: f.default for f in dataclasses.fields(ReadOptions)},
+        "sensor": {f.name: f.default for f in dataclasses.fields(SensorModel)},
+        "fit": keywords(OccupancyRegressor.__init__),
+        "robot": {f.name: f.default for f in dataclasses.fields(Robot)},
+        "navigation": keywords(navigation_map),
+    }
+
+
+def test_every_shared_option_is_named_and_defaulted_as_its_library_keyword() -> None:
+    from occtool.cli import options
+
+    library = _library_defaults()
+    # Which library object each shared option group maps onto; the robot's options are
+    # renamed (--robot-radius sets Robot.radius), the rest keep the keyword's name
+    # (--topic is topics=, --intensities use_intensities=, --angles n_angles=: click's
+    # parameter names are the keywords).
+    owners = {
+        **{name: ("read", name) for name in options.LOG_OPTION_NAMES},
+        **{name: ("sensor", name) for name in options.SENSOR_OPTION_NAMES},
+        **{name: ("fit", name) for name in options.FIT_OPTION_NAMES},
+        **{name: ("robot", field) for name, field in options.ROBOT_FIELDS.items()},
+        **{name: ("navigation", name) for name in options.EXTRACT_OPTION_NAMES},
+    }
+    assert tuple(options.LOG_FLAGS) == options.LOG_OPTION_NAMES == tuple(library["read"])
+    # The defaults the help texts state for options left to the library (default None) are the library's.
+    for name, stated in options.LIBRARY_DEFAULTS.items():
+        owner, keyword = owners[name]
+        assert library[owner][keyword] == stated, name
+    own_meaning = {("plot model", "pieces")}  # --pieces/--no-pieces: draw the pieces, not how many
+    checked = set()
+    for command_name, command in _commands():
+        for param in command.params:
+            if param.name not in owners or (command_name, param.name) in own_meaning:
+                continue
+            owner, keyword = owners[param.name]
+            assert keyword in library[owner], (command_name, param.name)
+            expected = library[owner][keyword]
+            default = param.default
+            if param.name == "position_tolerance":
+                default = options.float_list(None, None, default)
+            if getattr(param, "multiple", False) and default in ((), None):
+                default = None
+            if default is None and param.name in options.LIBRARY_DEFAULTS:
+                continue  # the library decides; its default is named in the help, checked above
+            assert default == expected, (command_name, param.name, default, expected)
+            checked.add(param.name)
+    assert set(options.LOG_OPTION_NAMES) <= checked
+    assert set(options.ROBOT_FIELDS) <= checked
+
+
+def test_each_commands_own_options_default_as_the_library_function_it_calls() -> None:
+    import dataclasses
+    import inspect
+
+    from occtool.compare import compare_grid
+    from occtool.scoring import evaluate_log
+    from occtool.robot import Robot
+    from occtool.simulate import simulate_scene
+
+    def keywords(function) -> dict[str, object]:
+        return {n: p.default for n, p in inspect.signature(function).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+
+    robot = {f.name: f.default for f in dataclasses.fields(Robot)}
+    # command -> (library keywords, option name -> keyword where they differ)
+    calls = {
+        "compare-grid": (keywords(compare_grid), {"use_octomap": "octomap"}),
+        "evaluate-log": (keywords(evaluate_log), {}),
+        "simulate": ({**keywords(simulate_scene), **robot}, {"features": "n_features", "noise": "range_noise"}),
+    }
+    commands = dict(_commands())
+    for name, (library, renamed) in calls.items():
+        matched = 0
+        for param in commands[name].params:
+            keyword = renamed.get(param.name, param.name)
+            if keyword in library and param.default is not None:
+                assert param.default == library[keyword], (name, param.name, param.default, library[keyword])
+                matched += 1
+        assert matched >= 3, name

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import traceback
 from pathlib import Path
 
@@ -121,10 +122,40 @@ def test_any_number_replaced_by_a_wrong_value_loads_or_fails_cleanly(files, tmp_
     path_in_file = data.draw(st.sampled_from(_paths(original)))
     path = tmp_path_factory.mktemp("fuzz") / f"{kind}.json"
     path.write_text(_dump(_set(original, path_in_file, replacement), 10**400), encoding="utf-8")
+    before = _get(original, path_in_file)
+    unchanged = type(before) is type(replacement) and before == replacement
     try:
         (load_inverse if kind == "inverse" else load_model)(path)
-    except ModelFormatError:
-        pass
+    except ModelFormatError as exc:
+        assert str(exc).startswith(f"{path}: "), str(exc)  # one line naming the file
+        assert not unchanged, f"the file as written fails to load: {exc}"
+        return
+    # occtool never writes NaN or infinity (nor a 400-digit number): one there is damage.
+    assert not (isinstance(replacement, float) and not math.isfinite(replacement)), \
+        f"{kind} with {'/'.join(map(str, path_in_file))} = {replacement} loaded"
+    assert replacement != "@BIG@", f"{kind} with a 400-digit {'/'.join(map(str, path_in_file))} loaded"
+
+
+@pytest.mark.parametrize("kind", ["model", "inverse", "observed"])
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
+def test_nan_or_infinity_anywhere_is_a_format_error(files, tmp_path, kind, value):
+    # A bound, setting or summary left NaN loaded before, and every map made from it was wrong.
+    original = json.loads(files[kind].read_text())
+    path = tmp_path / f"{kind}.json"
+    numbers = [p for p in _paths(original) if isinstance(_get(original, p), (int, float))
+               and not isinstance(_get(original, p), bool)]
+    assert len(numbers) > 20
+    for where in numbers:
+        path.write_text(_dump(_set(original, where, value)), encoding="utf-8")
+        with pytest.raises(ModelFormatError, match="is not a finite number") as caught:
+            (load_inverse if kind == "inverse" else load_model)(path)
+        assert str(caught.value).startswith(f"{path}: "), str(caught.value)
+
+
+def _get(data: object, path: tuple) -> object:
+    for key in path:
+        data = data[key]  # type: ignore[index]
+    return data
 
 
 @pytest.mark.parametrize(("damage", "message"), [

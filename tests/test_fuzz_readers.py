@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_io_mcap import header, laserscan, quaternion, transform, write_ros2
 
@@ -292,19 +292,46 @@ def test_a_negative_ply_element_count_is_an_error(tmp_path_factory, count):
         read_log(path)
 
 
+def _read_or_input_error(path: Path) -> Features | None:
+    """The features read from ``path``, or ``None`` for an InputError that names the file.
+
+    What a fuzzed file may give: one error class, naming the file; or finite features
+    with evidence in [0, 1], no more of them than its body has room for (a point takes at
+    least five bytes, ``1 2 3``, as text and twelve as binary floats).
+    """
+    try:
+        log = read_log(path)
+    except InputError as exc:
+        assert path.name in str(exc), str(exc)
+        return None
+    features = Features(np.concatenate([p.features.points for p in log.positions]),
+                        np.concatenate([p.features.evidence for p in log.positions]))
+    body = path.read_bytes().split(b"end_header\n" if path.suffix == ".ply" else b"\nDATA", 1)[-1]
+    assert 5 * len(features) <= len(body)
+    assert np.isfinite(features.points).all()
+    assert ((features.evidence >= 0.0) & (features.evidence <= 1.0)).all()
+    return features
+
+
+PLY_POINTS = "1 2 3\n-1 0.5 0.25\n4 -2 1\n"
+
+
 @settings(max_examples=40)
 @given(header_lines=st.lists(st.sampled_from([
     "format ascii 1.0", "format binary_little_endian 1.0", "element vertex 3", "element vertex -1", "element face 2",
     "property float x", "property float y", "property float z", "property double x", "property list uchar int i",
     "property bogus q", "comment hi", "element vertex 99999999999",
 ]), max_size=10), body=st.binary(max_size=64))
+@example(header_lines=["format ascii 1.0", "element vertex 3", "property float x", "property float y",
+                       "property float z"], body=PLY_POINTS.encode())
 def test_fuzzed_ply_headers_never_raise_anything_but_input_errors(tmp_path_factory, header_lines, body):
     path = tmp_path_factory.mktemp("plyf") / "f.ply"
     path.write_bytes(("ply\n" + "".join(line + "\n" for line in header_lines) + "end_header\n").encode() + body)
-    try:
-        read_log(path)
-    except InputError:
-        pass
+    features = _read_or_input_error(path)
+    if body == PLY_POINTS.encode() and header_lines[:2] == ["format ascii 1.0", "element vertex 3"]:
+        assert features is not None  # the one valid file among them reads as written
+        np.testing.assert_array_equal(features.points, [[1, 2, 3], [-1, 0.5, 0.25], [4, -2, 1]])
+        np.testing.assert_array_equal(features.evidence, 0.9)  # no evidence property: the constant
 
 
 @settings(max_examples=40)
@@ -314,13 +341,16 @@ def test_fuzzed_ply_headers_never_raise_anything_but_input_errors(tmp_path_facto
     "VIEWPOINT 0 0 0 1 0 0 0", "VIEWPOINT nan 0 0 1 0 0 0",
 ]), max_size=10), data=st.sampled_from(["DATA ascii", "DATA binary", "DATA binary_compressed", "DATA x"]),
     body=st.binary(max_size=64))
+@example(lines=["FIELDS x y z", "SIZE 4 4 4", "TYPE F F F", "COUNT 1 1 1", "WIDTH 3", "HEIGHT 1", "POINTS 3"],
+         data="DATA ascii", body=PLY_POINTS.encode())
 def test_fuzzed_pcd_headers_never_raise_anything_but_input_errors(tmp_path_factory, lines, data, body):
     path = tmp_path_factory.mktemp("pcdf") / "f.pcd"
     path.write_bytes(("VERSION 0.7\n" + "".join(line + "\n" for line in lines) + data + "\n").encode() + body)
-    try:
-        read_log(path)
-    except InputError:
-        pass
+    features = _read_or_input_error(path)
+    if lines == ["FIELDS x y z", "SIZE 4 4 4", "TYPE F F F", "COUNT 1 1 1", "WIDTH 3", "HEIGHT 1", "POINTS 3"] \
+            and data == "DATA ascii" and body == PLY_POINTS.encode():
+        assert features is not None
+        np.testing.assert_array_equal(features.points, [[1, 2, 3], [-1, 0.5, 0.25], [4, -2, 1]])
 
 
 # --- class 11 (and 4): compressed and marked-up text ----------------------------------------------
@@ -363,9 +393,18 @@ def test_a_plain_file_is_not_bounded_by_the_decompression_limit(tmp_path, monkey
 
 
 def test_describe_log_of_a_gzip_csv_under_a_plain_name(tmp_path):
-    path = tmp_path / "g.csv"
+    from rich.console import Console
+
+    path = tmp_path / "g.txt"  # nothing in the name says CSV or gzip: the bytes do
     path.write_bytes(gzip.compress(CSV.encode()))
-    assert describe_log(path) is not None
+    console = Console(width=200, record=True, file=open(tmp_path / "out", "w"))  # noqa: SIM115
+    console.print(describe_log(path))
+    console.file.close()
+    rows = {" ".join(line.split()[:1]): " ".join(line.split()[1:]) for line in console.export_text().splitlines()}
+    assert rows["format"] == "csv"
+    assert rows["positions"] == "1"
+    assert rows["features"] == "3"
+    assert rows["size"] == f"{path.stat().st_size:,} bytes"
 
 
 @pytest.mark.parametrize(("name", "text"), [("far.csv", "x,y,z,m\n1,1,1,0.9\n1e308,0,0,0.9\n"),

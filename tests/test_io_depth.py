@@ -27,11 +27,12 @@ CAMERA = PinholeCamera(64, 48, 50.0, 50.0, 31.5, 23.5)
 
 
 def test_the_cli_defaults_are_the_readers() -> None:
-    from occtool.cli import options
+    from occtool.cli.fit import fit
     from occtool.io import read_options
 
-    for name in ("DEFAULT_DEPTH_FEATURES", "DEFAULT_DEPTH_NOISE", "DEFAULT_DEPTH_MAX_RANGE"):
-        assert getattr(options, name) == getattr(read_options, name)
+    defaults = {p.name: p.default for p in fit.params}
+    for name in ("depth_features", "depth_noise", "depth_max_range"):
+        assert defaults[name] == getattr(read_options, f"DEFAULT_{name.upper()}")
 
 
 def test_a_wall_at_known_depth_back_projects_into_rep103() -> None:

@@ -112,8 +112,7 @@ def compare_grid(
     logger = logging.getLogger("occtool.compare")
     regressor = fit_from_kwargs(kwargs, seed=seed)
     # fit_from_kwargs took the robot's options; the navigation uses the same robot.
-    navigation = extract_from_kwargs(kwargs)
-    navigation["robot"] = regressor.robot
+    navigation = extract_from_kwargs(kwargs, robot=regressor.robot)
     log = read_log_from_kwargs(log_path, kwargs)
     features = log.single(position).features
     scene = None

@@ -38,12 +38,11 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
     training scans (Nav2 agreement, per beam and per cell)."""
     import json
 
-    from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs
+    from occtool.cli.options import fit_from_kwargs, pop_log_options
     from occtool.scoring import evaluate_log as score
 
     template = fit_from_kwargs(kwargs, seed=seed)
-    options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
-    options["topics"] = list(options.get("topics") or []) or None
+    options = pop_log_options(kwargs)
     no_return = options.pop("no_return_range", None)
     result = score(log_path, template, holdout=holdout, block=block, seed=seed, resolution=resolution,
                    no_return_range=no_return, read_options=options, keyframe_share=keyframe_share).as_dict()

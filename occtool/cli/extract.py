@@ -7,6 +7,7 @@ from typing import Any
 import click
 
 from occtool.cli.options import (
+    ROBOT_FIELDS,
     config_option,
     extract_from_kwargs,
     extract_options,
@@ -28,9 +29,8 @@ def _robot_given(ctx: click.Context) -> set[str]:
     """The robot options set on the command line or in a --config file (not defaults)."""
     from click.core import ParameterSource
 
-    names = ("robot_radius", "sensor_height", "body_height", "ground_clearance")
     return {
-        name for name in names
+        name for name in ROBOT_FIELDS
         if ctx.get_parameter_source(name) not in (ParameterSource.DEFAULT, None)
     }
 
@@ -87,14 +87,13 @@ def extract(
     from occtool.modelset import navigation_map_of_file
 
     logger = logging.getLogger("occtool.extract")
-    fields = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
-              "ground_clearance": "ground_clearance"}
     given = _robot_given(click.get_current_context())
     options = extract_from_kwargs(kwargs)
     navigation = {
         **{k: v for k, v in options.items() if k != "robot"}, "robot": options["robot"],
         # The model was fitted for a robot (its floor, its body): keep what the user did not override.
-        "robot_overrides": {field: getattr(options["robot"], field) for name, field in fields.items() if name in given},
+        "robot_overrides": {field: getattr(options["robot"], field) for name, field in ROBOT_FIELDS.items()
+                            if name in given},
         "straight_line": straight_line, "bounds": not ignore_bounds,
     }
     written = {

@@ -48,8 +48,8 @@ def fit(log_paths: tuple[str, ...], output: str | None, overwrite: bool, positio
     from pathlib import Path
 
     from occtool.cli.options import (
-        LOG_OPTION_NAMES,
         fit_from_kwargs,
+        pop_log_options,
         read_log_from_kwargs,
     )
 
@@ -62,8 +62,7 @@ def fit(log_paths: tuple[str, ...], output: str | None, overwrite: bool, positio
     if to_folder:
         from occtool.modelset import fit_model_set
 
-        read_options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
-        read_options["topics"] = list(read_options.get("topics") or []) or None
+        read_options = pop_log_options(kwargs)
         command = "occtool fit " + " ".join(sys.argv[2:]) if len(sys.argv) > 1 else "occtool fit"
         with _progress_bar("fitting") as progress:
             summary = fit_model_set(

@@ -4,18 +4,18 @@ from __future__ import annotations
 
 import click
 
-from occtool.cli.options import no_return_range_callback
+from occtool.cli.options import log_option
 
 
 @click.command(short_help="Describe a model file or a range log.")
 @click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=False))
 @click.option("--pieces/--no-pieces", "show_pieces", default=True, show_default=True,
               help="List the coefficients of every piece.")
-@click.option("--skip-invalid", is_flag=True, default=False,
-              help="Range log: count invalid rows/points in a note instead of stopping at the first.")
-@click.option("--no-return-range", type=float, default=None, callback=no_return_range_callback, metavar="METRES",
-              help="Range log: count laser beams that returned nothing as free rays at this range "
-                   "(as fit --no-return-range does).")
+@log_option("skip_invalid",
+            help="Range log: count invalid rows/points in a note instead of stopping at the first.")
+@log_option("no_return_range",
+            help="Range log: count laser beams that returned nothing as free rays at this range "
+                 "(as fit --no-return-range does).")
 def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: float | None) -> None:
     """Summarise FILE: a model or inverse file (pieces, tree, constraints, fit error,
     samples, run) or any range log the readers understand."""

@@ -13,6 +13,7 @@ command line win.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -20,6 +21,15 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from occtool.io.read_options import (  # a light module: --help imports no numpy
+    DEFAULT_CONSTANT_EVIDENCE,
+    DEFAULT_DEPTH_MIN_RANGE,
+    FORMATS,
+    GROUP_BY_CHOICES,
+    OPTION_NAMES,
+    ReadOptions,
+    check_no_return_range,
+)
 from occtool.limits import (
     MAX_ANGLES,
     MAX_BODY_SAMPLES,
@@ -153,19 +163,6 @@ jobs_options = _compose(
 
 # --- range-log reading (owner: readers) ------------------------------------------------
 
-# occtool.io.read_options' depth defaults, spelled here so that --help imports no numpy
-# (tests/test_io_depth.py holds them equal).
-DEFAULT_DEPTH_FEATURES = 10_000
-DEFAULT_DEPTH_NOISE = 0.0015
-DEFAULT_DEPTH_MAX_RANGE = 8.0
-
-LOG_OPTION_NAMES = (
-    "format", "topics", "evidence_field", "evidence", "use_intensities", "sensor_frame", "base_frame",
-    "position_tolerance", "group_by", "skip_invalid", "no_return_range", "depth_features", "depth_noise",
-    "depth_max_range",
-)
-
-
 def _position_tolerance(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> tuple[float, float]:
     values = float_list(ctx, param, value)
     if values is None or len(values) != 2 or any(v < 0 or v != v for v in values):
@@ -184,7 +181,6 @@ def _unit_interval(ctx: click.Context | None, param: click.Parameter | None, val
 def no_return_range_callback(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
     # The readers' own check, so the rule lives in one place; click names the option.
     from occtool.errors import InputError
-    from occtool.io import check_no_return_range
 
     try:
         return check_no_return_range(value)
@@ -192,66 +188,88 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
         raise click.BadParameter(str(exc)) from None
 
 
-log_options = _compose(
-    click.option(
-        "--format", "format", type=click.Choice(["csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg", "tum",
-                                                 "3dmatch"], case_sensitive=False),
-        default=None, help="Log format (default: from the content and extension).",
-    ),
-    click.option(
-        "--topic", "topics", multiple=True,
-        help="MCAP or ROS bag topic to read (repeatable; default: the one supported range channel).",
-    ),
-    click.option(
-        "--evidence-field", default="evidence", show_default=True,
-        help="Point field or CSV column holding the evidence value (CSV also accepts m).",
-    ),
-    click.option(
-        "--evidence", type=float, default=None, callback=_unit_interval,
-        help="Constant evidence for data without an evidence field (laser scans: 0.9 if not given).",
-    ),
-    click.option(
-        "--intensities", "use_intensities", is_flag=True, default=False,
-        help="Laser scans: evidence from the intensities, scaled by the scan's largest.",
-    ),
-    click.option("--sensor-frame", default=None, help="MCAP: frame the points are in (default: the message's)."),
-    click.option("--base-frame", default=None, help="MCAP: robot base frame (default: base_link, if in /tf_static)."),
-    click.option(
-        "--position-tolerance", default="0.25,0.26", show_default=True, callback=_position_tolerance,
-        help="Consecutive scans within DIST,ANGLE (metres, radians) of a position's first scan form one position.",
-    ),
-    click.option(
-        "--group-by", type=click.Choice(["position", "message"]), default="position", show_default=True,
-        help="Group scans into robot positions, or make each message its own position.",
-    ),
-    click.option(
-        "--skip-invalid", is_flag=True, default=False,
-        help="Drop invalid rows/points (NaN, evidence outside [0, 1], unparsable) and report how many.",
-    ),
-    click.option(
-        "--no-return-range", type=float, default=None, callback=no_return_range_callback, metavar="METRES",
+def _text(values: Any) -> str:
+    """A default as the command line spells it: ``0.25,0.26`` for a pair."""
+    if isinstance(values, (tuple, list)):
+        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in values)
+    return f"{values:g}" if isinstance(values, float) else str(values)
+
+
+_READ_DEFAULTS = {f.name: f.default for f in dataclasses.fields(ReadOptions)}
+
+#: Each :class:`occtool.io.ReadOptions` field's command-line option, in the field's order:
+#: its flags and click settings. The default is the field's (``_READ_DEFAULTS``), never
+#: written here; a test holds this table and the dataclass to the same names.
+LOG_FLAGS: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
+    "format": (("--format", "format"), dict(
+        type=click.Choice(list(FORMATS), case_sensitive=False),
+        help="Log format (default: from the content and extension).")),
+    "topics": (("--topic", "topics"), dict(
+        multiple=True,
+        help="MCAP or ROS bag topic to read (repeatable; default: the one supported range channel).")),
+    "evidence_field": (("--evidence-field",), dict(
+        show_default=True,
+        help="Point field or CSV column holding the evidence value (CSV also accepts m).")),
+    "evidence": (("--evidence",), dict(
+        type=float, callback=_unit_interval,
+        help="Constant evidence for data without an evidence field (laser scans: "
+             f"{DEFAULT_CONSTANT_EVIDENCE:g} if not given).")),
+    "use_intensities": (("--intensities", "use_intensities"), dict(
+        is_flag=True, help="Laser scans: evidence from the intensities, scaled by the scan's largest.")),
+    "sensor_frame": (("--sensor-frame",), dict(help="MCAP: frame the points are in (default: the message's).")),
+    "base_frame": (("--base-frame",), dict(help="MCAP: robot base frame (default: base_link, if in /tf_static).")),
+    "position_tolerance": (("--position-tolerance",), dict(
+        show_default=True, callback=_position_tolerance,
+        help="Consecutive scans within DIST,ANGLE (metres, radians) of a position's first scan form one position.")),
+    "group_by": (("--group-by",), dict(
+        type=click.Choice(list(GROUP_BY_CHOICES)), show_default=True,
+        help="Group scans into robot positions, or make each message its own position.")),
+    "skip_invalid": (("--skip-invalid",), dict(
+        is_flag=True,
+        help="Drop invalid rows/points (NaN, evidence outside [0, 1], unparsable) and report how many.")),
+    "no_return_range": (("--no-return-range",), dict(
+        type=float, callback=no_return_range_callback, metavar="METRES",
         help="Laser scans (CARMEN, LaserScan): keep each beam that returned nothing within range as a "
              "free ray, a feature with evidence 0 at min(METRES, the beam's max range), saying its ray is "
              "free and nothing about an obstacle (default: such beams are dropped; ignored for point clouds "
-             "and CSV).",
-    ),
-    click.option(
-        "--depth-features", type=click.IntRange(min=1, max=MAX_FEATURES), default=DEFAULT_DEPTH_FEATURES,
-        show_default=True, metavar="N",
-        help="Depth images: most features kept of each frame, on a regular pixel grid (keeps each surface's share).",
-    ),
-    click.option(
-        "--depth-noise", type=click.FloatRange(min=0.0, max=1.0), default=DEFAULT_DEPTH_NOISE, show_default=True,
-        metavar="K",
+             "and CSV).")),
+    "depth_features": (("--depth-features",), dict(
+        type=click.IntRange(min=1, max=MAX_FEATURES), show_default=True, metavar="N",
+        help="Depth images: most features kept of each frame, on a regular pixel grid (keeps each surface's "
+             "share).")),
+    "depth_noise": (("--depth-noise",), dict(
+        type=click.FloatRange(min=0.0, max=1.0), show_default=True, metavar="K",
         help="Depth images: depth noise sigma = K z^2 metres that gives each pixel its evidence "
-             "(0.0015 structured light, about 0.005-0.01 stereo).",
-    ),
-    click.option(
-        "--depth-max-range", type=click.FloatRange(min=0.1, max=MAX_DISTANCE, min_open=True), default=DEFAULT_DEPTH_MAX_RANGE,
-        show_default=True, metavar="METRES",
-        help="Depth images: farther depths are no returns (dropped, or free rays with --no-return-range).",
-    ),
-)
+             f"({_READ_DEFAULTS['depth_noise']:g} structured light, about 0.005-0.01 stereo).")),
+    "depth_max_range": (("--depth-max-range",), dict(
+        type=click.FloatRange(min=DEFAULT_DEPTH_MIN_RANGE, max=MAX_DISTANCE, min_open=True), show_default=True,
+        metavar="METRES",
+        help="Depth images: farther depths are no returns (dropped, or free rays with --no-return-range).")),
+}
+#: The log options' names: :class:`occtool.io.ReadOptions`' fields, the keywords of :func:`occtool.io.read_log`.
+LOG_OPTION_NAMES = OPTION_NAMES
+
+
+def log_option(name: str, **changes: Any) -> Callable[[F], F]:
+    """The click option of the :class:`~occtool.io.ReadOptions` field ``name``, its default the
+    field's; ``changes`` replace settings of :data:`LOG_FLAGS` (a command's own help text)."""
+    flags, settings = LOG_FLAGS[name]
+    default = _READ_DEFAULTS[name]
+    if isinstance(default, tuple):
+        default = _text(default)  # a pair is typed METRES,RADIANS and parsed by its callback
+    return click.option(*flags, default=default, **{**settings, **changes})
+
+
+log_options = _compose(*(log_option(name) for name in OPTION_NAMES))
+
+
+def pop_log_options(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Pop the :data:`log_options` out of a command's keyword arguments: the keywords of
+    :func:`occtool.io.read_log` (no ``--topic``: ``topics=None``)."""
+    options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
+    if "topics" in options:
+        options["topics"] = list(options["topics"]) or None
+    return options
 
 
 def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
@@ -264,9 +282,7 @@ def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
 
     from occtool.io import read_log
 
-    options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
-    if "topics" in options:
-        options["topics"] = list(options["topics"]) or None
+    options = pop_log_options(kwargs)
     if str(path) == "-":
         from occtool.io.stream import read_log_stream
 
@@ -279,6 +295,31 @@ def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
     return log
 
 # --- sensor model and fit (owner: core model) -----------------------------------------
+
+#: The library's defaults as the command line states them: the options that leave the
+#: choice to the library (default None) name them in their help, the robot's and the
+#: extraction's take them as their own. Spelled here, once, because the library's modules
+#: import numpy and ``--help`` must not; tests/test_cli_model.py holds each equal to the
+#: library keyword it maps to (``SensorModel``'s and ``Robot``'s fields,
+#: ``OccupancyRegressor.__init__``'s and ``navigation_map``'s keywords).
+LIBRARY_DEFAULTS: dict[str, Any] = {
+    # occtool.sensor.SensorModel
+    "depth_error": 0.03, "near_positions": (0.8, 0.9), "near_values": (0.2, 0.4), "floor": "free",
+    "footprint_samples": 512, "background_samples": 0, "background_weight": 0.05, "background_range": 3.0,
+    # occtool.fit.OccupancyRegressor
+    "basis": "trig", "c_min": 0.25, "a_max": 12.0, "b_max": 8.0, "c_max": 8.0, "loss": "huber", "huber_delta": 0.1,
+    "max_sweeps": 0, "focus_range": 4.0, "guard": True,
+    # occtool.robot.Robot (--robot-radius is its radius)
+    "robot_radius": 0.25, "sensor_height": 1.0, "body_height": 1.0, "ground_clearance": 0.05,
+    # occtool.navigation.navigation_map (--angles is its n_angles)
+    "threshold": 0.6, "max_range": 1.5, "n_angles": 360, "return_snap": 0.5,
+}
+
+
+def _default(name: str) -> str:
+    """`` [default: X]`` for a help text, X the library's default of ``name``."""
+    return f" [default: {_text(LIBRARY_DEFAULTS[name])}]"
+
 
 SENSOR_OPTION_NAMES = (
     "depth_error", "near_positions", "near_values", "floor", "footprint_samples", "background_samples",
@@ -297,21 +338,22 @@ def _pair(ctx: click.Context | None, param: click.Parameter | None, value: Any) 
 
 sensor_options = _compose(
     click.option("--depth-error", type=float, default=None,
-                 help="Relative depth error: hit samples at r(1 -+ e) [default: 0.03]."),
+                 help=f"Relative depth error: hit samples at r(1 -+ e){_default('depth_error')}."),
     click.option("--near-positions", callback=_pair, default=None,
-                 help="Near samples' positions as fractions of the feature's range, 'P1,P2' [default: 0.8,0.9]."),
+                 help=f"Near samples' positions as fractions of the feature's range, 'P1,P2'{_default('near_positions')}."),
     click.option("--near-values", callback=_pair, default=None,
-                 help="Near samples' values as fractions of the feature's evidence, 'V1,V2' [default: 0.2,0.4]."),
+                 help=f"Near samples' values as fractions of the feature's evidence, 'V1,V2'{_default('near_values')}."),
     click.option("--floor", type=click.Choice(["free", "drop", "obstacle"]), default=None,
                  help="Floor features (below the ground clearance): free-space samples only, dropped, "
-                      "or obstacles [default: free]."),
+                      f"or obstacles{_default('floor')}."),
     click.option("--footprint-samples", type=click.IntRange(min=0, max=MAX_BODY_SAMPLES), default=None,
-                 help="Zero-occupancy samples filling the robot's body [default: 512]."),
+                 help=f"Zero-occupancy samples filling the robot's body{_default('footprint_samples')}."),
     click.option("--background-samples", type=click.IntRange(min=0, max=MAX_BODY_SAMPLES), default=None,
-                 help="Zero-occupancy background samples for featureless directions [default: 0]."),
-    click.option("--background-weight", type=float, default=None, help="Weight of each background sample [default: 0.05]."),
+                 help=f"Zero-occupancy background samples for featureless directions{_default('background_samples')}."),
+    click.option("--background-weight", type=float, default=None,
+                 help=f"Weight of each background sample{_default('background_weight')}."),
     click.option("--background-range", type=click.FloatRange(min=0, max=MAX_DISTANCE, min_open=True), default=None,
-                 help="Farthest background sample, metres [default: 3]."),
+                 help=f"Farthest background sample, metres{_default('background_range')}."),
 )
 
 
@@ -323,24 +365,28 @@ def fit_options(function: F) -> F:
         click.option("-L", "--pieces", type=click.IntRange(min=1, max=MAX_PIECES), default=None,
                      help="Number of linear pieces [default: 64, and beyond 10,000 features a position more, "
                           "up to 128 from 40,000 on]."),
-        click.option("--basis", type=click.Choice(["trig", "linear"]), default="trig", show_default=True,
+        click.option("--basis", type=click.Choice(["trig", "linear"]), default=LIBRARY_DEFAULTS["basis"], show_default=True,
                      help="Pieces a1 cos(alpha) + a2 sin(alpha) + b h + c r + d (seam-free) or the paper's "
                           "a alpha + b h + c r + d."),
-        click.option("--c-min", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Lower bound of the range weight c, per metre [default: 0.25]."),
-        click.option("--a-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Bound of |dF/dalpha|, per radian [default: 12]."),
-        click.option("--b-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Bound of the height weight |b|, per metre [default: 8]."),
+        click.option("--c-min", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None,
+                     help=f"Lower bound of the range weight c, per metre{_default('c_min')}."),
+        click.option("--a-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None,
+                     help=f"Bound of |dF/dalpha|, per radian{_default('a_max')}."),
+        click.option("--b-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None,
+                     help=f"Bound of the height weight |b|, per metre{_default('b_max')}."),
         click.option("--c-max", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None,
-                     help="Largest range weight of a centre piece, per metre [default: 8]."),
-        click.option("--loss", type=click.Choice(["huber", "squared"]), default="huber", show_default=True,
+                     help=f"Largest range weight of a centre piece, per metre{_default('c_max')}."),
+        click.option("--loss", type=click.Choice(["huber", "squared"]), default=LIBRARY_DEFAULTS["loss"], show_default=True,
                      help="Regression loss (Huber is robust to outliers)."),
-        click.option("--huber-delta", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None, help="Huber loss threshold [default: 0.1]."),
+        click.option("--huber-delta", type=click.FloatRange(min=0, max=MAX_WEIGHT, min_open=True), default=None,
+                     help=f"Huber loss threshold{_default('huber_delta')}."),
         click.option("--groups", type=click.IntRange(min=1), default=None,
                      help="Angular segments of the tree [default: pieces // 4]."),
         click.option("--max-sweeps", type=click.IntRange(min=0, max=MAX_SWEEPS), default=None,
-                     help="Least-squares refit sweeps after the construction [default: 0]."),
+                     help=f"Least-squares refit sweeps after the construction{_default('max_sweeps')}."),
         click.option("--focus-range", type=click.FloatRange(min=0.0, max=MAX_DISTANCE, min_open=True), default=None, callback=_positive,
                      help="Farthest horizontal distance fitted, metres; scale it with the maps' "
-                          "--max-range (about 2.5x) [default: 4]."),
+                          f"--max-range (about 2.5x){_default('focus_range')}."),
         click.option("--guard/--no-guard", default=None,
                      help="Keep the position's returns in the model, so that every navigation map keeps the "
                           "robot's radius from each of them [default: guard]."),
@@ -368,11 +414,14 @@ def fit_from_kwargs(kwargs: dict[str, Any], *, seed: int = 0) -> Any:
 
 # --- navigation extraction (owner: navigation) ----------------------------------------
 
-ROBOT_OPTION_NAMES = ("robot_radius", "sensor_height", "body_height", "ground_clearance")
+#: Each robot option and the :class:`occtool.robot.Robot` field it sets.
+ROBOT_FIELDS = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
+                "ground_clearance": "ground_clearance"}
+ROBOT_OPTION_NAMES = tuple(ROBOT_FIELDS)
 EXTRACT_OPTION_NAMES = ("threshold", "heights", "slice_spacing", "max_range", "n_angles", "point_spacing",
                         "return_snap")
 #: The library's :data:`occtool.navigation.RETURN_SNAP` (not imported: the CLI starts without numpy).
-RETURN_SNAP = 0.5
+RETURN_SNAP = LIBRARY_DEFAULTS["return_snap"]
 
 
 def _positive(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> float | None:
@@ -389,19 +438,19 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 
 
 robot_options = _compose(
-    click.option("--robot-radius", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=0.25, show_default=True,
-                 help="Robot footprint radius, metres: the navigation polygon is shrunk by it."),
-    click.option("--sensor-height", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=1.0, show_default=True,
-                 help="Height of the sensor centre above the floor, metres."),
-    click.option("--body-height", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=1.0, show_default=True,
-                 help="Height of the top of the robot above the floor, metres."),
-    click.option("--ground-clearance", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=0.05, show_default=True,
-                 help="Obstacles lower than this above the floor are driven over, metres."),
+    click.option("--robot-radius", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=LIBRARY_DEFAULTS["robot_radius"],
+                 show_default=True, help="Robot footprint radius, metres: the navigation polygon is shrunk by it."),
+    click.option("--sensor-height", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=LIBRARY_DEFAULTS["sensor_height"],
+                 show_default=True, help="Height of the sensor centre above the floor, metres."),
+    click.option("--body-height", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=LIBRARY_DEFAULTS["body_height"],
+                 show_default=True, help="Height of the top of the robot above the floor, metres."),
+    click.option("--ground-clearance", type=click.FloatRange(min=0, max=MAX_ROBOT_SIZE), default=LIBRARY_DEFAULTS["ground_clearance"],
+                 show_default=True, help="Obstacles lower than this above the floor are driven over, metres."),
 )
 
 extract_options = _compose(
     robot_options,
-    click.option("--threshold", type=float, default=0.6, show_default=True, callback=_occupancy,
+    click.option("--threshold", type=float, default=LIBRARY_DEFAULTS["threshold"], show_default=True, callback=_occupancy,
                  help="Occupancy at or above which space is an obstacle, in (0, 1)."),
     click.option("--heights", callback=float_list, default=None, metavar="H,H,...",
                  help="Sensor-frame heights to cut the model at, metres, comma-separated (floor at "
@@ -409,9 +458,11 @@ extract_options = _compose(
     click.option("--slice-spacing", type=float, default=None, callback=_positive,
                  help="Largest gap between cuts, metres: cuts are added between the heights so the map "
                       "holds between them (default: from the model's slope bounds)."),
-    click.option("--max-range", type=click.FloatRange(min=0, max=MAX_DISTANCE, min_open=True), default=1.5, show_default=True, callback=_positive,
+    click.option("--max-range", type=click.FloatRange(min=0, max=MAX_DISTANCE, min_open=True), default=LIBRARY_DEFAULTS["max_range"], show_default=True,
+                 callback=_positive,
                  help="Radius of the circle bounding the navigation polygon, metres."),
-    click.option("--angles", "n_angles", type=click.IntRange(min=8, max=MAX_ANGLES), default=360, show_default=True,
+    click.option("--angles", "n_angles", type=click.IntRange(min=8, max=MAX_ANGLES), default=LIBRARY_DEFAULTS["n_angles"],
+                 show_default=True,
                  help="Pan angles swept, evenly spaced."),
     click.option("--point-spacing", type=float, default=None, callback=_positive,
                  help="Arc length between obstacle/exploration points on the max-range circle, metres "
@@ -439,18 +490,17 @@ def robot_from_kwargs(kwargs: dict[str, Any]) -> Any:
     """Pop the :data:`robot_options` out of a command's keyword arguments: an :class:`occtool.robot.Robot`."""
     from occtool.robot import Robot
 
-    values = {name: kwargs.pop(name) for name in ROBOT_OPTION_NAMES if name in kwargs}
-    if "robot_radius" in values:
-        values["radius"] = values.pop("robot_radius")
-    return Robot(**values)
+    return Robot(**{field: kwargs.pop(name) for name, field in ROBOT_FIELDS.items() if name in kwargs})
 
 
-def extract_from_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+def extract_from_kwargs(kwargs: dict[str, Any], *, robot: Any = None) -> dict[str, Any]:
     """Pop the :data:`extract_options` out of a command's keyword arguments.
 
     Returns the keyword arguments of :func:`occtool.navigation.navigation_map` (``robot``
     included), all but ``inverse_range`` and ``slope_bounds``, which come from the model.
+    ``robot``: the robot already built from these options (by :func:`fit_from_kwargs`),
+    instead of popping the robot options again.
     """
     options = {name: kwargs.pop(name) for name in EXTRACT_OPTION_NAMES if name in kwargs}
-    options["robot"] = robot_from_kwargs(kwargs)
+    options["robot"] = robot if robot is not None else robot_from_kwargs(kwargs)
     return options

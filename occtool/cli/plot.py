@@ -12,7 +12,14 @@ from typing import Any
 
 import click
 
-from occtool.cli.options import _compose, config_option, log_options, overwrite_option, refuse_existing
+from occtool.cli.options import (
+    LIBRARY_DEFAULTS,
+    _compose,
+    config_option,
+    log_options,
+    overwrite_option,
+    refuse_existing,
+)
 from occtool.limits import MAX_ROBOT_SIZE
 
 DEFAULT_DPI = 100.0
@@ -64,8 +71,8 @@ def plot() -> None:
 @log_options
 @click.option("--position", type=click.IntRange(min=0), default=None,
               help="Draw this robot position only (default: the only one, or all along the path).")
-@click.option("--robot-radius", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE), default=0.25, show_default=True,
-              help="Radius of the robot disc, metres.")
+@click.option("--robot-radius", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE),
+              default=LIBRARY_DEFAULTS["robot_radius"], show_default=True, help="Radius of the robot disc, metres.")
 @_figure_options
 def features(log: str, position: int | None, robot_radius: float, output: str, overwrite: bool, dpi: float,
              size: str | None, title: str | None, **kwargs: Any) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from occtool.cli.options import config_option, overwrite_option, refuse_existing, seed_option
+from occtool.cli.options import LIBRARY_DEFAULTS, config_option, overwrite_option, refuse_existing, seed_option
 from occtool.limits import MAX_DISTANCE, MAX_FEATURES, MAX_RANGE_NOISE, MAX_ROBOT_SIZE
 
 
@@ -32,13 +32,17 @@ def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
 @click.option("--yaw", type=float, default=0.0, show_default=True,
               help="Turn the whole scene (features and truth) by this many radians.")
 @click.option("--sensor-height", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE, min_open=True),
-              default=1.0, show_default=True, help="Height of the camera above the floor, metres.")
+              default=LIBRARY_DEFAULTS["sensor_height"], show_default=True,
+              help="Height of the camera above the floor, metres.")
 @click.option("--body-height", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE, min_open=True),
-              default=1.0, show_default=True, help="Height of the robot's top above the floor, metres.")
+              default=LIBRARY_DEFAULTS["body_height"], show_default=True,
+              help="Height of the robot's top above the floor, metres.")
 @click.option("--radius", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE),
-              default=0.25, show_default=True, help="Robot radius, metres (recorded in the truth).")
+              default=LIBRARY_DEFAULTS["robot_radius"], show_default=True,
+              help="Robot radius, metres (recorded in the truth).")
 @click.option("--ground-clearance", type=click.FloatRange(min=0.0, max=MAX_ROBOT_SIZE),
-              default=0.05, show_default=True, help="Obstacles lower than this are driven over, metres.")
+              default=LIBRARY_DEFAULTS["ground_clearance"], show_default=True,
+              help="Obstacles lower than this are driven over, metres.")
 @click.option("--sensor-range", type=click.FloatRange(min=0.0, max=MAX_DISTANCE, min_open=True),
               default=6.0, show_default=True, help="Farthest range at which the camera registers features, metres.")
 @click.option("--depth-frames", type=click.Choice(["tum", "3dmatch"]), default=None,

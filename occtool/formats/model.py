@@ -188,7 +188,24 @@ MAX_TREE_DEPTH = 64
 
 
 def _read_json(path: str | os.PathLike[str]) -> Any:
-    return read_json(path, error=ModelFormatError)
+    data = read_json(path, error=ModelFormatError)
+    _check_finite(data, str(path))
+    return data
+
+
+def _check_finite(data: Any, source: str) -> None:
+    """Refuse NaN and infinity anywhere in a file: occtool writes neither (``allow_nan=False``),
+    so one there is damage, and a NaN setting or bound would load and poison every map."""
+    stack: list[tuple[Any, str]] = [(data, "")]
+    while stack:  # a stack, not recursion: a deep tree is refused by its own check, with its own message
+        item, where = stack.pop()
+        if isinstance(item, float):
+            if not math.isfinite(item):
+                raise ModelFormatError(f"{source}: {where or 'the file'} is not a finite number ({item})")
+        elif isinstance(item, dict):
+            stack.extend((value, f"{where}.{key}" if where else str(key)) for key, value in item.items())
+        elif isinstance(item, list):
+            stack.extend((value, f"{where}[{index}]") for index, value in enumerate(item))
 
 
 def _check_tree_depth(tree: Any, source: str) -> None:

@@ -36,49 +36,42 @@ from __future__ import annotations
 import contextlib
 import os
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE
-from occtool.io.read_options import DEFAULT_DEPTH_FEATURES, DEFAULT_DEPTH_MAX_RANGE, DEFAULT_DEPTH_NOISE
-from occtool.limits import MAX_DISTANCE
+from occtool.io.read_options import (
+    DEFAULT_CONSTANT_EVIDENCE,
+    FORMATS,
+    ReadOptions,
+    as_read_options,
+    check_no_return_range,
+    options_as_keywords,
+)
 
 if TYPE_CHECKING:
     from occtool.features import Features, Position, RangeLog
     from occtool.io.position_stream import PositionStream
-    from occtool.io.read_options import ReadOptions
 
-__all__ = ["FORMATS", "check_no_return_range", "describe_log", "detect_format", "iter_positions", "read_log",
-           "write_csv", "write_mcap"]
+__all__ = ["DEFAULT_CONSTANT_EVIDENCE", "FORMATS", "ReadOptions", "check_no_return_range", "describe_log",
+           "detect_format", "iter_positions", "read_log", "write_csv", "write_mcap"]
 
-FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg", "tum", "3dmatch")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-DEFAULT_CONSTANT_EVIDENCE = 0.9
 CARMEN_RECORDS = (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"NEFF", b"SYNC", b"TRUEPOS")
 
 
 def _head(path: Path, size: int = 4096) -> bytes:
-    """The first bytes of a file, decompressed if it is gzip or bzip2."""
-    with open(path, "rb") as raw:
-        start = raw.read(4)
+    """The first bytes of a file, decompressed if it is gzip or bzip2 (:func:`occtool._files.open_input`)."""
+    from occtool._files import open_input
+
     try:
-        # gzip and bz2 imported for a compressed file only (a few ms of every fresh fit).
-        if start[:2] == b"\x1f\x8b":
-            import gzip
-
-            with gzip.open(path, "rb") as handle:
-                return handle.read(size)
-        if start[:3] == b"BZh":
-            import bz2
-
-            with bz2.open(path, "rb") as handle:
-                return handle.read(size)
+        with open_input(path, "rb") as handle:
+            head = handle.read(size)
     except (OSError, EOFError) as exc:
+        if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
+            raise
         raise InputError(f"{path}: the compressed file is corrupt ({exc})") from None
-    with open(path, "rb") as handle:
-        head = handle.read(size)
     return head[3:] if head.startswith(b"\xef\xbb\xbf") else head  # a UTF-8 byte-order mark
 
 
@@ -143,27 +136,6 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     )
 
 
-def check_no_return_range(value: float | None) -> float | None:
-    """Validate ``no_return_range``: ``None``, or a finite number of metres > 0.
-
-    Raises
-    ------
-    InputError
-        For zero, a negative number, NaN, infinity or a value that is not a number.
-    """
-    if value is None:
-        return None
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}") from None
-    if not (number > 0.0 and number < float("inf")):
-        raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}")
-    if number > MAX_DISTANCE:
-        raise InputError(f"no-return range must be at most {MAX_DISTANCE:g} m, got {value!r}")
-    return number
-
-
 def _numeric_fields(line: str) -> int:
     count = 0
     for item in line.split():
@@ -175,68 +147,20 @@ def _numeric_fields(line: str) -> int:
     return count
 
 
-def read_log(
-    path: str | os.PathLike[str],
-    *,
-    format: str | None = None,
-    topics: Sequence[str] | None = None,
-    evidence_field: str = "evidence",
-    evidence: float | None = None,
-    use_intensities: bool = False,
-    sensor_frame: str | None = None,
-    base_frame: str | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-    no_return_range: float | None = None,
-    depth_features: int = DEFAULT_DEPTH_FEATURES,
-    depth_noise: float = DEFAULT_DEPTH_NOISE,
-    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
-) -> RangeLog:
+def read_log(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
     """Read a range log into positions of features.
 
     Parameters
     ----------
     path
-        The log file.
-    format
-        One of :data:`FORMATS`; by default chosen from the content and extension.
-    topics
-        MCAP channels to read (all must exist); by default the one supported range channel.
-    evidence_field
-        Point field (PointCloud2, PCD, PLY) or CSV column holding the evidence value.
-    evidence
-        Constant evidence for data without an evidence field (laser scans, plain
-        points); defaults to 0.9 there. CSV needs it only if it has no ``m`` column.
-    use_intensities
-        For laser scans, take the evidence from the intensities scaled into [0, 1]
-        by the scan's largest intensity.
-    sensor_frame, base_frame
-        MCAP frames: points are moved from the sensor frame into the base frame with
-        ``/tf_static``; by default the message's frame and ``base_link``.
-    position_tolerance
-        ``(metres, radians)``: consecutive scans within this distance and yaw of a
-        position's first scan belong to that position.
-    group_by
-        ``"position"`` (see above) or ``"message"`` (each scan its own position).
-    skip_invalid
-        Drop invalid rows/points (NaN, evidence outside [0, 1], at the origin, a line
-        that does not parse) and report the count in ``notes`` instead of failing.
-    no_return_range
-        Laser scans (CARMEN, ``sensor_msgs/msg/LaserScan``, ``foxglove.LaserScan``):
-        ``None`` drops beams that returned nothing within the laser's range (noted);
-        a number R of metres > 0 keeps each as a *free ray*, a feature along its beam
-        at ``min(R, the beam's max range)`` with evidence 0 (free up to there, nothing
-        about an obstacle). Other data (point clouds, CSV) has no such beams and
-        ignores it. Depth images: pixels with no return (+inf, beyond
-        ``depth_max_range``) become free rays at ``min(R, depth_max_range)``.
-    depth_features
-        Depth images: most features kept of each frame, sampled on a regular pixel grid.
-    depth_noise
-        Depth images: ``k`` of the depth noise ``sigma = k z**2`` metres that gives each
-        pixel its evidence (:func:`occtool.io.depth.noise_evidence`).
-    depth_max_range
-        Depth images: farther depths are no returns, metres.
+        The log file (or a folder of depth frames).
+    options
+        How to read it: a :class:`~occtool.io.read_options.ReadOptions`, whose fields are
+        the options (``format``, ``topics``, ``evidence``, ``no_return_range``, ...; see
+        there for each one's meaning and default). Default: every default.
+    **keywords
+        The same options by name, replacing those of ``options``:
+        ``read_log(path, no_return_range=5)``.
 
     Returns
     -------
@@ -246,32 +170,29 @@ def read_log(
     Raises
     ------
     InputError
-        For unreadable or invalid data, naming the file and what is wrong.
+        For unreadable or invalid data, or an invalid option, naming the file and what is wrong.
+    TypeError
+        For a keyword that is no reading option.
 
     Examples
     --------
     >>> log = read_log("fixtures/office/features.csv")  # doctest: +SKIP
     >>> features = log.single().features                # doctest: +SKIP
     """
-    fmt, options = _checked_options(
-        path, format=format, topics=topics, evidence_field=evidence_field, evidence=evidence,
-        use_intensities=use_intensities, sensor_frame=sensor_frame, base_frame=base_frame,
-        position_tolerance=position_tolerance, group_by=group_by, skip_invalid=skip_invalid,
-        no_return_range=no_return_range, depth_features=depth_features, depth_noise=depth_noise,
-        depth_max_range=depth_max_range,
-    )
+    fmt, checked = _checked(path, options, keywords)
     with _read_errors(path):
-        return _read_format(path, fmt, options)
+        return _read_format(path, fmt, checked)
 
 
-def iter_positions(path: str | os.PathLike[str], **options: Any) -> PositionStream:
+def iter_positions(path: str | os.PathLike[str], options: ReadOptions | None = None,
+                   **keywords: Any) -> PositionStream:
     """The positions of a range log, read one at a time (bounded memory).
 
-    ``options`` are those of :func:`read_log`, checked here. The result is an iterable
-    of :class:`~occtool.features.Position`; each iteration reads the file from its start
-    and yields the same positions, in the same order and with the same features, poses
-    and stamps as ``read_log(path, **options).positions``; ``notes`` is complete after a
-    full iteration. What is held at a time depends on the format: see
+    ``options`` and ``keywords`` are those of :func:`read_log`, checked here. The result is
+    an iterable of :class:`~occtool.features.Position`; each iteration reads the file from
+    its start and yields the same positions, in the same order and with the same features,
+    poses and stamps as ``read_log(path, options, **keywords).positions``; ``notes`` is
+    complete after a full iteration. What is held at a time depends on the format: see
     :class:`~occtool.io.position_stream.PositionStream`.
 
     Raises
@@ -282,56 +203,24 @@ def iter_positions(path: str | os.PathLike[str], **options: Any) -> PositionStre
     """
     from occtool.io.position_stream import PositionStream
 
-    fmt, checked = _checked_options(path, **options)
+    fmt, checked = _checked(path, options, keywords)
     return PositionStream(path, fmt, checked)
 
 
-def _checked_options(
-    path: str | os.PathLike[str],
-    *,
-    format: str | None = None,
-    topics: Sequence[str] | None = None,
-    evidence_field: str = "evidence",
-    evidence: float | None = None,
-    use_intensities: bool = False,
-    sensor_frame: str | None = None,
-    base_frame: str | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-    no_return_range: float | None = None,
-    depth_features: int = DEFAULT_DEPTH_FEATURES,
-    depth_noise: float = DEFAULT_DEPTH_NOISE,
-    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
-) -> tuple[str, ReadOptions]:
+def _checked(path: str | os.PathLike[str], options: ReadOptions | None,
+             keywords: dict[str, Any]) -> tuple[str, ReadOptions]:
     """The log's format and the reading options, checked (see :func:`read_log`)."""
-    from occtool.io.positions import GROUP_BY_CHOICES, check_tolerance
-
     if not Path(path).exists():
         raise FileNotFoundError(2, "No such file or directory", str(path))
-    tolerance = check_tolerance(position_tolerance)
-    if group_by not in GROUP_BY_CHOICES:
-        raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {group_by!r}")
-    if evidence is not None and not (0.0 <= float(evidence) <= 1.0):
-        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
-    fmt = (format or detect_format(path)).lower()
-    if fmt == "dat":
-        fmt = "xyz"
-    if fmt not in FORMATS:
-        raise InputError(f"unknown format {format!r}: expected one of {', '.join(FORMATS)}")
-    if topics and fmt not in ("mcap", "rosbag"):
+    checked = as_read_options(options, **keywords)
+    fmt = checked.format or detect_format(path)
+    if checked.topics and fmt not in ("mcap", "rosbag"):
         raise InputError(f"topics= applies to MCAP logs only, and {path} is {fmt}")
-    no_return_range = check_no_return_range(no_return_range)
-    from occtool.io.read_options import check_depth_features, check_depth_max_range, check_depth_noise
+    return fmt, checked
 
-    options: ReadOptions = dict(
-        topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
-        sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-        skip_invalid=skip_invalid, no_return_range=no_return_range,
-        depth_features=check_depth_features(depth_features), depth_noise=check_depth_noise(depth_noise),
-        depth_max_range=check_depth_max_range(depth_max_range),
-    )
-    return fmt, options
+
+options_as_keywords(read_log)
+options_as_keywords(iter_positions)
 
 
 @contextlib.contextmanager
@@ -350,68 +239,10 @@ def _read_errors(path: str | os.PathLike[str]) -> Iterator[None]:
 
 
 def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -> RangeLog:
-    topics = options["topics"]
-    evidence_field = options["evidence_field"]
-    evidence = options["evidence"]
-    use_intensities = options["use_intensities"]
-    sensor_frame = options["sensor_frame"]
-    base_frame = options["base_frame"]
-    tolerance = options["position_tolerance"]
-    group_by = options["group_by"]
-    skip_invalid = options["skip_invalid"]
-    no_return_range = options["no_return_range"]
-    constant = DEFAULT_CONSTANT_EVIDENCE if evidence is None else float(evidence)
-    if fmt in ("tum", "3dmatch"):
-        from occtool.io.depth_folders import read_depth_folder
+    """Read a whole log of format ``fmt`` with its registered reader."""
+    from occtool.io._formats import READERS
 
-        return read_depth_folder(
-            path, format=fmt, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid,
-            no_return_range=no_return_range, depth_features=options["depth_features"],
-            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
-        )
-    if fmt == "csv":
-        from occtool.io.csv import read_csv
-
-        return read_csv(
-            path, evidence_field=evidence_field, evidence=evidence, position_tolerance=tolerance,
-            group_by=group_by, skip_invalid=skip_invalid,
-        )
-    if fmt == "mcap":
-        from occtool.io.mcap import read_mcap
-
-        return read_mcap(
-            path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
-            sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid, no_return_range=no_return_range, depth_features=options["depth_features"],
-            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
-        )
-    if fmt == "rosbag":
-        from occtool.io.rosbag import read_rosbag
-
-        return read_rosbag(
-            path, topics=topics, evidence_field=evidence_field, evidence=evidence, use_intensities=use_intensities,
-            sensor_frame=sensor_frame, base_frame=base_frame, position_tolerance=tolerance, group_by=group_by,
-            skip_invalid=skip_invalid, no_return_range=no_return_range, depth_features=options["depth_features"],
-            depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"],
-        )
-    if fmt == "carmen":
-        from occtool.io.carmen import read_carmen
-
-        return read_carmen(
-            path, evidence=constant, position_tolerance=tolerance, group_by=group_by, skip_invalid=skip_invalid,
-            no_return_range=no_return_range,
-        )
-    if fmt == "urg":
-        from occtool.io.urg import read_urg
-
-        return read_urg(path, evidence=evidence, position_tolerance=tolerance, group_by=group_by,
-                        skip_invalid=skip_invalid)
-    from occtool.io.pointcloud import read_pointcloud
-
-    return read_pointcloud(
-        path, format=fmt, evidence_field=evidence_field, evidence=evidence, position_tolerance=tolerance,
-        group_by=group_by, skip_invalid=skip_invalid,
-    )
+    return READERS[fmt](path, fmt, options)
 
 
 def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,

@@ -30,16 +30,17 @@ obstacle.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
-from occtool.io import check_no_return_range
 from occtool.io.csv import open_text
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, group_scans
+from occtool.io.positions import Scan, group_scans
+from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 # The largest reading of a file is taken as the no-return sentinel when it occurs this
 # often (or, in short logs, at least twice and in 1% of the readings).
@@ -103,13 +104,10 @@ def _parse_laser(
 
 def read_carmen(
     path: str | os.PathLike[str],
+    options: ReadOptions | None = None,
     *,
-    evidence: float = 0.9,
     max_range: float | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-    no_return_range: float | None = None,
+    **keywords: Any,
 ) -> RangeLog:
     """Read the laser scans of a CARMEN log into positions of features.
 
@@ -117,31 +115,33 @@ def read_carmen(
     ----------
     path
         ``.log`` or ``.log.gz`` file.
-    evidence
-        Evidence given to every reading (a 2D laser reports none).
+    options, **keywords
+        The reading options (:class:`~occtool.io.ReadOptions`, or its fields by name). A
+        CARMEN log uses ``evidence`` (given to every reading: a 2D laser reports none;
+        :data:`~occtool.io.read_options.DEFAULT_CONSTANT_EVIDENCE` by default),
+        ``position_tolerance``, ``group_by``, ``skip_invalid`` (skip laser lines that do
+        not parse) and ``no_return_range`` (below).
     max_range
         Readings at or above this are "no return" and dropped; by default the file's
         repeated largest reading (see the module notes).
-    position_tolerance, group_by, skip_invalid
-        As for :func:`occtool.io.read_log`; ``skip_invalid`` skips laser lines that do
-        not parse.
-    no_return_range
-        ``None`` (default): no-return readings are dropped. A positive number R: each
-        no-return reading becomes a *free ray*, a feature along its beam at
-        ``min(R, max range)`` (the line's own max range for ``ROBOTLASER1``, else
-        ``max_range`` or the file's sentinel) with evidence 0: its ray is free up to
-        there, and it says nothing about an obstacle. Readings <= 0 or NaN are dropped
-        either way.
+
+    Notes
+    -----
+    ``no_return_range`` ``None`` (default): no-return readings are dropped. A positive
+    number R: each no-return reading becomes a *free ray*, a feature along its beam at
+    ``min(R, max range)`` (the line's own max range for ``ROBOTLASER1``, else
+    ``max_range`` or the file's sentinel) with evidence 0: its ray is free up to there,
+    and it says nothing about an obstacle. Readings <= 0 or NaN are dropped either way.
 
     Raises
     ------
     InputError
         For a laser line that does not parse (naming it) or a log without scans.
     """
-    scans = CarmenScans(path, evidence=evidence, max_range=max_range, skip_invalid=skip_invalid,
-                        no_return_range=no_return_range)
-    positions = list(group_scans(scans, source=scans.name, tolerance=position_tolerance, group_by=group_by,
-                                 notes=scans.notes))
+    settings = as_read_options(options, **keywords)
+    scans = CarmenScans(path, settings, max_range=max_range)
+    positions = list(group_scans(scans, source=scans.name, tolerance=settings.position_tolerance,
+                                 group_by=settings.group_by, notes=scans.notes))
     return RangeLog(positions=positions, source=scans.name, notes=scans.notes)
 
 
@@ -157,16 +157,15 @@ class CarmenScans:
     after a full iteration. Parameters are those of :func:`read_carmen`.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, evidence: float = 0.9, max_range: float | None = None,
-                 skip_invalid: bool = False, no_return_range: float | None = None) -> None:
-        if not 0.0 <= evidence <= 1.0:
-            raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None, *,
+                 max_range: float | None = None, **keywords: Any) -> None:
+        self.settings = as_read_options(options, **keywords)
         self.path = path
         self.name = str(path)
-        self.evidence = evidence
+        self.evidence = self.settings.constant_evidence
         self.max_range = max_range
-        self.skip_invalid = skip_invalid
-        self.no_return_range = check_no_return_range(no_return_range)
+        self.skip_invalid = self.settings.skip_invalid
+        self.no_return_range = self.settings.no_return_range
         self.notes: list[str] = []
         self._limit: tuple[float | None] | None = None  # (the sentinel or None,) once the file was read
 
@@ -281,3 +280,7 @@ class CarmenScans:
         if self.unknown:
             notes.append(f"ignored records of unknown type: {', '.join(sorted(self.unknown)[:5])}")
         return notes
+
+
+options_as_keywords(read_carmen)
+options_as_keywords(CarmenScans)

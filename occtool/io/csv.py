@@ -18,14 +18,15 @@ import logging
 import os
 import warnings
 from collections.abc import Callable, Iterable, Sequence
-from typing import IO
+from typing import IO, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, assign_positions, to_reference_frame
+from occtool.io.positions import assign_positions, to_reference_frame
+from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 from occtool.limits import MAX_COORDINATE
 
 logger = logging.getLogger(__name__)
@@ -175,32 +176,21 @@ def _data_line_numbers(path: str | os.PathLike[str], layout: _Layout) -> NDArray
     return np.array(numbers, dtype=np.int64)
 
 
-def read_csv(
-    path: str | os.PathLike[str],
-    *,
-    evidence_field: str = "evidence",
-    evidence: float | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-) -> RangeLog:
+def read_csv(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
     """Read a CSV feature file into a :class:`~occtool.features.RangeLog`.
 
     Parameters
     ----------
     path
         The CSV file (``.csv``, optionally ``.gz`` or ``.bz2`` compressed).
-    evidence_field
-        Name of the evidence column; ``"evidence"`` (the default) also accepts ``m``.
-    evidence
-        Constant evidence for every row, used when the file has no evidence column.
-    position_tolerance
-        ``(metres, radians)``: consecutive poses within it form one position.
-    group_by
-        ``"position"`` or ``"message"`` (every distinct consecutive pose its own position).
-    skip_invalid
-        Drop bad rows (not numeric, NaN or infinite, evidence outside [0, 1], a point at
-        the origin) and report their count in ``notes`` instead of failing.
+    options, **keywords
+        The reading options (:class:`~occtool.io.ReadOptions`, or its fields by name). A CSV
+        file uses ``evidence_field`` (the evidence column; ``"evidence"``, the default, also
+        accepts ``m``), ``evidence`` (constant evidence for every row, when the file has no
+        evidence column), ``position_tolerance`` and ``group_by`` (``"message"``: every
+        distinct consecutive pose its own position), and ``skip_invalid`` (drop bad rows:
+        not numeric, NaN or infinite, evidence outside [0, 1], a point at the origin, and
+        report their count in ``notes`` instead of failing).
 
     Returns
     -------
@@ -213,13 +203,13 @@ def read_csv(
     InputError
         For an empty file, a missing column, or a bad row (naming its line).
     """
+    settings = as_read_options(options, **keywords)
+    evidence = settings.evidence
     name = str(path)
-    if evidence is not None and not (0.0 <= evidence <= 1.0):
-        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
     line_numbers: NDArray[np.int64] | None = None
     unparsable: list[tuple[int, str]] = []
     with open_text(path) as handle:
-        layout = _find_layout(handle, name, evidence_field, evidence)
+        layout = _find_layout(handle, name, settings.evidence_field, evidence)
         try:
             with warnings.catch_warnings():
                 # A header without rows is reported below as an InputError, not a warning.
@@ -239,7 +229,7 @@ def read_csv(
     if data.shape[0] == 0 and not unparsable:
         raise InputError(f"{name} has a header but no data rows")
 
-    data, skipped = _checked_rows(name, layout, data, line_numbers, unparsable, evidence, skip_invalid,
+    data, skipped = _checked_rows(name, layout, data, line_numbers, unparsable, evidence, settings.skip_invalid,
                                   functools.partial(_data_line_numbers, path, layout))
     columns = {c: data[:, k] for k, c in enumerate(layout.used)}
     points = np.column_stack([columns[c] for c in layout.xyz])
@@ -251,7 +241,10 @@ def read_csv(
     if data.shape[0] == 0:
         raise InputError(f"{name} holds no valid rows ({skipped} skipped)")
 
-    return _group_rows(name, layout, columns, points, m, position_tolerance, group_by, notes)
+    return _group_rows(name, layout, columns, points, m, settings.position_tolerance, settings.group_by, notes)
+
+
+options_as_keywords(read_csv)
 
 
 def _group_rows(

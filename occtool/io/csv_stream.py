@@ -8,6 +8,7 @@ import functools
 import os
 import warnings
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,7 +25,8 @@ from occtool.io.csv import (
     open_text,
     read_csv,
 )
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, to_reference_frame
+from occtool.io.positions import to_reference_frame
+from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 #: Text parsed at a time when a CSV log is streamed (:func:`iter_csv`): about 4 MB, tens
 #: of thousands of rows.
@@ -33,17 +35,15 @@ CHUNK_BYTES = 1 << 22
 
 def iter_csv(
     path: str | os.PathLike[str],
+    options: ReadOptions | None = None,
     *,
-    evidence_field: str = "evidence",
-    evidence: float | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
     notes: list[str] | None = None,
+    **keywords: Any,
 ) -> Iterator[Position]:
     """The positions of a CSV feature file, parsed :data:`CHUNK_BYTES` of text at a time.
 
-    Yields what :func:`read_csv` returns, position by position, holding one chunk and
+    ``options`` and ``keywords`` are :func:`read_csv`'s. Yields what :func:`read_csv`
+    returns, position by position, holding one chunk and
     the rows of the position being gathered; the notes are appended to ``notes`` at the
     end, and a bad row is an :class:`InputError` when its chunk is reached (the first bad
     row of the file, as :func:`read_csv` names it). A file without ``position`` or pose
@@ -55,19 +55,18 @@ def iter_csv(
     after another (rows of positions interleaved), or the column does not parse, the file
     is read whole by :func:`read_csv` instead, with the same result.
     """
+    settings = as_read_options(options, **keywords)
+    evidence = settings.evidence
     name = str(path)
     notes = notes if notes is not None else []
-    if evidence is not None and not (0.0 <= evidence <= 1.0):
-        raise InputError(f"constant evidence must lie in [0, 1], got {evidence}")
     with open_text(path) as handle:
-        layout = _find_layout(handle, name, evidence_field, evidence)
+        layout = _find_layout(handle, name, settings.evidence_field, evidence)
     if layout.position is not None and not _ids_are_contiguous(path, layout, layout.position):
-        log = read_csv(path, evidence_field=evidence_field, evidence=evidence, position_tolerance=position_tolerance,
-                       group_by=group_by, skip_invalid=skip_invalid)
+        log = read_csv(path, settings)
         notes.extend(log.notes)
         yield from log.positions
         return
-    gatherer = _RowGatherer(name, layout, position_tolerance, group_by)
+    gatherer = _RowGatherer(name, layout, settings.position_tolerance, settings.group_by)
     rows = 0
     skipped = 0
     with open_text(path) as handle:
@@ -81,7 +80,7 @@ def iter_csv(
             first_line, line_number = line_number + 1, line_number + len(lines)
             data, line_numbers, unparsable = _parse_chunk(lines, first_line, layout)
             rows += data.shape[0]
-            data, bad_count = _checked_rows(name, layout, data, line_numbers, unparsable, evidence, skip_invalid,
+            data, bad_count = _checked_rows(name, layout, data, line_numbers, unparsable, evidence, settings.skip_invalid,
                                             functools.partial(_chunk_line_numbers, lines, first_line))
             skipped += bad_count
             yield from gatherer.add(data, evidence)
@@ -95,6 +94,9 @@ def iter_csv(
     yield from gatherer.finish()
     if gatherer.dropped:
         notes.append(f"{gatherer.dropped} point(s) fell on their position's sensor origin and were dropped")
+
+
+options_as_keywords(iter_csv)
 
 
 def _ids_are_contiguous(path: str | os.PathLike[str], layout: _Layout, column: int) -> bool:
@@ -157,7 +159,8 @@ class _RowGatherer:
     at a new ``position`` id, or at a pose run that starts a new position (tolerance)."""
 
     def __init__(self, name: str, layout: _Layout, tolerance: Sequence[float], group_by: str) -> None:
-        from occtool.io.positions import GROUP_BY_CHOICES, check_tolerance
+        from occtool.io.positions import check_tolerance
+        from occtool.io.read_options import GROUP_BY_CHOICES
 
         if group_by not in GROUP_BY_CHOICES:
             raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {group_by!r}")

@@ -363,10 +363,8 @@ def floor_mounting(points_optical: FloatArray) -> tuple[FloatArray, float, float
     optical coordinates into a frame with z up (the floor's normal) and x along the
     camera's heading, the camera's height above the floor plane in metres and its tilt in
     degrees (negative: looking down); ``None`` when no floor plane is found
-    (:func:`occtool.io.depth_folders.estimate_floor`).
+    (:func:`estimate_floor`).
     """
-    from occtool.io.depth_folders import estimate_floor
-
     found = estimate_floor(points_optical, np.array([0.0, -1.0, 0.0]))
     if found is None:
         return None
@@ -405,11 +403,54 @@ def camera_scan(points_body: FloatArray, camera_to_world: FloatArray) -> tuple[F
     return points_body @ rotation.T, Pose(float(t[0]), float(t[1]), float(t[2]), yaw)
 
 
+def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0,
+                   tolerance: float = 0.03) -> tuple[FloatArray, float, int] | None:
+    """The floor plane of world points: the plane of most inliers (within ``tolerance``)
+    whose normal lies within 30 degrees of ``up_guess``, among the lowest 40 % of the points.
+
+    Returns ``(unit normal pointing up, offset d with n . p = d on the floor, inliers)``, or
+    ``None`` when no such plane holds 5 % of the points.
+    """
+    if points.shape[0] < 50:
+        return None
+    up = up_guess / np.linalg.norm(up_guess)
+    heights = points @ up
+    low = points[heights <= np.quantile(heights, 0.4)]
+    rng = np.random.default_rng(seed)
+    best: tuple[FloatArray, float, int] | None = None
+    cos_limit = math.cos(math.radians(30.0))
+    for _ in range(300):
+        a, b, c = low[rng.choice(low.shape[0], 3, replace=False)]
+        normal = np.cross(b - a, c - a)
+        length = float(np.linalg.norm(normal))
+        if length < 1e-9:
+            continue
+        normal /= length
+        if normal @ up < 0:
+            normal = -normal
+        if normal @ up < cos_limit:
+            continue
+        offset = float(normal @ a)
+        inliers = int(np.count_nonzero(np.abs(points @ normal - offset) < tolerance))
+        if best is None or inliers > best[2]:
+            best = (normal, offset, inliers)
+    if best is None or best[2] < 0.05 * points.shape[0]:
+        return None
+    # Refine: the least-squares plane of the inliers.
+    normal, offset, _ = best
+    inlier_points = points[np.abs(points @ normal - offset) < tolerance]
+    centre = inlier_points.mean(axis=0)
+    _, _, vt = np.linalg.svd(inlier_points - centre, full_matrices=False)
+    refined = vt[2] if vt[2] @ up > 0 else -vt[2]
+    return refined, float(refined @ centre), int(inlier_points.shape[0])
+
+
 __all__ = [
     "DEFAULT_DEPTH_FEATURES",
     "DEFAULT_DEPTH_MAX_RANGE",
     "DEFAULT_DEPTH_MIN_RANGE",
     "DEFAULT_DEPTH_NOISE",
+    "estimate_floor",
     "OPTICAL_TO_BODY",
     "DepthCounts",
     "PinholeCamera",

@@ -28,9 +28,10 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,19 +39,18 @@ from numpy.typing import NDArray
 from occtool.errors import InputError, MissingDependencyError
 from occtool.features import RangeLog
 from occtool.io.depth import (
-    DEFAULT_DEPTH_FEATURES,
-    DEFAULT_DEPTH_MAX_RANGE,
     DEFAULT_DEPTH_MIN_RANGE,
-    DEFAULT_DEPTH_NOISE,
     DepthCounts,
     PinholeCamera,
     back_project,
     camera_scan,
     check_rigid,
+    estimate_floor,
     level_rotation,
     rotation_from_quaternion,
 )
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 FloatArray = NDArray[np.float64]
 
@@ -316,48 +316,6 @@ def _check_pinhole(k: FloatArray, where: Path) -> None:
         raise InputError(f"{where}: {exc}") from None
 
 
-def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0,
-                   tolerance: float = 0.03) -> tuple[FloatArray, float, int] | None:
-    """The floor plane of world points: the plane of most inliers (within ``tolerance``)
-    whose normal lies within 30 degrees of ``up_guess``, among the lowest 40 % of the points.
-
-    Returns ``(unit normal pointing up, offset d with n . p = d on the floor, inliers)``, or
-    ``None`` when no such plane holds 5 % of the points.
-    """
-    if points.shape[0] < 50:
-        return None
-    up = up_guess / np.linalg.norm(up_guess)
-    heights = points @ up
-    low = points[heights <= np.quantile(heights, 0.4)]
-    rng = np.random.default_rng(seed)
-    best: tuple[FloatArray, float, int] | None = None
-    cos_limit = math.cos(math.radians(30.0))
-    for _ in range(300):
-        a, b, c = low[rng.choice(low.shape[0], 3, replace=False)]
-        normal = np.cross(b - a, c - a)
-        length = float(np.linalg.norm(normal))
-        if length < 1e-9:
-            continue
-        normal /= length
-        if normal @ up < 0:
-            normal = -normal
-        if normal @ up < cos_limit:
-            continue
-        offset = float(normal @ a)
-        inliers = int(np.count_nonzero(np.abs(points @ normal - offset) < tolerance))
-        if best is None or inliers > best[2]:
-            best = (normal, offset, inliers)
-    if best is None or best[2] < 0.05 * points.shape[0]:
-        return None
-    # Refine: the least-squares plane of the inliers.
-    normal, offset, _ = best
-    inlier_points = points[np.abs(points @ normal - offset) < tolerance]
-    centre = inlier_points.mean(axis=0)
-    _, _, vt = np.linalg.svd(inlier_points - centre, full_matrices=False)
-    refined = vt[2] if vt[2] @ up > 0 else -vt[2]
-    return refined, float(refined @ centre), int(inlier_points.shape[0])
-
-
 class DepthFolderScans:
     """The frames of a TUM RGB-D or 3DMatch / 7-Scenes folder as scans, read one frame at a
     time (an iterable of :class:`~occtool.io.positions.Scan`, for
@@ -369,20 +327,18 @@ class DepthFolderScans:
     is complete after a full iteration. Parameters are those of :func:`read_depth_folder`.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, format: str | None = None, skip_invalid: bool = False,
-                 no_return_range: float | None = None, depth_features: int = DEFAULT_DEPTH_FEATURES,
-                 depth_noise: float = DEFAULT_DEPTH_NOISE,
-                 depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE) -> None:
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> None:
+        settings = self.settings = as_read_options(options, **keywords)
         self.target = Path(path)
         self.name = str(path)
         self.folder = self.target if self.target.is_dir() else self.target.parent
-        self.layout = format or depth_layout(self.target)
+        self.layout = settings.format or depth_layout(self.target)
         if self.layout not in DEPTH_FORMATS:
             raise InputError(f"{self.target} is neither a TUM RGB-D folder (depth.txt) nor a 3DMatch / 7-Scenes "
                              "folder (frame-NNNNNN.depth.png with .pose.txt)")
-        self.skip_invalid = skip_invalid
-        self.no_return_range = no_return_range
-        self.features, self.noise, self.max_range = depth_features, depth_noise, depth_max_range
+        self.skip_invalid = settings.skip_invalid
+        self.no_return_range = settings.no_return_range
+        self.features, self.noise, self.max_range = settings.depth_features, settings.depth_noise, settings.depth_max_range
         self.notes: list[str] = []
         self._prepared = False
 
@@ -498,27 +454,23 @@ class DepthFolderScans:
         self.notes.extend(notes)
 
 
-def read_depth_folder(
-    path: str | os.PathLike[str],
-    *,
-    format: str | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-    no_return_range: float | None = None,
-    depth_features: int = DEFAULT_DEPTH_FEATURES,
-    depth_noise: float = DEFAULT_DEPTH_NOISE,
-    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
-) -> RangeLog:
+def read_depth_folder(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
     """Read a TUM RGB-D or 3DMatch / 7-Scenes folder (see the module) into positions.
 
-    Parameters are those of :func:`occtool.io.read_log`. ``skip_invalid`` drops frames
+    ``options`` and ``keywords`` are those of :func:`occtool.io.read_log` (a
+    :class:`~occtool.io.ReadOptions` and its fields by name): ``format`` (``"tum"`` or
+    ``"3dmatch"``; by default from the folder), ``position_tolerance``, ``group_by``,
+    ``no_return_range``, the ``depth_*`` options, and ``skip_invalid``, which drops frames
     whose image cannot be read (counted in a note) instead of failing.
     """
-    scans = DepthFolderScans(path, format=format, skip_invalid=skip_invalid, no_return_range=no_return_range,
-                             depth_features=depth_features, depth_noise=depth_noise, depth_max_range=depth_max_range)
+    scans = DepthFolderScans(path, options, **keywords)
     listed = list(scans)
-    return build_log(listed, source=scans.name, tolerance=position_tolerance, group_by=group_by, notes=scans.notes)
+    return build_log(listed, source=scans.name, tolerance=scans.settings.position_tolerance,
+                     group_by=scans.settings.group_by, notes=scans.notes)
+
+
+options_as_keywords(read_depth_folder)
+options_as_keywords(DepthFolderScans)
 
 
 def _level_world(posed: list[tuple[FloatArray, FloatArray, _Frame]], z_up: bool

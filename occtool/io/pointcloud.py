@@ -21,8 +21,8 @@ from __future__ import annotations
 import io
 import os
 import warnings
-from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,10 +30,10 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
 from occtool.io.csv import open_text
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 from occtool.limits import MAX_COORDINATE
 
-DEFAULT_CONSTANT_EVIDENCE = 0.9
 _PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
     "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
@@ -397,48 +397,46 @@ def _read_ply(path: str | os.PathLike[str], name: str, evidence_field: str, cons
     return [Scan(points, evidence, None, None, name)], notes
 
 
-def read_pointcloud(
-    path: str | os.PathLike[str],
-    *,
-    format: str | None = None,
-    evidence_field: str = "evidence",
-    evidence: float | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-) -> RangeLog:
+def read_pointcloud(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
     """Read an ``xyz``, ``pcd`` or ``ply`` point-cloud file into positions of features.
 
     Parameters
     ----------
     path
         The file.
-    format
-        ``"xyz"``, ``"pcd"`` or ``"ply"``; by default from the extension.
-    evidence_field, evidence, position_tolerance, group_by, skip_invalid
-        As for :func:`occtool.io.read_log`.
+    options, **keywords
+        The reading options (:class:`~occtool.io.ReadOptions`, or its fields by name). A
+        point cloud uses ``format`` (``"xyz"``, ``"pcd"`` or ``"ply"``; by default from the
+        extension), ``evidence_field``, ``evidence``, ``position_tolerance``, ``group_by``
+        and ``skip_invalid``.
 
     Raises
     ------
     InputError
         For a malformed header or data, naming the file (and line for ``xyz``).
     """
+    settings = as_read_options(options, **keywords)
     name = str(path)
+    format = settings.format
     if format is None:
         suffixes = [s.lower() for s in Path(name).suffixes if s.lower() not in (".gz", ".bz2")]
         format = {".pcd": "pcd", ".ply": "ply"}.get(suffixes[-1] if suffixes else "", "xyz")
-    constant = DEFAULT_CONSTANT_EVIDENCE if evidence is None else float(evidence)
+    constant, skip_invalid = settings.constant_evidence, settings.skip_invalid
     counts = {"nan": 0, "origin": 0, "invalid": 0, "lines": 0}
     if format == "xyz":
         scans, notes = _read_xyz(path, name, constant, skip_invalid, counts)
         notes.append(f"constant evidence {constant} for plain x y z points (evidence=)")
     elif format == "pcd":
-        scans, notes = _read_pcd(path, name, evidence_field, constant, skip_invalid, counts)
+        scans, notes = _read_pcd(path, name, settings.evidence_field, constant, skip_invalid, counts)
     elif format == "ply":
-        scans, notes = _read_ply(path, name, evidence_field, constant, skip_invalid, counts)
+        scans, notes = _read_ply(path, name, settings.evidence_field, constant, skip_invalid, counts)
     else:
         raise InputError(f"unknown point-cloud format {format!r}: expected xyz, pcd or ply")
     notes.extend(_notes(counts))
     if not any(s.points.shape[0] for s in scans):
         raise InputError(f"{name} holds no valid points")
-    return build_log(scans, source=name, tolerance=position_tolerance, group_by=group_by, notes=notes)
+    return build_log(scans, source=name, tolerance=settings.position_tolerance, group_by=settings.group_by,
+                     notes=notes)
+
+
+options_as_keywords(read_pointcloud)

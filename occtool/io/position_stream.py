@@ -61,24 +61,7 @@ class PositionStream:
         self.format = fmt
         self.options = options
         self.notes: list[str] = []
-        self._carmen: Any = None
-        self._mcap: Any = None
-        self._depth: Any = None
-
-    def _mcap_scans(self) -> Any:
-        from occtool.io.mcap._reader import McapScans
-
-        opener = None
-        if self.format == "rosbag":
-            from occtool.io.rosbag import BagReader
-
-            opener = BagReader
-        o = self.options
-        return McapScans(self.path, topics=o["topics"], evidence_field=o["evidence_field"], evidence=o["evidence"],
-                         use_intensities=o["use_intensities"], sensor_frame=o["sensor_frame"],
-                         base_frame=o["base_frame"], skip_invalid=o["skip_invalid"],
-                         no_return_range=o["no_return_range"], depth_features=o["depth_features"],
-                         depth_noise=o["depth_noise"], depth_max_range=o["depth_max_range"], opener=opener)
+        self._source: Any = None  # the format's streaming source, kept across iterations
 
     def __iter__(self) -> Iterator[Position]:
         from occtool.io import _read_errors
@@ -87,56 +70,20 @@ class PositionStream:
             yield from self._positions()
 
     def _positions(self) -> Iterator[Position]:
-        from occtool.io.positions import group_scans
+        from occtool.io._formats import STREAMS
 
-        options = self.options
-        tolerance, group_by = options["position_tolerance"], options["group_by"]
-        if self.format == "carmen":
-            from occtool.io import DEFAULT_CONSTANT_EVIDENCE
-            from occtool.io.carmen import CarmenScans
-
-            if self._carmen is None:
-                evidence = options["evidence"]
-                self._carmen = CarmenScans(
-                    self.path, evidence=DEFAULT_CONSTANT_EVIDENCE if evidence is None else float(evidence),
-                    skip_invalid=options["skip_invalid"], no_return_range=options["no_return_range"],
-                )
-            scans = self._carmen
-            self.notes = scans.notes
-            yield from group_scans(scans, source=scans.name, tolerance=tolerance, group_by=group_by, notes=scans.notes)
-            return
-        if self.format == "csv":
-            from occtool.io.csv_stream import iter_csv
-
-            self.notes = []
-            yield from iter_csv(self.path, evidence_field=options["evidence_field"], evidence=options["evidence"],
-                                position_tolerance=tolerance, group_by=group_by, skip_invalid=options["skip_invalid"],
-                                notes=self.notes)
-            return
-        if self.format in ("tum", "3dmatch"):
-            from occtool.io.depth_folders import DepthFolderScans
-
-            if self._depth is None:
-                self._depth = DepthFolderScans(
-                    self.path, format=self.format, skip_invalid=options["skip_invalid"],
-                    no_return_range=options["no_return_range"], depth_features=options["depth_features"],
-                    depth_noise=options["depth_noise"], depth_max_range=options["depth_max_range"])
-            scans = self._depth
-            self.notes = scans.notes
-            yield from group_scans(scans, source=scans.name, tolerance=tolerance, group_by=group_by, notes=scans.notes)
-            return
-        if self.format in ("mcap", "rosbag"):
-            if self._mcap is None:
-                self._mcap = self._mcap_scans()
-            if self._mcap.prepare():
-                scans = self._mcap
-                self.notes = scans.notes
-                yield from group_scans(scans, source=scans.name, tolerance=tolerance, group_by=group_by,
-                                       notes=scans.notes)
+        stream = STREAMS.get(self.format)
+        if stream is not None:
+            if self._source is None:
+                self._source = stream(self.path, self.format, self.options)
+            positions = self._source.positions()
+            if positions is not None:
+                self.notes = self._source.notes
+                yield from positions
                 return
         from occtool.io import _read_format
 
-        log = _read_format(self.path, self.format, options)
+        log = _read_format(self.path, self.format, self.options)
         self.notes = list(log.notes)
         yield from log.positions
 

@@ -19,9 +19,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
-
-GROUP_BY_CHOICES = ("position", "message")
-DEFAULT_POSITION_TOLERANCE = (0.25, 0.26)
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE, GROUP_BY_CHOICES
 
 
 @dataclass(frozen=True, eq=False)

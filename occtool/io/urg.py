@@ -16,13 +16,15 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 
 from occtool.errors import InputError
 from occtool.features import Pose, RangeLog
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 #: Fields before the ranges, the ranges, and the trailing value of a line.
 HEADER_FIELDS = 24
@@ -111,18 +113,26 @@ def iter_urg_scans(path: str | os.PathLike[str], *, evidence: float = 0.9, skip_
             notes.append(f"skipped {skipped} line(s) that do not parse")
 
 
-def read_urg(path: str | os.PathLike[str], *, evidence: float | None = None,
-             position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE, group_by: str = "position",
-             skip_invalid: bool = False) -> RangeLog:
-    """Read a BreezySLAM URG log (see the module's docstring) into positions on its odometry."""
-    constant = 0.9 if evidence is None else float(evidence)
+def read_urg(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
+    """Read a BreezySLAM URG log (see the module's docstring) into positions on its odometry.
+
+    ``options`` and ``keywords`` are the reading options (:class:`~occtool.io.ReadOptions`,
+    or its fields by name): a URG log uses ``evidence``, ``position_tolerance``,
+    ``group_by`` and ``skip_invalid``.
+    """
+    settings = as_read_options(options, **keywords)
     notes: list[str] = []
-    scans: list[Scan] = list(iter_urg_scans(path, evidence=constant, skip_invalid=skip_invalid, notes=notes))
+    scans: list[Scan] = list(iter_urg_scans(path, evidence=settings.constant_evidence,
+                                            skip_invalid=settings.skip_invalid, notes=notes))
     if not scans:
         raise InputError(f"{path} holds no scans")
-    log = build_log(scans, source=str(path), tolerance=position_tolerance, group_by=group_by, notes=notes)
+    log = build_log(scans, source=str(path), tolerance=settings.position_tolerance, group_by=settings.group_by,
+                    notes=notes)
     log.pose_kind = "odometry"
     return log
+
+
+options_as_keywords(read_urg)
 
 
 __all__ = ["iter_urg_scans", "looks_like_urg", "read_urg"]

@@ -54,10 +54,10 @@ from occtool.io.mcap._channels import (
     TF,
     channel_kind,
 )
-from occtool.io.mcap._decode import DEFAULT_CONSTANT_EVIDENCE
 from occtool.io.mcap._file import ChannelRow, describe_channels
 from occtool.io.mcap._reader import read_mcap
 from occtool.io.mcap._writer import write_mcap
+from occtool.io.read_options import DEFAULT_CONSTANT_EVIDENCE
 
 __all__ = [
     "DEFAULT_CONSTANT_EVIDENCE",

@@ -25,8 +25,7 @@ from occtool.io.mcap._channels import (
     _stamp_seconds,
 )
 from occtool.io.mcap._transforms import _IDENTITY, _Rigid, _rotation_from_quaternion, _strip_frame, _vector
-
-DEFAULT_CONSTANT_EVIDENCE = 0.9
+from occtool.io.read_options import DEFAULT_CONSTANT_EVIDENCE, ReadOptions
 
 # ROS sensor_msgs/PointField datatypes and foxglove PackedElementField numeric types.
 _ROS_DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -49,13 +48,11 @@ class _Decoded:
 
 
 class _Options:
-    def __init__(self, evidence_field: str, evidence: float | None, use_intensities: bool, skip_invalid: bool,
-                 no_return_range: float | None = None):
-        self.evidence_field = evidence_field
-        self.evidence = evidence
-        self.use_intensities = use_intensities
-        self.skip_invalid = skip_invalid
-        self.no_return_range = no_return_range
+    """The reading options (:class:`~occtool.io.ReadOptions`, whose fields read through:
+    ``options.evidence_field``) and what decoding counts into them for the notes."""
+
+    def __init__(self, settings: ReadOptions):
+        self.settings = settings
         self.constant_for: set[str] = set()
         self.skipped_invalid = 0
         # Laser beams: all of them, the no-return ones (dropped, or kept as free rays out to
@@ -65,6 +62,11 @@ class _Options:
         self.invalid_beams = 0
         self.free_reach: set[float] = set()
         self.depth: Any = None  # DepthSettings for a log with depth images (occtool.io.mcap._depth)
+
+    def __getattr__(self, name: str) -> Any:
+        # Only for names not set above: the reading options' fields, so a new option reaches
+        # the decoders without a line here.
+        return getattr(self.settings, name)
 
 
 def _structured_points(

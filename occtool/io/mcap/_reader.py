@@ -21,7 +21,7 @@ from occtool.io.mcap._channels import (
     _protobuf_available,
     channel_kind,
 )
-from occtool.io.mcap._decode import _DECODERS, DEFAULT_CONSTANT_EVIDENCE, _decode_occtool, _Decoded, _Options
+from occtool.io.mcap._decode import _DECODERS, _decode_occtool, _Decoded, _Options
 from occtool.io.mcap._depth import DepthSettings, add_camera_info, decode_depth, depth_notes
 from occtool.io.mcap._file import ChannelRow, _Reader
 from occtool.io.mcap._transforms import (
@@ -34,8 +34,8 @@ from occtool.io.mcap._transforms import (
     _strip_frame,
     _transforms_of,
 )
-from occtool.io.positions import DEFAULT_POSITION_TOLERANCE, Scan, build_log
-from occtool.io.read_options import DEFAULT_DEPTH_FEATURES, DEFAULT_DEPTH_MAX_RANGE, DEFAULT_DEPTH_NOISE
+from occtool.io.positions import Scan, build_log
+from occtool.io.read_options import DEFAULT_CONSTANT_EVIDENCE, ReadOptions, as_read_options, options_as_keywords
 
 
 def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path: str) -> list[ChannelRow]:
@@ -78,25 +78,15 @@ def _choose_channels(rows: list[ChannelRow], topics: Sequence[str] | None, path:
 
 def read_mcap(
     path: str | os.PathLike[str],
+    options: ReadOptions | None = None,
     *,
-    topics: Sequence[str] | None = None,
-    evidence_field: str = "evidence",
-    evidence: float | None = None,
-    use_intensities: bool = False,
-    sensor_frame: str | None = None,
-    base_frame: str | None = None,
-    position_tolerance: Sequence[float] = DEFAULT_POSITION_TOLERANCE,
-    group_by: str = "position",
-    skip_invalid: bool = False,
-    no_return_range: float | None = None,
-    depth_features: int = DEFAULT_DEPTH_FEATURES,
-    depth_noise: float = DEFAULT_DEPTH_NOISE,
-    depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
     opener: Callable[[str | os.PathLike[str]], Any] | None = None,
+    **keywords: Any,
 ) -> RangeLog:
     """Read the range channels of an MCAP file into positions of features.
 
-    Parameters are those of :func:`occtool.io.read_log`; ``opener`` opens another
+    ``options`` and ``keywords`` are those of :func:`occtool.io.read_log` (a
+    :class:`~occtool.io.ReadOptions` and its fields by name); ``opener`` opens another
     container with the same ``channels``/``messages`` interface (ROS bags,
     :mod:`occtool.io.rosbag`).
 
@@ -106,13 +96,11 @@ def read_mcap(
         For a corrupt or truncated file, a missing topic, an unsupported schema, a log
         without range data, or invalid evidence values (unless ``skip_invalid``).
     """
-    from occtool.io import check_no_return_range
-
+    settings = as_read_options(options, **keywords)
     name = str(path)
-    no_return_range = check_no_return_range(no_return_range)
     with (opener or _Reader)(path) as reader:
-        rows = _channel_rows(reader, topics)
-        chosen = _choose_channels(rows, topics, name)
+        rows = _channel_rows(reader, settings.topics)
+        chosen = _choose_channels(rows, settings.topics, name)
         kinds = {r.topic: r.kind for r in chosen}
         if any(k == OCCTOOL for k in kinds.values()):
             if len(chosen) > 1:
@@ -123,13 +111,14 @@ def read_mcap(
         tf_topics = [r.topic for r in rows if r.kind == TF and r.topic not in static_topics]
         odom_topics = [r.topic for r in rows if r.kind == ODOMETRY]
         frames = _static_frames(reader, static_topics, name)
-        base = _strip_frame(base_frame) if base_frame else None
-        if base is not None and base not in frames and not tf_topics and not odom_topics and sensor_frame is None:
+        base = _strip_frame(settings.base_frame) if settings.base_frame else None
+        if (base is not None and base not in frames and not tf_topics and not odom_topics
+                and settings.sensor_frame is None):
             raise InputError(f"{name}: base frame '{base}' appears in no transform of the log")
 
-        options = _Options(evidence_field, evidence, use_intensities, skip_invalid, no_return_range)
-        options.depth = _depth_settings(reader, rows, kinds, name, depth_features, depth_noise, depth_max_range)
-        scans = _Scans(name, base or "base_link", sensor_frame, frames, options)
+        decoding = _Options(settings)
+        decoding.depth = _depth_settings(reader, rows, kinds, name, settings)
+        scans = _Scans(name, base or "base_link", settings.sensor_frame, frames, decoding)
         for schema, channel, record, message in reader.messages([r.topic for r in chosen] + tf_topics + odom_topics):
             if channel.topic in tf_topics:
                 scans.add_transforms(message, channel.topic)
@@ -141,10 +130,11 @@ def read_mcap(
     if scans.count == 0:
         raise InputError(f"{name} holds no messages on {', '.join(r.topic for r in chosen)}")
     posed, notes = scans.posed()
-    notes += _reading_notes(scans, evidence, no_return_range)
+    notes += _reading_notes(scans)
     if not any(s.points.shape[0] for s in posed):
         raise InputError(f"{name}: the {scans.count} range message(s) hold no valid points")
-    return build_log(posed, source=name, tolerance=position_tolerance, group_by=group_by, notes=notes)
+    return build_log(posed, source=name, tolerance=settings.position_tolerance, group_by=settings.group_by,
+                     notes=notes)
 
 
 def _channel_rows(reader: Any, topics: Sequence[str] | None) -> list[ChannelRow]:
@@ -170,14 +160,12 @@ def _channel_rows(reader: Any, topics: Sequence[str] | None) -> list[ChannelRow]
     return rows
 
 
-def _depth_settings(reader: Any, rows: list[ChannelRow], kinds: dict[str, str | None], name: str, features: int,
-                    noise: float, max_range: float) -> DepthSettings | None:
-    """For depth channels: the settings, with every camera's intrinsics read first."""
+def _depth_settings(reader: Any, rows: list[ChannelRow], kinds: dict[str, str | None], name: str,
+                    options: ReadOptions) -> DepthSettings | None:
+    """For depth channels: the settings (checked by ReadOptions), with every camera's intrinsics read first."""
     if not any(k in DEPTH_KINDS for k in kinds.values()):
         return None
-    from occtool.io.depth import check_depth_features, check_depth_max_range, check_depth_noise
-
-    settings = DepthSettings(check_depth_features(features), check_depth_noise(noise), check_depth_max_range(max_range))
+    settings = DepthSettings(options.depth_features, options.depth_noise, options.depth_max_range)
     info_topics = [r.topic for r in rows if r.kind == CAMERA_INFO]
     if not info_topics:
         raise InputError(f"{name}: depth images need their camera's intrinsics, and the log has no "
@@ -332,9 +320,10 @@ def _pose_notes(pose_source: str, missing: int) -> list[str]:
     return notes
 
 
-def _reading_notes(scans: _Scans, evidence: float | None, no_return_range: float | None) -> list[str]:
+def _reading_notes(scans: _Scans) -> list[str]:
     """What the reading assumed or dropped: mountings, constant evidence, beams and points."""
     options = scans.options
+    evidence, no_return_range = options.settings.evidence, options.settings.no_return_range
     notes: list[str] = []
     if scans.unmounted:
         notes.append(
@@ -407,26 +396,12 @@ class McapScans:
     is complete after a full iteration.
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, topics: Sequence[str] | None = None,
-                 evidence_field: str = "evidence", evidence: float | None = None, use_intensities: bool = False,
-                 sensor_frame: str | None = None, base_frame: str | None = None, skip_invalid: bool = False,
-                 no_return_range: float | None = None, depth_features: int = DEFAULT_DEPTH_FEATURES,
-                 depth_noise: float = DEFAULT_DEPTH_NOISE, depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE,
-                 opener: Callable[[str | os.PathLike[str]], Any] | None = None) -> None:
-        from occtool.io import check_no_return_range
-
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None, *,
+                 opener: Callable[[str | os.PathLike[str]], Any] | None = None, **keywords: Any) -> None:
         self.path = path
         self.name = str(path)
-        self.topics = topics
-        self.evidence_field = evidence_field
-        self.evidence = evidence
-        self.use_intensities = use_intensities
-        self.sensor_frame = sensor_frame
-        self.base_frame = base_frame
-        self.skip_invalid = skip_invalid
-        self.no_return_range = check_no_return_range(no_return_range)
+        self.settings = as_read_options(options, **keywords)
         self.opener = opener or _Reader
-        self.depth = (depth_features, depth_noise, depth_max_range)
         self.notes: list[str] = []
         self.own_channel = False
         self._pose_source: str | None = None
@@ -436,8 +411,8 @@ class McapScans:
         """Each range message's scan with its /tf and odometry poses (the loop of read_mcap)."""
         name = self.name
         with self.opener(self.path) as reader:
-            rows = _channel_rows(reader, self.topics)
-            chosen = _choose_channels(rows, self.topics, name)
+            rows = _channel_rows(reader, self.settings.topics)
+            chosen = _choose_channels(rows, self.settings.topics, name)
             self.chosen_topics = [r.topic for r in chosen]
             kinds = {r.topic: r.kind for r in chosen}
             if any(k == OCCTOOL for k in kinds.values()):
@@ -449,14 +424,14 @@ class McapScans:
             tf_topics = [r.topic for r in rows if r.kind == TF and r.topic not in static_topics]
             odom_topics = [r.topic for r in rows if r.kind == ODOMETRY]
             frames = _static_frames(reader, static_topics, name)
-            base = _strip_frame(self.base_frame) if self.base_frame else None
+            base = _strip_frame(self.settings.base_frame) if self.settings.base_frame else None
             if (base is not None and base not in frames and not tf_topics and not odom_topics
-                    and self.sensor_frame is None):
+                    and self.settings.sensor_frame is None):
                 raise InputError(f"{name}: base frame '{base}' appears in no transform of the log")
-            options = _Options(self.evidence_field, self.evidence, self.use_intensities, self.skip_invalid,
-                               self.no_return_range)
-            options.depth = _depth_settings(reader, rows, kinds, name, *self.depth)
-            scans = self.state = _Scans(name, base or "base_link", self.sensor_frame, frames, options, keep=False)
+            options = _Options(self.settings)
+            options.depth = _depth_settings(reader, rows, kinds, name, self.settings)
+            scans = self.state = _Scans(name, base or "base_link", self.settings.sensor_frame, frames, options,
+                                        keep=False)
             for schema, channel, record, message in reader.messages(self.chosen_topics + tf_topics + odom_topics):
                 if channel.topic in tf_topics:
                     scans.add_transforms(message, channel.topic)
@@ -487,7 +462,7 @@ class McapScans:
         elif odom_missing < count:
             self._pose_source = "odometry"
             notes += _pose_notes("odometry", odom_missing)
-        notes += _reading_notes(self.state, self.evidence, self.no_return_range)
+        notes += _reading_notes(self.state)
         if not with_points:
             raise InputError(f"{self.name}: the {count} range message(s) hold no valid points")
         self._notes = notes
@@ -501,3 +476,7 @@ class McapScans:
             pose = tf_pose if self._pose_source == "tf" else odom_pose if self._pose_source == "odometry" else None
             yield Scan(scan.points, scan.evidence, pose, scan.stamp, scan.source)
         self.notes.extend(self._notes or [])
+
+
+options_as_keywords(read_mcap)
+options_as_keywords(McapScans)
