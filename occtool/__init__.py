@@ -20,9 +20,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from occtool._lazy import lazy_attributes
-
-# The one version source: pyproject.toml reads it ([tool.setuptools.dynamic]).
-__version__ = "0.1.0"
+from occtool._version import __version__
 
 # public name -> module that defines it
 _LAZY: dict[str, str] = {

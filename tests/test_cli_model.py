@@ -192,8 +192,8 @@ def test_each_commands_own_options_default_as_the_library_function_it_calls() ->
     import inspect
 
     from occtool.compare import compare_grid
-    from occtool.scoring import evaluate_log
     from occtool.robot import Robot
+    from occtool.scoring import evaluate_log
     from occtool.simulate import simulate_scene
 
     def keywords(function) -> dict[str, object]:

@@ -180,7 +180,7 @@ def _run_details(model, log_path: str, position: int) -> dict:
     import sys
     from datetime import datetime, timezone
 
-    from occtool import __version__
+    from occtool._version import __version__
 
     return {
         "seconds": round(model.fit_seconds_, 3),

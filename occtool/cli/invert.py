@@ -17,7 +17,7 @@ def invert(model_path: str, output: str | None, overwrite: bool) -> None:
     import platform
     from datetime import datetime, timezone
 
-    from occtool import __version__
+    from occtool._version import __version__
     from occtool.formats.model import load_model, save_inverse
 
     refuse_existing(overwrite, output)

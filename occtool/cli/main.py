@@ -20,7 +20,7 @@ from typing import Any
 
 import click
 
-from occtool import __version__
+from occtool._version import __version__
 
 # name -> (module, function, one-line help). Order is the order of `occtool --help`.
 COMMANDS: dict[str, tuple[str, str, str]] = {

@@ -33,10 +33,7 @@ GeoJSON writers.
 
 from __future__ import annotations
 
-import contextlib
 import os
-import zlib
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -180,8 +177,10 @@ def read_log(path: str | os.PathLike[str], options: ReadOptions | None = None, *
     >>> features = log.single().features                # doctest: +SKIP
     """
     fmt, checked = _checked(path, options, keywords)
-    with _read_errors(path):
-        return _read_format(path, fmt, checked)
+    from occtool.io._formats import read_errors, read_whole
+
+    with read_errors(path):
+        return read_whole(path, fmt, checked)
 
 
 def iter_positions(path: str | os.PathLike[str], options: ReadOptions | None = None,
@@ -221,28 +220,6 @@ def _checked(path: str | os.PathLike[str], options: ReadOptions | None,
 
 options_as_keywords(read_log)
 options_as_keywords(iter_positions)
-
-
-@contextlib.contextmanager
-def _read_errors(path: str | os.PathLike[str]) -> Iterator[None]:
-    """A damaged compressed file or an I/O error while reading as one :class:`InputError`."""
-    try:
-        yield
-    except (EOFError, zlib.error) as exc:
-        raise InputError(f"{path} is truncated or corrupt: {exc}") from None
-    except OSError as exc:
-        # Decompression errors (a damaged .gz/.bz2) are OSErrors too; missing files and
-        # permissions keep their own message.
-        if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
-            raise
-        raise InputError(f"{path} cannot be read: {exc}") from None
-
-
-def _read_format(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -> RangeLog:
-    """Read a whole log of format ``fmt`` with its registered reader."""
-    from occtool.io._formats import READERS
-
-    return READERS[fmt](path, fmt, options)
 
 
 def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,

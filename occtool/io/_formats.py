@@ -14,10 +14,13 @@ whole (occtool's own MCAP channel).
 
 from __future__ import annotations
 
+import contextlib
 import os
+import zlib
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
+from occtool.errors import InputError
 from occtool.io.read_options import FORMATS
 
 if TYPE_CHECKING:
@@ -146,4 +149,26 @@ STREAMS: dict[str, Callable[[PathLike, str, ReadOptions], Any]] = {
 }
 assert set(READERS) == set(FORMATS) and set(STREAMS) <= set(FORMATS)  # one list of names
 
-__all__ = ["READERS", "STREAMS"]
+
+
+@contextlib.contextmanager
+def read_errors(path: str | os.PathLike[str]) -> Iterator[None]:
+    """A damaged compressed file or an I/O error while reading as one :class:`InputError`."""
+    try:
+        yield
+    except (EOFError, zlib.error) as exc:
+        raise InputError(f"{path} is truncated or corrupt: {exc}") from None
+    except OSError as exc:
+        # Decompression errors (a damaged .gz/.bz2) are OSErrors too; missing files and
+        # permissions keep their own message.
+        if isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
+            raise
+        raise InputError(f"{path} cannot be read: {exc}") from None
+
+
+def read_whole(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -> RangeLog:
+    """Read a whole log of format ``fmt`` with its registered reader."""
+    return READERS[fmt](path, fmt, options)
+
+
+__all__ = ["READERS", "STREAMS", "read_errors", "read_whole"]

@@ -64,13 +64,13 @@ class PositionStream:
         self._source: Any = None  # the format's streaming source, kept across iterations
 
     def __iter__(self) -> Iterator[Position]:
-        from occtool.io import _read_errors
+        from occtool.io._formats import read_errors
 
-        with _read_errors(self.path):
+        with read_errors(self.path):
             yield from self._positions()
 
     def _positions(self) -> Iterator[Position]:
-        from occtool.io._formats import STREAMS
+        from occtool.io._formats import STREAMS, read_whole
 
         stream = STREAMS.get(self.format)
         if stream is not None:
@@ -81,9 +81,7 @@ class PositionStream:
                 self.notes = self._source.notes
                 yield from positions
                 return
-        from occtool.io import _read_format
-
-        log = _read_format(self.path, self.format, self.options)
+        log = read_whole(self.path, self.format, self.options)
         self.notes = list(log.notes)
         yield from log.positions
 

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
-from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE, GROUP_BY_CHOICES
+from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE, GROUP_BY_CHOICES, check_tolerance
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,16 +45,6 @@ class Scan:
     pose: Pose | None = None
     stamp: float | None = None
     source: str = ""
-
-
-def check_tolerance(tolerance: Sequence[float]) -> tuple[float, float]:
-    """Validate a ``(distance, angle)`` tolerance in metres and radians."""
-    values = tuple(float(v) for v in tolerance)
-    if len(values) != 2 or not all(np.isfinite(v) and v >= 0 for v in values):
-        raise InputError(
-            f"position tolerance must be two numbers >= 0 (metres, radians), got {tolerance!r}"
-        )
-    return values[0], values[1]
 
 
 def _angle_difference(a: float, b: float) -> float:

@@ -18,6 +18,7 @@ This module is light (no numpy at import): the command line reads its defaults f
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
@@ -62,6 +63,19 @@ def check_no_return_range(value: float | None) -> float | None:
     if number > MAX_DISTANCE:
         raise InputError(f"no-return range must be at most {MAX_DISTANCE:g} m, got {value!r}")
     return number
+
+
+def check_tolerance(tolerance: Sequence[float]) -> tuple[float, float]:
+    """Validate a ``(distance, angle)`` tolerance in metres and radians."""
+    try:
+        values = tuple(float(v) for v in tolerance)
+    except (TypeError, ValueError):
+        values = ()
+    if len(values) != 2 or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise InputError(
+            f"position tolerance must be two numbers >= 0 (metres, radians), got {tolerance!r}"
+        )
+    return values[0], values[1]
 
 
 def check_depth_noise(value: float) -> float:
@@ -186,8 +200,6 @@ class ReadOptions:
 
     def __post_init__(self) -> None:
         # The order is read_log's of old: a user with two wrong options hears of the same one first.
-        from occtool.io.positions import check_tolerance  # numpy: when reading, not for --help
-
         checked: dict[str, Any] = {"position_tolerance": check_tolerance(self.position_tolerance)}
         if self.group_by not in GROUP_BY_CHOICES:
             raise InputError(f"group-by must be one of {', '.join(GROUP_BY_CHOICES)}, got {self.group_by!r}")
@@ -256,4 +268,4 @@ def options_as_keywords(function: Any) -> Any:
 __all__ = ["DEFAULT_CONSTANT_EVIDENCE", "DEFAULT_DEPTH_FEATURES", "DEFAULT_DEPTH_MAX_RANGE", "DEFAULT_DEPTH_MIN_RANGE",
            "DEFAULT_DEPTH_NOISE", "DEFAULT_POSITION_TOLERANCE", "FORMATS", "GROUP_BY_CHOICES", "OPTION_NAMES",
            "ReadOptions", "as_read_options", "check_depth_features", "check_depth_max_range", "check_depth_noise", "check_format",
-           "check_no_return_range", "options_as_keywords"]
+           "check_no_return_range", "check_tolerance", "options_as_keywords"]

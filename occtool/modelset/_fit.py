@@ -200,7 +200,7 @@ def fit_model_set(
     KeyboardInterrupt
         After writing the finished part (Ctrl-C, or SIGTERM when not handled elsewhere).
     """
-    from occtool import __version__
+    from occtool._version import __version__
     from occtool.executor import check_jobs, make_executor
     from occtool.fit import OccupancyRegressor, features_digest
     from occtool.formats.model import save_model_text, with_run

@@ -21,7 +21,7 @@ log = logging.getLogger("occtool.modelset")
 def settings_digest(estimator: Any) -> str:
     """sha256 of everything besides the features that decides a model's bytes: the fit
     parameters, sensor model, robot and occtool's version."""
-    from occtool import __version__
+    from occtool._version import __version__
     from occtool.robot import Robot
     from occtool.sensor import SensorModel
 

@@ -29,8 +29,8 @@ def write_mcap(log: RangeLog | Features, path: str | os.PathLike[str]) -> None:
     """
     from mcap.writer import CompressionType, Writer
 
-    from occtool import __version__
     from occtool._files import atomic_write
+    from occtool._version import __version__
 
     if isinstance(log, Features):
         log = RangeLog(positions=[Position(0, log)])
