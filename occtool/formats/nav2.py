@@ -187,7 +187,7 @@ def _read_png(path: Path) -> tuple[NDArray[np.uint16], NDArray[np.uint8] | None]
     return colour.sum(axis=-1, dtype=np.uint16), alpha
 
 
-def _read_pgm(path: Path) -> tuple[NDArray[np.uint8] | NDArray[np.uint16], int]:
+def _read_pgm(path: Path) -> tuple[NDArray[Any], int]:
     """The pixels (``(height, width)``, first row the top) and maxval of a binary PGM whose
     header agrees with its length to the byte."""
     size = path.stat().st_size
