@@ -154,6 +154,8 @@ MAX_MAP_COORDINATE = 1e8
 #: Cells looked up per step when pixels become cells: bounds the temporary index arrays.
 _LOOKUP_CHUNK = 1 << 22
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: The last 12 bytes of every PNG: the empty IEND chunk and its CRC.
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 _NUMBER = re.compile(rb"[0-9]{1,12}")
 
 
@@ -176,6 +178,11 @@ def _read_png(path: Path) -> tuple[NDArray[np.uint16], NDArray[np.uint8] | None]
     width, height = struct.unpack(">II", head[16:24])
     if width * height > MAX_IMAGE_CELLS:
         raise InputError(f"{path}: a {width}x{height} map image is over {MAX_IMAGE_CELLS:,} cells")
+    # Pillow decodes a file cut after its last pixel row without complaint: a PNG ends with IEND.
+    with open(path, "rb") as handle:
+        handle.seek(max(0, path.stat().st_size - len(_PNG_END)))
+        if handle.read() != _PNG_END:
+            raise InputError(f"{path}: truncated PNG image (it does not end with an IEND chunk)")
     try:
         with image_module.open(path) as image:
             image.load()  # a truncated file fails here (OSError), not half-decoded
