@@ -359,7 +359,8 @@ def _settings(path: Path) -> tuple[str, str, float, tuple[float, float, float], 
 
 def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2Map:
     """Load a Nav2 map by map_server's rules (``negate``, thresholds, ``trinary`` or ``scale``;
-    a PGM, or a PNG with Pillow).
+    a binary PGM of any maxval up to 65535, its samples fractions of maxval, or a PNG with
+    Pillow). ``raw`` maps are refused.
 
     Returns cells with row 0 at the bottom, so cell ``(j, i)`` covers
     ``origin + (i, j) * resolution``.
