@@ -77,9 +77,12 @@ def test_a_pgm_of_the_wrong_size_is_an_input_error(tmp_path_factory, width, heig
     (folder / "map.pgm").write_bytes(f"P5\n{width} {height}\n255\n".encode() + body)
     try:
         loaded = read_nav2(folder / "map.yaml")
-    except InputError:
-        assert width * height == 0 or len(body) < width * height
+    except InputError as exc:
+        # A short file and a padded one alike: the header must say the file's length.
+        assert width * height == 0 or len(body) != width * height
+        assert "\n" not in str(exc) and str(exc).startswith(str(folder / "map.pgm"))
         return
+    assert len(body) == width * height
     assert loaded.cells.shape == (height, width)
 
 
@@ -178,3 +181,14 @@ def test_a_png_too_large_to_decode_is_refused_from_its_header(tmp_path):
                                        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
     with pytest.raises(InputError, match="over 50,000,000 cells"):
         read_nav2(tmp_path / "map.yaml")
+
+
+@pytest.mark.parametrize("maxval", [15, 255, 1000, 65535])
+def test_a_pgm_sample_is_a_fraction_of_its_maxval(tmp_path, maxval):
+    # White (maxval) is free, black occupied, 80 % grey (p = 0.2: between the thresholds) unknown.
+    values = np.array([[maxval, 0, round(0.8 * maxval)]])
+    dtype = np.dtype(np.uint8) if maxval < 256 else np.dtype(">u2")
+    (tmp_path / "map.pgm").write_bytes(f"P5\n3 1\n{maxval}\n".encode() + values.astype(dtype).tobytes())
+    (tmp_path / "map.yaml").write_text("image: map.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+                                       "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    assert read_nav2(tmp_path / "map.yaml").cells.tolist() == [[CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN]]

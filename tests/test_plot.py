@@ -584,3 +584,76 @@ def test_a_single_map_of_a_set_draws_its_own_positions_features():
     assert len(scatter.get_offsets()) == 12
     with pytest.raises(InputError, match="position=N"):
         plot.navigation_figure([hand_map(notched_disc())], log=log, size=SMALL, dpi=DPI)
+
+
+# --- a run's map (plot map): reduced to the picture's pixels, walls kept ---------------------
+
+
+def _map_folder(folder: Path, pixels: np.ndarray, resolution: float = 0.05) -> Path:
+    from occtool.formats.nav2 import write_nav2
+
+    folder.mkdir()
+    write_nav2(pixels, resolution, (-2.0, 3.0), folder / "map.yaml")
+    return folder
+
+
+def test_a_small_map_is_drawn_cell_for_cell(tmp_path):
+    pixels = np.full((30, 40), 254, dtype=np.uint8)
+    pixels[5:25, 17] = 0
+    pixels[:, :3] = 205
+    folder = _map_folder(tmp_path / "map", pixels)
+    figure = plot.map_figure(folder, size=(6.0, 6.0), dpi=100.0)
+    image = figure.axes[0].images[0]
+    drawn = np.asarray(image.get_array())
+    assert drawn.shape == (30, 40, 3)
+    np.testing.assert_allclose(image.get_extent(), (-2.0, -2.0 + 40 * 0.05, 3.0, 3.0 + 30 * 0.05))
+    assert (drawn[5:25, 17] == 0).all() and (drawn[:, :3] == 0.75).all() and (drawn[:, 20:] == 1).all()
+
+
+@given(st.integers(0, 1499), st.integers(0, 999))
+@settings(max_examples=5)
+def test_a_one_cell_wall_in_a_big_map_stays_black(tmp_path_factory, column, row):
+    from occtool.plot._map import decimate
+
+    # 1,500 x 1,000 cells on a 200 x 200 pixel figure: blocks of 10 x 10 cells at least.
+    pixels = np.full((1000, 1500), 254, dtype=np.uint8)
+    pixels[:, column] = 0  # a wall one cell thick, along the map
+    pixels[row, :] = 0  # and one across it
+    folder = _map_folder(tmp_path_factory.mktemp("big") / "map", pixels)
+    figure = plot.map_figure(folder, size=(2.0, 2.0), dpi=100.0)
+    image = figure.axes[0].images[0]
+    drawn = np.asarray(image.get_array())
+    assert drawn.shape[0] * drawn.shape[1] <= 200 * 200 and drawn.dtype == np.float32
+    factor = math.ceil(1500 / drawn.shape[1])
+    assert factor >= 10
+    # Every block the walls cross is black, every other block white (row 0: the map's bottom).
+    black = np.zeros(drawn.shape[:2], dtype=bool)
+    black[:, column // factor] = True
+    black[row // factor, :] = True
+    assert ((drawn[..., 0] == 0) == black).all()
+    left, right, bottom, top = image.get_extent()
+    assert (left, bottom) == (-2.0, 3.0) and 0 <= right - (-2.0 + 1500 * 0.05) < factor * 0.05
+    assert 0 <= top - (3.0 + 1000 * 0.05) < factor * 0.05
+    # The reduction keeps the darkest known cell: unknown only where every cell is unknown.
+    cells = np.array([[-1, -1, 0, -1], [-1, -1, -1, 40]], dtype=np.int8)
+    assert decimate(cells, 2).tolist() == [[-1, 40]]
+
+
+def test_the_reduction_is_the_blockwise_maximum(tmp_path):
+    from occtool.plot import _map
+
+    rng = np.random.default_rng(3)
+    cells = rng.choice(np.array([-1, 0, 37, 100], dtype=np.int8), size=(203, 157), p=[0.5, 0.4, 0.05, 0.05])
+    for factor in (1, 2, 7, 16, 300):
+        # Strips of a few rows at a time give the same result as one pass.
+        saved, _map._STRIP_CELLS = _map._STRIP_CELLS, 3 * 157 * factor * factor
+        try:
+            reduced = _map.decimate(cells, factor)
+        finally:
+            _map._STRIP_CELLS = saved
+        rows, cols = -(-203 // factor), -(-157 // factor)
+        expected = np.array([[cells[i * factor:(i + 1) * factor, j * factor:(j + 1) * factor].max()
+                              for j in range(cols)] for i in range(rows)], dtype=np.int8)
+        assert (reduced == expected).all()
+    with pytest.raises(InputError):
+        _map.decimate(cells, 0)

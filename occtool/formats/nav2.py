@@ -23,7 +23,10 @@ need Pillow (the ``png`` extra).
 
 from __future__ import annotations
 
+import math
 import os
+import re
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +36,7 @@ from numpy.typing import NDArray
 
 from occtool._files import atomic_write
 from occtool.errors import InputError
+from occtool.limits import MAX_DISTANCE
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
@@ -133,116 +137,275 @@ def _write_yaml(yaml_path: Path, image: str, mode: str, resolution: float, origi
         handle.write(text)
 
 
-def _read_png(path: Path) -> tuple[NDArray[np.float32], NDArray[np.uint8] | None]:
-    """map_server's brightness of each pixel (the mean of its colour channels, 0-255) and
-    its alpha (``None``: the image has none)."""
+# --- reading ------------------------------------------------------------------------------
+# A map folder is user input: every size and value is checked against the file and its
+# range before anything is allocated, and every refusal is one InputError line naming the
+# file, the setting and what it must be.
+
+#: Longest map.yaml read: map_server's are a few hundred bytes.
+MAX_YAML_BYTES = 64 * 1024
+#: Longest PGM header (magic, comments, width, height, maxval).
+MAX_PGM_HEADER_BYTES = 64 * 1024
+#: Cell sizes read, metres: a micrometre to MAX_DISTANCE (10 km); outside this no map is a robot's.
+MIN_RESOLUTION = 1e-6
+#: Farthest map coordinate read (origin and far corner), metres: beyond any frame on Earth
+#: (UTM northings reach 1e7), far below where a figure's arithmetic loses its digits.
+MAX_MAP_COORDINATE = 1e8
+#: Cells looked up per step when pixels become cells: bounds the temporary index arrays.
+_LOOKUP_CHUNK = 1 << 22
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: The last 12 bytes of every PNG: the empty IEND chunk and its CRC.
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+_NUMBER = re.compile(rb"[0-9]{1,12}")
+
+
+def _shown(text: str) -> str:
+    """A value from the file as a message shows it: quoted, one line, at most 40 characters."""
+    return repr(text if len(text) <= 40 else text[:37] + "...")
+
+
+def _read_png(path: Path) -> tuple[NDArray[np.uint16], NDArray[np.uint8] | None]:
+    """The sum of each pixel's colour channels (0-765; map_server's brightness is their mean)
+    and its alpha (``None``: the image has none)."""
     image_module = _pillow(f"{path}: reading a PNG map image")
+    # A PNG's size is in its header and a small file can inflate to any size: the size is
+    # refused from the IHDR chunk (bytes 16-24) before Pillow sees the file, so its own
+    # bomb check (a process-wide setting occtool leaves alone) never decides.
+    with open(path, "rb") as handle:
+        head = handle.read(24)
+    if len(head) < 24 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
+        raise InputError(f"{path}: not a PNG image (no PNG signature and IHDR header)")
+    width, height = struct.unpack(">II", head[16:24])
+    if width * height > MAX_IMAGE_CELLS:
+        raise InputError(f"{path}: a {width}x{height} map image is over {MAX_IMAGE_CELLS:,} cells")
+    # Pillow decodes a file cut after its last pixel row without complaint: a PNG ends with IEND.
+    with open(path, "rb") as handle:
+        handle.seek(max(0, path.stat().st_size - len(_PNG_END)))
+        if handle.read() != _PNG_END:
+            raise InputError(f"{path}: truncated PNG image (it does not end with an IEND chunk)")
     try:
         with image_module.open(path) as image:
-            # A PNG's size is in its header and a small file can inflate to any size: refuse first.
-            if image.width * image.height > MAX_IMAGE_CELLS:
-                raise InputError(f"{path}: a {image.width}x{image.height} map image is over "
-                                 f"{MAX_IMAGE_CELLS:,} cells")
-            image.load()
+            image.load()  # a truncated file fails here (OSError), not half-decoded
             alpha = np.asarray(image.getchannel("A")) if "A" in image.getbands() else None
             colour = np.asarray(image.convert("RGB"))
     except (OSError, ValueError, SyntaxError, image_module.DecompressionBombError) as exc:
-        raise InputError(f"{path}: not a readable PNG image ({exc})") from None
-    return colour.sum(axis=-1, dtype=np.uint16).astype(np.float32) / np.float32(3.0), alpha
+        detail = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(f"{path}: not a readable PNG image ({detail})") from None
+    return colour.sum(axis=-1, dtype=np.uint16), alpha
 
 
-def _read_pgm(path: Path) -> NDArray[np.uint8]:
-    data = path.read_bytes()
+def _read_pgm(path: Path) -> tuple[NDArray[Any], int]:
+    """The pixels (``(height, width)``, first row the top) and maxval of a binary PGM whose
+    header agrees with its length to the byte."""
+    size = path.stat().st_size
+    with open(path, "rb") as handle:
+        head = handle.read(MAX_PGM_HEADER_BYTES)
     tokens: list[bytes] = []
     position = 0
     # Header: magic, width, height, maxval, separated by whitespace, '#' comments to end of line.
     while len(tokens) < 4:
-        while position < len(data) and data[position:position + 1].isspace():
+        while position < len(head) and head[position:position + 1].isspace():
             position += 1
-        if data[position:position + 1] == b"#":
-            end = data.find(b"\n", position)
+        if head[position:position + 1] == b"#":
+            end = head.find(b"\n", position)
             if end < 0:
-                raise InputError(f"{path}: truncated PGM header")
+                break
             position = end + 1
             continue
         start = position
-        while position < len(data) and not data[position:position + 1].isspace():
+        while position < len(head) and not head[position:position + 1].isspace():
             position += 1
-        if start == position:
-            raise InputError(f"{path}: truncated PGM header")
-        tokens.append(data[start:position])
-    position += 1
-    if tokens[0] != b"P5":
+        if start == position or position == len(head):
+            break  # no token, or one that runs into the end of what was read
+        tokens.append(head[start:position])
+    if tokens[:1] and tokens[0] != b"P5":
         raise InputError(f"{path}: not a binary PGM (P5) image")
-    try:
-        width, height, maxval = (int(t) for t in tokens[1:])
-    except ValueError:
-        raise InputError(f"{path}: malformed PGM header") from None
-    if maxval != 255 or width <= 0 or height <= 0:
-        raise InputError(f"{path}: only 8-bit PGM images are read, got maxval {maxval}")
-    body = np.frombuffer(data, dtype=np.uint8, count=width * height, offset=position) \
-        if len(data) - position >= width * height else None
-    if body is None:
-        raise InputError(f"{path}: the PGM image is shorter than {width}x{height}")
-    return body.reshape(height, width)
+    if len(tokens) < 4:
+        raise InputError(f"{path}: truncated PGM header" if len(head) < MAX_PGM_HEADER_BYTES
+                         else f"{path}: no PGM header in its first {MAX_PGM_HEADER_BYTES:,} bytes")
+    if not all(_NUMBER.fullmatch(token) for token in tokens[1:]):
+        raise InputError(f"{path}: malformed PGM header (width, height and maxval must be whole numbers)")
+    width, height, maxval = (int(token) for token in tokens[1:])
+    if width < 1 or height < 1:
+        raise InputError(f"{path}: a {width}x{height} PGM image has no pixels")
+    if width * height > MAX_IMAGE_CELLS:
+        raise InputError(f"{path}: a {width}x{height} map image is over {MAX_IMAGE_CELLS:,} cells")
+    if not 1 <= maxval <= 65535:
+        raise InputError(f"{path}: PGM maxval {maxval} is not in [1, 65535]")
+    position += 1  # the single whitespace byte after maxval
+    sample = 1 if maxval < 256 else 2
+    if size - position != width * height * sample:
+        raise InputError(f"{path}: the PGM header says {width}x{height} pixels ({width * height * sample:,} bytes) "
+                         f"but {size - position:,} bytes follow it (a short or padded file)")
+    dtype = np.dtype(np.uint8) if sample == 1 else np.dtype(">u2")
+    pixels = np.fromfile(path, dtype=dtype, count=width * height, offset=position)
+    if pixels.size != width * height:
+        raise InputError(f"{path}: the PGM image changed while it was read")
+    if maxval not in (255, 65535) and int(pixels.max()) > maxval:
+        raise InputError(f"{path}: a pixel value {int(pixels.max())} is above the PGM maxval {maxval}")
+    return pixels.reshape(height, width), maxval
 
 
-def _parse_yaml(path: Path) -> dict[str, str]:
-    # map_server's YAML is flat key: value lines; a full YAML parser is not needed for it.
-    settings: dict[str, str] = {}
-    for line in path.read_text(encoding="utf-8").splitlines():
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        key, sep, value = line.partition(":")
-        if not sep:
-            raise InputError(f"{path}: line {line!r} is not 'key: value'")
-        settings[key.strip()] = value.strip()
-    return settings
-
-
-def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2Map:
-    """Load a Nav2 map by map_server's rules (``negate``, thresholds, ``trinary`` or ``scale``;
-    a PGM, or a PNG with Pillow).
-
-    Returns cells with row 0 at the bottom, so cell ``(j, i)`` covers
-    ``origin + (i, j) * resolution``.
-    """
-    yaml_path = Path(yaml_path)
-    settings = _parse_yaml(yaml_path)
-    try:
-        image = settings["image"]
-        resolution = float(settings["resolution"])
-        origin = tuple(float(v) for v in settings["origin"].strip("[]").split(","))
-        negate = int(settings.get("negate", "0"))
-        occupied = float(settings["occupied_thresh"])
-        free = float(settings["free_thresh"])
-    except (KeyError, ValueError) as exc:
-        raise InputError(f"{yaml_path}: missing or malformed map setting ({exc})") from None
-    mode = settings.get("mode", "trinary")
-    if len(origin) != 3:
-        raise InputError(f"{yaml_path}: origin must be [x, y, yaw]")
-    if mode not in ("trinary", "scale"):
-        raise InputError(f"{yaml_path}: mode {mode!r} is not read (trinary or scale)")
-    image_path = yaml_path.with_name(image) if not os.path.isabs(image) else Path(image)
-    alpha = None
-    if image_path.suffix.lower() == ".png":
-        shade, alpha = _read_png(image_path)
-        if mode == "trinary" and alpha is not None:
-            # map_server averages the alpha in with the colours in trinary mode.
-            shade = (3.0 * shade + alpha) / np.float32(4.0)
-    else:
-        shade = _read_pgm(image_path).astype(np.float64)
-    p = shade / 255.0 if negate else (255.0 - shade) / 255.0
-    cells = np.full(shade.shape, CELL_UNKNOWN, dtype=np.int8)
+def _classify(p: NDArray[np.floating], mode: str, occupied: float, free: float) -> NDArray[np.int8]:
+    """map_server's cell of each occupancy ``p``: its thresholds, and in ``scale`` mode the grade between."""
+    cells = np.full(p.shape, CELL_UNKNOWN, dtype=np.int8)
     cells[p > occupied] = CELL_OCCUPIED
     cells[p < free] = CELL_FREE
     if mode == "scale":
         between = (p >= free) & (p <= occupied)
         cells[between] = np.rint(100.0 * (p[between] - free) / (occupied - free)).astype(np.int8)
-        if alpha is not None:
-            cells[alpha < 255] = CELL_UNKNOWN
-    return Nav2Map(cells[::-1].copy(), resolution, origin, image, negate, occupied, free, mode)
+    return cells
+
+
+def _lookup_flipped(table: NDArray[np.int8], keys: NDArray[Any], unknown: NDArray[np.bool_] | None) -> NDArray[np.int8]:
+    """``table[keys]`` with row 0 at the bottom (``keys``' last row), ``unknown`` cells -1.
+
+    A cell depends on its pixel's value only, so a table of every value replaces float
+    arrays the image's size; rows go in chunks so that numpy's index arrays stay small."""
+    rows, cols = keys.shape
+    cells = np.empty((rows, cols), dtype=np.int8)
+    step = max(1, _LOOKUP_CHUNK // cols)
+    for top in range(0, rows, step):
+        block = table[keys[top:top + step]]
+        if unknown is not None:
+            block[unknown[top:top + step]] = CELL_UNKNOWN
+        cells[rows - top - len(block):rows - top] = block[::-1]
+    return cells
+
+
+def _read_yaml(path: Path) -> dict[str, str]:
+    # map_server's YAML is flat key: value lines; a full YAML parser is not needed for it.
+    with open(path, "rb") as handle:
+        data = handle.read(MAX_YAML_BYTES + 1)
+    if len(data) > MAX_YAML_BYTES:
+        raise InputError(f"{path}: longer than {MAX_YAML_BYTES:,} bytes, not a Nav2 map.yaml")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {exc.start}), not a Nav2 map.yaml") from None
+    settings: dict[str, str] = {}
+    for number, line in enumerate(text.splitlines(), 1):
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        key, sep, value = line.partition(":")
+        key = key.strip()
+        if not sep or not key:
+            raise InputError(f"{path}: line {number} {_shown(line)} is not 'key: value'")
+        if key in settings:
+            raise InputError(f"{path}: line {number}: {key} is set twice")
+        settings[key] = value.strip()
+    return settings
+
+
+#: The numbers of map.yaml: (lowest, highest, what they are).
+_RANGES = {
+    "resolution": (MIN_RESOLUTION, MAX_DISTANCE, "metres per cell"),
+    "occupied_thresh": (0.0, 1.0, "occupancy probability"),
+    "free_thresh": (0.0, 1.0, "occupancy probability"),
+}
+
+
+def _number(path: Path, settings: dict[str, str], key: str) -> float:
+    low, high, unit = _RANGES[key]
+    if key not in settings:
+        raise InputError(f"{path}: no {key} (map_server needs it)")
+    text = settings[key]
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not low <= value <= high:  # NaN fails too
+        raise InputError(f"{path}: {key} must be a number in [{low:g}, {high:g}] ({unit}), got {_shown(text)}")
+    return value
+
+
+def _origin(path: Path, settings: dict[str, str]) -> tuple[float, float, float]:
+    if "origin" not in settings:
+        raise InputError(f"{path}: no origin (map_server needs it: [x, y, yaw])")
+    text = settings["origin"]
+    parts = text[1:-1].split(",") if text.startswith("[") and text.endswith("]") else []
+    try:
+        values = tuple(float(part) for part in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values) \
+            or max(abs(values[0]), abs(values[1])) > MAX_MAP_COORDINATE:
+        raise InputError(f"{path}: origin must be [x, y, yaw], finite, x and y within "
+                         f"{MAX_MAP_COORDINATE:g} m, got {_shown(text)}")
+    return values[0], values[1], values[2]
+
+
+def _settings(path: Path) -> tuple[str, str, float, tuple[float, float, float], int, float, float]:
+    """map.yaml's image, mode, resolution, origin, negate and thresholds, each checked."""
+    settings = _read_yaml(path)
+    image = settings.get("image", "")
+    if not image:
+        raise InputError(f"{path}: no image (map_server needs the image file's name)")
+    mode = settings.get("mode", "trinary")
+    if mode not in ("trinary", "scale"):
+        raise InputError(f"{path}: mode {_shown(mode)} is not read (trinary or scale)")
+    resolution = _number(path, settings, "resolution")
+    origin = _origin(path, settings)
+    negate_text = settings.get("negate", "0")
+    if negate_text not in ("0", "1"):
+        raise InputError(f"{path}: negate must be 0 or 1, got {_shown(negate_text)}")
+    occupied = _number(path, settings, "occupied_thresh")
+    free = _number(path, settings, "free_thresh")
+    if not free < occupied:
+        raise InputError(f"{path}: free_thresh {free:g} must be below occupied_thresh {occupied:g}")
+    return image, mode, resolution, origin, int(negate_text), occupied, free
+
+
+def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2Map:
+    """Load a Nav2 map by map_server's rules (``negate``, thresholds, ``trinary`` or ``scale``;
+    a binary PGM of any maxval up to 65535, its samples fractions of maxval, or a PNG with
+    Pillow). ``raw`` maps are refused.
+
+    Returns cells with row 0 at the bottom, so cell ``(j, i)`` covers
+    ``origin + (i, j) * resolution``.
+
+    Raises
+    ------
+    InputError
+        One line naming the file and what is wrong: a setting missing or out of map_server's
+        range (``resolution`` > 0, ``origin`` ``[x, y, yaw]`` finite, ``negate`` 0 or 1,
+        ``0 <= free_thresh < occupied_thresh <= 1``), an image over :data:`MAX_IMAGE_CELLS`
+        cells, or a PGM whose header and length disagree.
+    """
+    yaml_path = Path(yaml_path)
+    image, mode, resolution, origin, negate, occupied, free = _settings(yaml_path)
+    image_path = yaml_path.parent / image
+    if not image_path.is_file():
+        raise InputError(f"{yaml_path}: image {_shown(image)} is not a file ({image_path})")
+    unknown = None
+    if image_path.suffix.lower() == ".png":
+        brightness, alpha = _read_png(image_path)
+        rows, cols = brightness.shape
+        # Every (channel sum, alpha) pair through the arithmetic map_server's rules take.
+        shade = np.arange(766, dtype=np.uint16).astype(np.float32) / np.float32(3.0)
+        keys: NDArray[Any] = brightness
+        if mode == "trinary" and alpha is not None:
+            # map_server averages the alpha in with the colours in trinary mode.
+            shade = (3.0 * shade[:, None] + np.arange(256, dtype=np.uint8)[None, :]) / np.float32(4.0)
+            keys = brightness.astype(np.uint32) * np.uint32(256) + alpha
+        elif mode == "scale" and alpha is not None:
+            unknown = alpha < 255
+        shade = shade.ravel()
+    else:
+        pixels, maxval = _read_pgm(image_path)
+        rows, cols = pixels.shape
+        shade = np.arange(256 if maxval < 256 else 65536, dtype=np.float64)
+        if maxval != 255:
+            shade *= 255.0 / maxval  # PGM samples are fractions of maxval
+        keys = pixels
+    corner = (origin[0] + cols * resolution, origin[1] + rows * resolution)
+    if max(abs(corner[0]), abs(corner[1])) > MAX_MAP_COORDINATE:
+        raise InputError(f"{yaml_path}: the map's far corner ({corner[0]:g}, {corner[1]:g}) lies beyond "
+                         f"{MAX_MAP_COORDINATE:g} m (check resolution and origin)")
+    p = shade / 255.0 if negate else (255.0 - shade) / 255.0
+    cells = _lookup_flipped(_classify(p, mode, occupied, free), keys, unknown)
+    return Nav2Map(cells, resolution, origin, image, negate, occupied, free, mode)
 
 
 __all__ = ["FREE_THRESH", "OCCUPIED_THRESH", "SCALE_FREE_THRESH", "Nav2Map", "read_nav2", "write_nav2",

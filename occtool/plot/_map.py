@@ -2,21 +2,74 @@
 
 Reads a folder written by ``occtool map`` (``map.yaml`` by map_server's rules,
 ``summary.json`` for the path, ``frontiers.geojson``, ``world.occmap`` for the walls);
-drawing needs the ``plot`` extra.
+drawing needs the ``plot`` extra. Every file is checked before it is used (sizes, finite
+coordinates in range), and a refusal is one :class:`~occtool.errors.InputError` line naming
+the file.
+
+A map can hold far more cells than the picture has pixels (the MIT corridor's: ~100 M).
+The raster is reduced to the axes' pixel count before any colour array is built, keeping
+each block's darkest cell, so a one-cell wall stays black and memory stays that of the
+picture, not of the map.
 """
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from occtool._json import read_json
 from occtool.errors import InputError
 from occtool.plot._canvas import new_figure
 
 DEFAULT_MAP_SIZE = (8.0, 8.0)
+#: Largest summary.json or frontiers.geojson read: the JSON parser needs several times the
+#: text's size, and a run's path of a million positions is ~30 MB.
+MAX_SIDECAR_BYTES = 128 * 1024 * 1024
+#: Share of the figure the map's axes cover at least (matplotlib's default subplot box is
+#: 0.775 x 0.77; the constrained layout gives more), for the pixels the raster is reduced to.
+_AXES_SHARE = 0.75
+#: Cells reduced per step: bounds the padded copy of a strip of rows.
+_STRIP_CELLS = 1 << 23
+
+
+def _sidecar(path: Path) -> Any:
+    """The JSON document in one of the folder's files, its size bounded."""
+    size = path.stat().st_size
+    if size > MAX_SIDECAR_BYTES:
+        raise InputError(f"{path}: {size:,} bytes, over the {MAX_SIDECAR_BYTES:,} read from a map folder's JSON")
+    return read_json(path, error=InputError)
+
+
+def _points(values: Any, path: Path, what: str) -> NDArray[np.float64]:
+    """``values`` as ``(N, 2)`` finite floats within the map's coordinate range, else one line naming ``path``."""
+    from occtool.formats.nav2 import MAX_MAP_COORDINATE
+
+    # Checked value by value: numpy would read "1" or true as numbers, and a ragged list as objects.
+    ok = isinstance(values, list) and all(
+        isinstance(point, list) and len(point) == 2
+        and all(type(v) in (int, float) and math.isfinite(v) and abs(v) <= MAX_MAP_COORDINATE for v in point)
+        for point in values)
+    if not ok:
+        raise InputError(f"{path}: {what} must be [x, y] pairs of finite numbers within {MAX_MAP_COORDINATE:g} m "
+                         f"(as `occtool map` writes it)")
+    return np.array(values, dtype=np.float64).reshape(-1, 2)
+
+
+def _frontier_coordinates(document: Any, path: Path) -> Any:
+    """The frontier points of a map-frame collection; ``[]`` for one in another frame."""
+    if not isinstance(document, dict) or not isinstance(document.get("features"), list):
+        raise InputError(f"{path}: not a GeoJSON FeatureCollection (as `occtool map` writes it)")
+    properties = document.get("properties")
+    if not isinstance(properties, dict) or properties.get("frame") != "map":
+        return []  # longitude/latitude frontiers (--origin) are not drawn over metric cells
+    geometries = [feature.get("geometry") if isinstance(feature, dict) else None for feature in document["features"]]
+    if not all(isinstance(g, dict) and g.get("type") == "Point" for g in geometries):
+        raise InputError(f"{path}: every frontier must be a GeoJSON Point feature")
+    return [g.get("coordinates") for g in geometries]  # type: ignore[union-attr]
 
 
 def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndarray]:
@@ -29,17 +82,50 @@ def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndar
     nav2 = read_nav2(folder / "map.yaml")
     path: list[list[float]] = []
     frontiers = np.zeros((0, 2))
-    try:
-        if (folder / "summary.json").is_file():
-            path = json.loads((folder / "summary.json").read_text(encoding="utf-8")).get("path") or []
-        if (folder / "frontiers.geojson").is_file():
-            data = json.loads((folder / "frontiers.geojson").read_text(encoding="utf-8"))
-            if data.get("properties", {}).get("frame") == "map":
-                frontiers = np.array([f["geometry"]["coordinates"] for f in data["features"]],
-                                     dtype=np.float64).reshape(-1, 2)
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise InputError(f"{folder}: malformed summary.json or frontiers.geojson ({exc})") from None
+    summary_path, frontiers_path = folder / "summary.json", folder / "frontiers.geojson"
+    if summary_path.is_file():
+        summary = _sidecar(summary_path)
+        if not isinstance(summary, dict):
+            raise InputError(f"{summary_path}: not a JSON object (as `occtool map` writes it)")
+        if summary.get("path") is not None:
+            path = _points(summary["path"], summary_path, "path").tolist()
+    if frontiers_path.is_file():
+        frontiers = _points(_frontier_coordinates(_sidecar(frontiers_path), frontiers_path), frontiers_path,
+                            "each frontier's coordinates")
     return nav2, path, frontiers
+
+
+def decimate(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
+    """Each ``factor`` x ``factor`` block of ``cells`` as its largest value.
+
+    In a map's cells (-1 unknown, 0 free, 1-99 graded, 100 occupied) the largest is the
+    darkest known cell: a block with one occupied cell is occupied, one with no known cell
+    unknown. Edge blocks are padded with unknown, which never wins. The strips of rows
+    reduced at once are bounded, so memory stays that of the result.
+
+    Examples
+    --------
+    >>> cells = np.zeros((4, 5), dtype=np.int8)
+    >>> cells[2, 3] = 100
+    >>> cells[:, 4] = -1
+    >>> decimate(cells, 2).tolist()
+    [[0, 0, -1], [0, 100, -1]]
+    """
+    if factor < 1:
+        raise InputError(f"decimation factor must be >= 1, got {factor}")
+    if factor == 1:
+        return cells
+    rows, cols = cells.shape
+    out_rows, out_cols = -(-rows // factor), -(-cols // factor)
+    reduced = np.empty((out_rows, out_cols), dtype=np.int8)
+    strip = max(1, _STRIP_CELLS // (out_cols * factor * factor))  # output rows per step
+    for first in range(0, out_rows, strip):
+        block = cells[first * factor:(first + strip) * factor]
+        count = -(-len(block) // factor)
+        padded = np.full((count * factor, out_cols * factor), -1, dtype=np.int8)
+        padded[:len(block), :cols] = block
+        reduced[first:first + count] = padded.reshape(count, factor, out_cols, factor).max(axis=(1, 3))
+    return reduced
 
 
 def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SIZE, dpi: float = 100.0,
@@ -48,20 +134,28 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     cells are greys) cells in the map frame, the run's
     path (blue), the frontier points (green) and (``walls``) the world map's wall
     segments, from ``world.occmap``, red where every position that saw them returned from
-    them and paler as more saw through them."""
+    them and paler as more saw through them.
+
+    A map with more cells than the axes have pixels is drawn block by block, each block
+    its darkest cell (:func:`decimate`)."""
     from occtool.formats.nav2 import CELL_UNKNOWN
 
     nav2, run_path, frontier_points = read_map_folder(folder)
     figure = new_figure(size, dpi)
     axes = figure.add_subplot(1, 1, 1)
     rows, cols = nav2.cells.shape
+    # At equal aspect the axes show the map at the smaller of the two pixels-per-cell ratios.
+    width_px, height_px = size[0] * dpi * _AXES_SHARE, size[1] * dpi * _AXES_SHARE
+    factor = max(1, math.ceil(max(cols / width_px, rows / height_px)))
+    cells = decimate(nav2.cells, factor)
     # Grey from white (free, 0) to black (occupied, 100); a scale map's graded cells between.
     # Unknown: mid grey in a trinary map, pale blue in a scale map, whose greys are taken.
-    grey = 1.0 - np.clip(nav2.cells, 0, 100).astype(np.float32) / 100.0
+    grey = 1.0 - np.clip(cells, 0, 100).astype(np.float32) / 100.0
     rgb = np.repeat(grey[:, :, None], 3, axis=2)
-    rgb[nav2.cells == CELL_UNKNOWN] = (0.75, 0.75, 0.75) if nav2.mode != "scale" else (0.78, 0.85, 0.93)
+    rgb[cells == CELL_UNKNOWN] = (0.75, 0.75, 0.75) if nav2.mode != "scale" else (0.78, 0.85, 0.93)
     x0, y0 = nav2.origin[0], nav2.origin[1]
-    extent = (x0, x0 + cols * nav2.resolution, y0, y0 + rows * nav2.resolution)
+    # Padded edge blocks reach past the map by less than one block: less than a pixel.
+    extent = (x0, x0 + cells.shape[1] * factor * nav2.resolution, y0, y0 + cells.shape[0] * factor * nav2.resolution)
     axes.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
     if path and run_path:
         xy = np.asarray(run_path, dtype=np.float64).reshape(-1, 2)
@@ -91,4 +185,4 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     return figure
 
 
-__all__ = ["map_figure", "read_map_folder"]
+__all__ = ["decimate", "map_figure", "read_map_folder"]
