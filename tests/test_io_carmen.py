@@ -202,3 +202,69 @@ def test_info_counts_no_return_beams_as_free_rays(fixtures_dir) -> None:
     assert "free rays at 5 m" in words and "free rays" not in plain.output
     bad = runner.invoke(cli, ["info", path, "--no-return-range", "-1"])
     assert bad.exit_code == 2 and "must be a finite number of metres > 0" in bad.output
+
+
+def _flaser(ranges, x=0.0):
+    return f"FLASER {len(ranges)} {' '.join(f'{r:.2f}' for r in ranges)} {x} 0 0 {x} 0 0 1.0 host 1.0\n"
+
+
+def test_a_cluster_of_no_return_codes_is_told_with_its_stray_readings(tmp_path):
+    """A laser that logs no return as codes a few centimetres apart (the MIT infinite corridor's
+    51.05-51.12 m): every reading from the lowest code less the codes' spread is no return, a
+    real return just below is kept, and the note names the codes."""
+    rng = np.random.default_rng(0)
+    lines = []
+    for scan in range(40):
+        ranges = rng.uniform(1.0, 50.8, 180)
+        ranges[:12] = rng.choice([51.05, 51.06, 51.11], 12)  # the codes
+        lines.append(_flaser(ranges, x=0.01 * scan))
+    strays = np.full(180, 3.0)
+    strays[:3] = [51.01, 51.16, 50.9]  # two strays of the cluster and a real far return
+    lines.append(_flaser(strays))
+    path = tmp_path / "codes.log"
+    path.write_text("".join(lines))
+    log = read_log(path, group_by="message")
+    assert "dropped 482 of 7380 readings as no return (readings >= 50.99 m: the laser's codes 51.05 to 51.11 m)" \
+        in log.notes
+    far = np.concatenate([p.features.range for p in log.positions])
+    assert far.max() == pytest.approx(50.9)
+    # Told by the user instead: only readings at or above it.
+    told = read_log(path, group_by="message", no_return_code=51.1)
+    assert any("readings >= 51.1 m, no_return_code" in note for note in told.notes)
+
+
+def test_each_laser_of_a_log_has_its_own_codes(tmp_path):
+    front = [_flaser([2.0] * 170 + [81.91] * 10, x=0.01 * i) for i in range(3)]
+    rear = [line.replace("FLASER", "RLASER") for line in
+            (_flaser([3.0] * 175 + [50.0] * 5, x=0.01 * i) for i in range(3))]
+    path = tmp_path / "two.log"
+    path.write_text("".join(front + rear))
+    from occtool.io.carmen import CarmenScans
+
+    limits = CarmenScans(path).limits()
+    assert limits["FLASER"] == (81.91, [81.91]) and limits["RLASER"] == (50.0, [50.0])
+    assert limits["ROBOTLASER1"] == (None, [])
+    log = read_log(path, group_by="message")
+    assert "dropped 45 of 1080 readings as no return (FLASER readings >= 81.91 m; RLASER readings >= 50 m)" \
+        in log.notes
+
+
+@pytest.mark.parametrize("log, found, codes", [
+    ("mit_infinite_corridor/infinite-corridor-corrected.log.gz", 4660,
+     "readings >= 50.98 m: the laser's codes 51.05 to 51.12 m"),
+    ("fr_campus/freiburg-campus-corrected.log.gz", 187049, "readings >= 81.75 m: the laser's codes 81.83 to 81.91 m"),
+])
+def test_the_corridors_and_the_campuss_no_return_codes_are_found_without_options(shared_data, log, found, codes):
+    from occtool.io.carmen import CarmenScans
+
+    scans = CarmenScans(shared_data / log)
+    for _ in scans:
+        pass
+    readings = {"mit_infinite_corridor": 349380, "fr_campus": 722880}[log.split("/")[0]]
+    assert f"dropped {found} of {readings} readings as no return ({codes})" in scans.notes
+
+
+def test_a_bad_no_return_code_is_an_error(fixtures_dir):
+    for bad in (0, -1, float("nan"), True, "far"):
+        with pytest.raises(InputError, match="no-return code must be"):
+            read_log(fixtures_dir / "logs" / "tiny.carmen.log", no_return_code=bad)

@@ -82,9 +82,9 @@ def test_the_reader_keywords_are_named_and_defaulted_once() -> None:
 
     shared = _keywords(read_log)
     assert set(shared) == set(get_type_hints(ReadOptions))
-    # CARMEN's constant evidence is resolved by read_log (0.9 when None); max_range is its own.
+    # CARMEN's constant evidence is resolved by read_log (0.9 when None).
     # read_mcap's opener lets the ROS bag reader reuse its decoding (not a reader option).
-    own = {read_carmen: {"max_range", "evidence"}, read_mcap: {"opener"}}
+    own = {read_carmen: {"evidence"}, read_mcap: {"opener"}}
     for reader in (read_csv, read_mcap, read_carmen, read_pointcloud):
         keywords = {k: v for k, v in _keywords(reader).items() if k not in own.get(reader, set())}
         assert keywords.items() <= shared.items(), reader.__name__

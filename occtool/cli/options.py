@@ -182,8 +182,9 @@ def no_return_range_callback(ctx: click.Context | None, param: click.Parameter |
     # The readers' own check, so the rule lives in one place; click names the option.
     from occtool.errors import InputError
 
+    name = (param.name if param is not None and param.name else "no_return_range").replace("_", " ")
     try:
-        return check_no_return_range(value)
+        return check_no_return_range(value, name.replace("no return", "no-return"))
     except InputError as exc:
         raise click.BadParameter(str(exc)) from None
 
@@ -233,6 +234,11 @@ LOG_FLAGS: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
              "free ray, a feature with evidence 0 at min(METRES, the beam's max range), saying its ray is "
              "free and nothing about an obstacle (default: such beams are dropped; ignored for point clouds "
              "and CSV).")),
+    "no_return_code": (("--no-return-code",), dict(
+        type=float, callback=no_return_range_callback, metavar="METRES",
+        help="CARMEN laser logs: readings at or above METRES are the laser's no-return code, not returns "
+             "(default: found in the log, its repeated largest readings, per laser; occtool info LOG names "
+             "them).")),
     "depth_features": (("--depth-features",), dict(
         type=click.IntRange(min=1, max=MAX_FEATURES), show_default=True, metavar="N",
         help="Depth images: most features kept of each frame, on a regular pixel grid (keeps each surface's "

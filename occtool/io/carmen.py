@@ -18,10 +18,14 @@ for even ``N`` (180 or 360 beams covering -90..+89(.5) degrees) and
 becomes a point in the scan plane (``z = 0``) of the laser pose, with constant
 evidence.
 
-Max-range readings mean "no return", not obstacles: a reading at or above
-``max_range`` when it is given, otherwise at or above the largest reading of the file
-when that value repeats (a sentinel such as 81.83 m: at least 10 times, or twice and in
-1% of the readings), and +inf. They are dropped with readings <= 0 and NaN, or with
+Max-range readings mean "no return", not obstacles. Each laser of a log (``FLASER``,
+``RLASER``, ``ROBOTLASER1``) logs them as codes near its largest reading, and they are told
+per laser (:func:`no_return_limit`): readings that repeat (at least 10 times, or twice and
+in 1 % of the readings) within 2 % of the laser's largest are its codes, as SICK's 81.83 and
+81.91 m on the Freiburg campus, or a cluster of them a few centimetres apart, as the MIT
+infinite corridor's 51.05-51.12 m; readings at or above the lowest code, less the codes'
+spread, are no returns. ``no_return_code`` sets the limit when the log does not say.
++inf is no return too. No-return readings are dropped with readings <= 0 and NaN, or with
 ``no_return_range`` R kept as *free rays*: a feature along the beam at ``min(R, max
 range)`` with evidence 0, which says the ray is free up to there and nothing about an
 obstacle.
@@ -42,9 +46,11 @@ from occtool.io.csv import open_text
 from occtool.io.positions import Scan, group_scans
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
-# The largest reading of a file is taken as the no-return sentinel when it occurs this
-# often (or, in short logs, at least twice and in 1% of the readings).
+#: A reading near a laser's largest is one of its no-return codes when it occurs this often
+#: (or, in short logs, at least twice and in 1 % of the readings).
 SENTINEL_MIN_COUNT = 10
+#: ... and within this share of the laser's largest reading.
+CODE_BAND = 0.02
 LASER_RECORDS = ("FLASER", "RLASER", "ROBOTLASER1")
 OTHER_RECORDS = ("ODOM", "PARAM", "NEFF", "SYNC", "TRUEPOS", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4",
                  "ROBOTLASER2", "GPSNMEA", "GPSGGA", "GPSRMC", "SONAR", "BUMPER", "SCANMARK", "POSITIONLASER")
@@ -105,8 +111,6 @@ def _parse_laser(
 def read_carmen(
     path: str | os.PathLike[str],
     options: ReadOptions | None = None,
-    *,
-    max_range: float | None = None,
     **keywords: Any,
 ) -> RangeLog:
     """Read the laser scans of a CARMEN log into positions of features.
@@ -120,17 +124,15 @@ def read_carmen(
         CARMEN log uses ``evidence`` (given to every reading: a 2D laser reports none;
         :data:`~occtool.io.read_options.DEFAULT_CONSTANT_EVIDENCE` by default),
         ``position_tolerance``, ``group_by``, ``skip_invalid`` (skip laser lines that do
-        not parse) and ``no_return_range`` (below).
-    max_range
-        Readings at or above this are "no return" and dropped; by default the file's
-        repeated largest reading (see the module notes).
+        not parse), ``no_return_range`` (below) and ``no_return_code`` (readings at or
+        above it are no return; by default each laser's codes, see the module notes).
 
     Notes
     -----
     ``no_return_range`` ``None`` (default): no-return readings are dropped. A positive
     number R: each no-return reading becomes a *free ray*, a feature along its beam at
     ``min(R, max range)`` (the line's own max range for ``ROBOTLASER1``, else
-    ``max_range`` or the file's sentinel) with evidence 0: its ray is free up to there,
+    the laser's no-return limit) with evidence 0: its ray is free up to there,
     and it says nothing about an obstacle. Readings <= 0 or NaN are dropped either way.
 
     Raises
@@ -139,37 +141,89 @@ def read_carmen(
         For a laser line that does not parse (naming it) or a log without scans.
     """
     settings = as_read_options(options, **keywords)
-    scans = CarmenScans(path, settings, max_range=max_range)
+    scans = CarmenScans(path, settings)
     positions = list(group_scans(scans, source=scans.name, tolerance=settings.position_tolerance,
                                  group_by=settings.group_by, notes=scans.notes))
     return RangeLog(positions=positions, source=scans.name, notes=scans.notes)
+
+
+def no_return_limit(values: NDArray[np.float64], counts: NDArray[np.int64],
+                    readings: int) -> tuple[float | None, list[float]]:
+    """The no-return limit of one laser, and the codes that set it.
+
+    ``values`` are the laser's distinct readings within :data:`CODE_BAND` of its largest
+    (ascending, the largest last), ``counts`` how often each occurs, ``readings`` how many
+    finite readings it logged. A code is a value that repeats (:data:`SENTINEL_MIN_COUNT`
+    times, or twice and in 1 % of the readings); readings at or above the lowest code less
+    the codes' spread are no returns, so a lone code is its own limit and a cluster's stray
+    readings (the infinite corridor's 51.01 and 51.16 m round 51.05-51.12 m) go with it.
+    ``(None, [])`` when no value repeats: the laser logged no code.
+
+    >>> no_return_limit(np.array([49.9, 50.0]), np.array([1, 620]), 79_200)
+    (50.0, [50.0])
+    >>> no_return_limit(np.array([51.01, 51.05, 51.06, 51.11, 51.16]), np.array([3, 218, 3720, 466, 2]), 349_380)
+    (50.99, [51.05, 51.06, 51.11])
+    """
+    if readings == 0 or values.size == 0:
+        return None, []
+    near = values >= values[-1] * (1.0 - CODE_BAND)
+    repeated = (counts >= SENTINEL_MIN_COUNT) | ((counts >= 2) & (counts >= 0.01 * readings))
+    codes = values[near & repeated]
+    if codes.size == 0:
+        return None, []
+    return round(float(2 * codes[0] - codes[-1]), 6), codes.tolist()
+
+
+class _TopReadings:
+    """One laser's largest readings, gathered line by line: the distinct values within
+    :data:`CODE_BAND` of the largest so far, with their counts (a few dozen values)."""
+
+    def __init__(self) -> None:
+        self.top = -np.inf
+        self.counts: dict[float, int] = {}
+        self.readings = 0
+
+    def add(self, finite: NDArray[np.float64]) -> None:
+        self.readings += finite.size
+        high = float(finite.max())
+        if high > self.top:
+            self.top = high
+            floor = high * (1.0 - CODE_BAND)
+            self.counts = {value: count for value, count in self.counts.items() if value >= floor}
+        values, counts = np.unique(finite[finite >= self.top * (1.0 - CODE_BAND)], return_counts=True)
+        for value, count in zip(values.tolist(), counts.tolist()):
+            self.counts[value] = self.counts.get(value, 0) + count
+
+    def limit(self) -> tuple[float | None, list[float]]:
+        values = np.array(sorted(self.counts), dtype=np.float64)
+        return no_return_limit(values, np.array([self.counts[v] for v in values.tolist()], dtype=np.int64),
+                               self.readings)
 
 
 class CarmenScans:
     """The laser scans of a CARMEN log, read line by line: an iterable of
     :class:`~occtool.io.positions.Scan` that holds one line at a time.
 
-    Each iteration reads the file again. Without ``max_range`` the no-return sentinel is
-    the file's repeated largest reading, which only the whole file tells: the first
-    iteration reads every laser line once before yielding anything (keeping only the
-    largest reading and its count), so a line that does not parse is an
+    Each iteration reads the file again. Without ``no_return_code`` each laser's
+    no-return codes are its repeated largest readings, which only the whole file tells:
+    the first iteration reads every laser line once before yielding anything (keeping only
+    each laser's largest readings and their counts), so a line that does not parse is an
     :class:`InputError` before the first scan, wherever it lies. ``notes`` is complete
     after a full iteration. Parameters are those of :func:`read_carmen`.
     """
 
-    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None, *,
-                 max_range: float | None = None, **keywords: Any) -> None:
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None,
+                 **keywords: Any) -> None:
         self.settings = as_read_options(options, **keywords)
         self.path = path
         self.name = str(path)
         self.evidence = self.settings.constant_evidence
-        self.max_range = max_range
         self.skip_invalid = self.settings.skip_invalid
         self.no_return_range = self.settings.no_return_range
         self.notes: list[str] = []
-        self._limit: tuple[float | None] | None = None  # (the sentinel or None,) once the file was read
+        self._limits: dict[str, tuple[float | None, list[float]]] | None = None  # per laser, once read
 
-    def _lines(self) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64], Pose, float | None,
+    def _lines(self) -> Iterator[tuple[str, NDArray[np.float64], NDArray[np.float64], Pose, float | None,
                                        float | None, int]]:
         """Every laser line, parsed; counts the skipped lines and unknown records as it goes."""
         self.skipped_lines = 0
@@ -193,7 +247,7 @@ class CarmenScans:
                         self.skipped_lines += 1
                         continue
                     found = True
-                    yield ranges, angles, pose, stamp, line_max, line_number
+                    yield fields[0], ranges, angles, pose, stamp, line_max, line_number
         except (OSError, EOFError) as exc:
             if isinstance(exc, FileNotFoundError):
                 raise
@@ -201,50 +255,45 @@ class CarmenScans:
         if not found:
             raise InputError(f"{self.name} holds no laser scans (FLASER, RLASER or ROBOTLASER1 lines)")
 
-    def limit(self) -> float | None:
-        """Readings at or above this are no return: ``max_range``, else the file's repeated
-        largest reading (read once, then kept), else ``None``."""
-        if self.max_range is not None:
-            return self.max_range
-        if self._limit is None:
-            top, repeats, finite_count = -np.inf, 0, 0
-            for ranges, *_ in self._lines():
+    def limits(self) -> dict[str, tuple[float | None, list[float]]]:
+        """Each laser's (record type's) no-return limit and the codes that set it: readings at
+        or above the limit are no return (``None``: the laser logged no code). With
+        ``no_return_code`` every laser's limit is that; else read from the file once, then kept."""
+        if self.settings.no_return_code is not None:
+            return {kind: (self.settings.no_return_code, []) for kind in LASER_RECORDS}
+        if self._limits is None:
+            top = {kind: _TopReadings() for kind in LASER_RECORDS}
+            for kind, ranges, *_ in self._lines():
                 finite = ranges[np.isfinite(ranges)]
-                if not finite.size:
-                    continue
-                finite_count += finite.size
-                high = float(finite.max())
-                if high > top:
-                    top, repeats = high, int((finite == high).sum())
-                elif high == top:
-                    repeats += int((finite == high).sum())
-            sentinel = repeats >= SENTINEL_MIN_COUNT or (repeats >= 2 and repeats >= 0.01 * finite_count)
-            self._limit = (top if finite_count and sentinel else None,)
-        return self._limit[0]
+                if finite.size:
+                    top[kind].add(finite)
+            self._limits = {kind: readings.limit() for kind, readings in top.items()}
+        return self._limits
 
     def __iter__(self) -> Iterator[Scan]:
-        limit = self.limit()
+        limits = self.limits()
         evidence, no_return_range, name = self.evidence, self.no_return_range, self.name
         self.notes.clear()
         readings = 0
-        no_return = 0
+        no_return = dict.fromkeys(LASER_RECORDS, 0)
         invalid = 0
         reach_low, reach_high = np.inf, -np.inf  # of every free ray
-        for ranges, angles, pose, stamp, line_max, line_number in self._lines():
+        for kind, ranges, angles, pose, stamp, line_max, line_number in self._lines():
             readings += ranges.size
+            limit = limits[kind][0]
             with np.errstate(invalid="ignore"):
                 # +inf is a no-return reading too (as in ROS's REP 117); NaN, -inf and <= 0 are not readings.
                 missing = np.isposinf(ranges) | (ranges >= limit if limit is not None else False)
                 valid = np.isfinite(ranges) & (ranges > 0.0) & ~missing
             if no_return_range is None:
-                no_return += int(ranges.size - valid.sum())
+                no_return[kind] += int(ranges.size - valid.sum())
                 r, a = ranges[valid], angles[valid]
                 values = np.full(r.size, evidence)
             else:
-                no_return += int(missing.sum())
+                no_return[kind] += int(missing.sum())
                 invalid += int(ranges.size - valid.sum() - missing.sum())
                 # A free ray out to min(R, the beam's max range): the line's own (ROBOTLASER1),
-                # else the file's limit; the features stay in beam order.
+                # else the laser's limit; the features stay in beam order.
                 reach = min(no_return_range, line_max if line_max is not None else np.inf,
                             limit if limit is not None else np.inf)
                 kept = valid | missing
@@ -255,21 +304,39 @@ class CarmenScans:
                     reach_low, reach_high = min(reach_low, reach), max(reach_high, reach)
             points = np.column_stack([r * np.cos(a), r * np.sin(a), np.zeros(r.size)])
             yield Scan(points, values, pose, stamp, f"{name}:{line_number}")
-        self.notes.extend(self._notes(limit, readings, no_return, invalid, reach_low, reach_high))
+        self.notes.extend(self._notes(limits, readings, no_return, invalid, reach_low, reach_high))
 
-    def _notes(self, limit: float | None, readings: int, no_return: int, invalid: int, reach_low: float,
-               reach_high: float) -> list[str]:
+    def _where(self, limits: dict[str, tuple[float | None, list[float]]], no_return: dict[str, int]) -> str:
+        """Which readings were no return, for the notes: each laser's limit and codes."""
+        told = []
+        several = sum(1 for count in no_return.values() if count) > 1
+        for kind in LASER_RECORDS:
+            limit, codes = limits[kind]
+            if limit is None or not no_return[kind]:
+                continue
+            if len(codes) > 1:
+                what = f"readings >= {limit:g} m: the laser's codes {codes[0]:g} to {codes[-1]:g} m"
+            elif self.settings.no_return_code is not None:
+                what = f"readings >= {limit:g} m, no_return_code"
+            else:
+                what = f"readings >= {limit:g} m"
+            told.append(f"{kind} {what}" if several else what)
+        return f" ({'; '.join(told)})" if told else ""
+
+    def _notes(self, limits: dict[str, tuple[float | None, list[float]]], readings: int, no_return: dict[str, int],
+               invalid: int, reach_low: float, reach_high: float) -> list[str]:
         notes = []
-        where = f" (readings >= {limit:g} m)" if limit is not None else ""
+        where = self._where(limits, no_return)
+        total = sum(no_return.values())
         if self.no_return_range is None:
-            if no_return:
-                notes.append(f"dropped {no_return} of {readings} readings as no return{where}")
+            if total:
+                notes.append(f"dropped {total} of {readings} readings as no return{where}")
         else:
-            if no_return:
+            if total:
                 where = where or " (infinite readings)"
                 at = f"{reach_low:g} m" if reach_low == reach_high else f"{reach_low:g} to {reach_high:g} m"
                 notes.append(
-                    f"kept {no_return} of {readings} readings with no return{where} as free rays "
+                    f"kept {total} of {readings} readings with no return{where} as free rays "
                     f"at {at} with evidence 0 (no_return_range={self.no_return_range:g})"
                 )
             if invalid:

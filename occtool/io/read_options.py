@@ -44,8 +44,9 @@ DEFAULT_DEPTH_MAX_RANGE = 8.0
 DEFAULT_DEPTH_MIN_RANGE = 0.1
 
 
-def check_no_return_range(value: float | None) -> float | None:
-    """Validate ``no_return_range``: ``None``, or a finite number of metres > 0.
+def check_no_return_range(value: float | None, name: str = "no-return range") -> float | None:
+    """Validate ``no_return_range`` (or another distance option, ``name`` in messages):
+    ``None``, or a finite number of metres > 0, at most :data:`~occtool.limits.MAX_DISTANCE`.
 
     Raises
     ------
@@ -55,13 +56,13 @@ def check_no_return_range(value: float | None) -> float | None:
     if value is None:
         return None
     try:
-        number = float(value)
+        number = float(value) if not isinstance(value, bool) else float("nan")
     except (TypeError, ValueError):
-        raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}") from None
+        raise InputError(f"{name} must be a finite number of metres > 0, got {value!r}") from None
     if not (number > 0.0 and number < float("inf")):
-        raise InputError(f"no-return range must be a finite number of metres > 0, got {value!r}")
+        raise InputError(f"{name} must be a finite number of metres > 0, got {value!r}")
     if number > MAX_DISTANCE:
-        raise InputError(f"no-return range must be at most {MAX_DISTANCE:g} m, got {value!r}")
+        raise InputError(f"{name} must be at most {MAX_DISTANCE:g} m, got {value!r}")
     return number
 
 
@@ -165,6 +166,10 @@ class ReadOptions:
         about an obstacle). Other data (point clouds, CSV) has no such beams and
         ignores it. Depth images: pixels with no return (+inf, beyond
         ``depth_max_range``) become free rays at ``min(R, depth_max_range)``.
+    no_return_code
+        Laser logs that log a beam without a return as a code (CARMEN): readings at or
+        above this many metres are no return. By default the log's own: its repeated
+        largest readings (:func:`occtool.io.carmen.no_return_limit`).
     depth_features
         Depth images: most features kept of each frame, sampled on a regular pixel grid.
     depth_noise
@@ -194,6 +199,7 @@ class ReadOptions:
     group_by: str = "position"
     skip_invalid: bool = False
     no_return_range: float | None = None
+    no_return_code: float | None = None
     depth_features: int = DEFAULT_DEPTH_FEATURES
     depth_noise: float = DEFAULT_DEPTH_NOISE
     depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE
@@ -207,6 +213,7 @@ class ReadOptions:
             raise InputError(f"constant evidence must lie in [0, 1], got {self.evidence}")
         checked["format"] = check_format(self.format)
         checked["no_return_range"] = check_no_return_range(self.no_return_range)
+        checked["no_return_code"] = check_no_return_range(self.no_return_code, "no-return code")
         checked["depth_features"] = check_depth_features(self.depth_features)
         checked["depth_noise"] = check_depth_noise(self.depth_noise)
         checked["depth_max_range"] = check_depth_max_range(self.depth_max_range)
