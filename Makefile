@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.occtool-installed
 DEMO   ?= demo-output
 
-.PHONY: install demo test bench lint clean
+.PHONY: install demo test test-slow test-all bench lint clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -33,7 +33,15 @@ demo: $(STAMP)
 	@echo "  model.json inverse.json nav.geojson"
 	@echo "  $(DEMO)/fig5a-features.png  $(DEMO)/fig5b-model.png  $(DEMO)/fig5c-navigation.png"
 
+# The suite less the slow end-to-end and property checks (marked @pytest.mark.slow);
+# `make test-slow` runs those, `make test-all` everything, as CI does.
 test: $(STAMP)
+	$(BIN)/python -m pytest -n 2 -q -m "not slow"
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -n 2 -q -m slow
+
+test-all: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 
 lint: $(STAMP)

@@ -71,6 +71,7 @@ def test_the_map_has_the_cabinet_and_the_floor_round_it_free(mapped):
     assert 0 < world_bytes < 20_000  # measured 3.7 KB
 
 
+@pytest.mark.slow
 def test_held_out_frames_score_as_the_bench_reports():
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
     import depth  # bench/depth.py

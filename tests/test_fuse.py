@@ -287,6 +287,7 @@ def test_keyframes_of_a_known_small_case():
     assert 4 not in select_keyframes(positions, LASER_ROBOT, cell=5.0)
 
 
+@pytest.mark.slow
 def test_a_model_set_keeps_what_each_position_observed_and_maps_as_its_log(room, tmp_path):
     from occtool.fuse import fuse_model_set, reach_from_guard
     from occtool.modelset import fit_model_set

@@ -133,6 +133,7 @@ def test_compressed_csv_is_read(tmp_path):
     assert read_log(path).single().features.points.tolist() == [[1, 2, 3]]
 
 
+@pytest.mark.slow
 def test_large_file_reads_vectorised(tmp_path):
     rng = np.random.default_rng(0)
     points = rng.uniform(0.5, 5.0, size=(200_000, 3))

@@ -344,6 +344,7 @@ def test_a_foxglove_raw_image_without_a_mounting_is_a_level_camera(tmp_path) -> 
         read_log(wrong)
 
 
+@pytest.mark.slow
 def test_a_hand_held_walk_maps_and_is_scored_on_frames_held_out_in_blocks(tmp_path) -> None:
     import json
 

@@ -103,6 +103,7 @@ def test_an_mcap_error_is_raised_before_the_first_position(tmp_path):
     assert_same_positions(path, topics=["/scan", "/cloud"])
 
 
+@pytest.mark.slow
 def test_the_ccny_ros1_bag_and_its_mcap_twin_stream_the_same_positions(shared_data):
     pytest.importorskip("rosbags")
     assert_same_positions(shared_data / "ccny_hokuyo_bag" / "demo.bag")

@@ -351,6 +351,7 @@ def check_against_scipy(c, A, b, lower, upper):
     return result, ref
 
 
+@pytest.mark.slow
 @settings(max_examples=200)
 @given(programmes())
 def test_random_programmes_match_scipy(programme):

@@ -81,6 +81,7 @@ def test_csv_to_mcap_to_model_is_the_csv_model(runner, fixtures_dir, tmp_path):
     assert from_csv["training"]["n_features"] == 10000
 
 
+@pytest.mark.slow
 def test_carmen_csv_and_mcap_give_the_same_model_set(runner, shared_data, tmp_path):
     log = intel_head(shared_data, tmp_path)
     grouping = ("--position-tolerance", "1,7")
@@ -213,6 +214,7 @@ def test_octomap_scan_gives_a_navigation_polygon(runner, shared_data, tmp_path):
 
 
 # --------------------------------------------------------------- Intel CARMEN model set
+@pytest.mark.slow
 def test_intel_model_set_extract_in_robot_and_world_frame(runner, shared_data, tmp_path):
     log_path = intel_head(shared_data, tmp_path)
     log = read_log(log_path, position_tolerance=(1, 7))
@@ -268,6 +270,7 @@ def test_intel_model_set_extract_in_robot_and_world_frame(runner, shared_data, t
     assert world_polygon.contains(type(world_polygon.centroid)(pose["x"], pose["y"]))
 
 
+@pytest.mark.slow
 def test_one_position_of_the_whole_intel_log(runner, shared_data, tmp_path):
     log = read_log(shared_data / INTEL)
     assert len(log.positions) > 800 and log.has_poses

@@ -211,6 +211,7 @@ def test_sigterm_leaves_a_valid_partial_index_and_no_temp_files(tmp_path):
         load_model(out / entry["file"])
 
 
+@pytest.mark.slow
 def test_several_logs_give_one_sub_folder_each_and_extract_takes_them_all(tmp_path):
     first = write_log(tmp_path / "a.csv", 2)
     second = write_log(tmp_path / "b.csv.gz".replace(".gz", ""), 2, seed=3)

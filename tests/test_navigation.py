@@ -370,6 +370,7 @@ def test_a_thin_overhang_between_two_heights_is_kept_clear_of_with_exact_bounds(
     assert nav.polygon.contains(Point(0.5, 0.0)) and not nav.polygon.contains(Point(0.65, 0.0))
 
 
+@pytest.mark.slow
 @settings(max_examples=25)
 @given(pieces=random_pieces, heights=random_heights)
 def test_random_trees_with_exact_bounds_never_let_the_body_touch_an_obstacle(pieces, heights):
@@ -529,6 +530,7 @@ def test_rotating_the_model_rotates_the_polygon(scene, steps):
     assert len(turned.exploration_points) + len(turned.obstacle_points) > 0 or inside_disc
 
 
+@pytest.mark.slow
 @settings(max_examples=25)
 @given(scene=scenes, radius=st.floats(0.05, 0.4))
 # Found by a fresh run: a corner exactly one radius from the robot, round which GEOS drew
@@ -597,6 +599,7 @@ def random_region(seed: int) -> Polygon:
     return parts[0] if parts else Polygon()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("block", [None, 5])
 def test_the_ray_cast_finds_what_every_ray_against_every_edge_finds(monkeypatch, block):
     import occtool.navigation._raycast
@@ -668,6 +671,7 @@ def test_an_inverse_returning_nan_or_the_wrong_shape_is_refused():
         navigation_map(lambda a, h, m: np.ones(7), robot=ROBOT)
 
 
+@pytest.mark.slow
 @settings(max_examples=15)
 @given(pieces=random_pieces, heights=random_heights)
 def test_random_min_max_models_never_let_the_body_touch_an_obstacle(pieces, heights):

@@ -54,6 +54,7 @@ def test_relative_and_compose_are_inverse():
                        [b.x, b.y, np.cos(b.yaw), np.sin(b.yaw)])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loop_closure, scans, bound", [(True, 150, 0.1), (False, 80, 0.25)])
 def test_degraded_intel_poses_are_registered_back(intel_slice, loop_closure, scans, bound):
     scans_log = RangeLog(intel_slice.positions[:scans], source="intel")

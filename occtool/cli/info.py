@@ -1,4 +1,5 @@
-"""``occtool info``: a readable summary of a model file, an inverse file or a range log."""
+"""``occtool info``: a readable summary of any file occtool reads or writes: a model or
+inverse file, a model set, a world map (``world.occmap``), a Nav2 map folder, a range log."""
 
 from __future__ import annotations
 
@@ -7,24 +8,46 @@ import click
 from occtool.cli.options import log_option
 
 
-@click.command(short_help="Describe a model file or a range log.")
-@click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=False))
-@click.option("--pieces/--no-pieces", "show_pieces", default=True, show_default=True,
-              help="List the coefficients of every piece.")
+@click.command(short_help="Describe a model, a model set, a world map, a Nav2 map or a range log.")
+@click.argument("path", metavar="FILE|FOLDER", type=click.Path(exists=True, dir_okay=True))
+@click.option("--pieces/--no-pieces", "show_pieces", default=False, show_default=True,
+              help="Model and inverse files: list the coefficients of every piece.")
 @log_option("skip_invalid",
             help="Range log: count invalid rows/points in a note instead of stopping at the first.")
 @log_option("no_return_range",
             help="Range log: count laser beams that returned nothing as free rays at this range "
                  "(as fit --no-return-range does).")
 def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: float | None) -> None:
-    """Summarise FILE: a model or inverse file (pieces, tree, constraints, fit error,
-    samples, run) or any range log the readers understand."""
+    """Summarise FILE or FOLDER: a model or inverse file (pieces, tree, constraints, fit
+    error, samples, run), a model set (`occtool fit LOG -o DIR/`: DIR or its index.json), a
+    world map (`world.occmap`), a Nav2 map (`map.yaml`, or the folder `occtool map` wrote:
+    its map.yaml and world.occmap both), or any range log the readers understand."""
+    from pathlib import Path
+
     from rich.console import Console
 
     from occtool.formats.model import read_any
 
     console = Console()
-    found = read_any(path)
+    target = Path(path)
+    if target.is_dir() and (target / "index.json").is_file():
+        console.print(_model_set_summary(target))
+        return
+    if target.is_dir() and (target / "map.yaml").is_file():
+        for part in (target / "world.occmap", target / "map.yaml"):
+            if part.is_file():
+                console.print(_world_map_summary(part) if part.suffix == ".occmap" else _nav2_summary(part))
+        return
+    if target.name == "index.json":
+        console.print(_model_set_summary(target))
+        return
+    if _is_world_map(target):
+        console.print(_world_map_summary(target))
+        return
+    if target.suffix in (".yaml", ".yml"):
+        console.print(_nav2_summary(target))
+        return
+    found = None if target.is_dir() else read_any(path)
     if found is None:
         from occtool.io import describe_log
 
@@ -64,7 +87,9 @@ def _model_summary(path: str, model, show_pieces: bool):
     table.add_row("constraints", f"c >= {model.c_min:g}, |dF/dalpha| <= {model.a_max:g}, |b| <= {model.b_max:g}")
     table.add_row("slope bounds", ", ".join(f"{k} {v:.4g}" for k, v in model.slope_bounds_.items()))
     table.add_row(
-        "fit error", f"RMSE {model.rmse_:.4f}, loss {model.loss_:.5f} ({model.loss} loss), {model.n_sweeps_} sweeps"
+        "fit error", f"RMSE {model.rmse_:.4f} of F against the samples' evidence m (weighted; F is not clipped to "
+                     f"[0, 1], so samples far past an obstacle add much), loss {model.loss_:.5f} ({model.loss} "
+                     f"loss), {model.n_sweeps_} sweeps"
     )
     counts = ", ".join(f"{k} {v}" for k, v in model.sample_counts_.items() if v)
     table.add_row("training", f"{model.n_features_} features -> {model.n_samples_} samples ({counts})")
@@ -100,3 +125,97 @@ def _inverse_summary(path: str, inverse, show_pieces: bool):
     table.add_row("pieces", f"{inverse.n_pieces} ({inverse.basis} basis)")
     table.add_row("tree", f"depth {inverse.depth()}: {inverse.describe()}")
     return Group(table, _pieces_table(inverse, "inverse pieces")) if show_pieces else table
+
+
+def _key_value_table(title: str):
+    from rich.table import Table
+
+    table = Table(title=title, show_header=False)
+    table.add_column("key", style="bold")
+    table.add_column("value", overflow="fold")
+    return table
+
+
+def _is_world_map(path) -> bool:
+    from occtool.formats.occmap import MAGIC
+
+    try:
+        with open(path, "rb") as handle:
+            return handle.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
+def _world_map_summary(path):
+    """A world map: what it holds, where, at what precision and in how many bytes."""
+    from occtool.formats.occmap import read_map
+    from occtool.fuse import WorldMap
+
+    arrays = read_map(path)  # the file's numbers (one read), then the map built of them
+    world = WorldMap.from_arrays(arrays)
+    lower, upper = world.bounds
+    size = path.stat().st_size
+    table = _key_value_table(f"occtool world map: {path}")
+    table.add_row("format", f"occmap version {arrays.version} (this occtool writes version "
+                            f"{_occmap_version()}), {size:,} bytes")
+    table.add_row("frame", "map: the frame of the log's poses (x, y in metres); heights from the sensor, the "
+                           f"body band {world.band[0]:g} to {world.band[1]:g} m")
+    table.add_row("extent", f"x {lower[0]:.2f} to {upper[0]:.2f} m, y {lower[1]:.2f} to {upper[1]:.2f} m "
+                            f"({upper[0] - lower[0]:.1f} x {upper[1] - lower[1]:.1f} m)")
+    trusted = int((world.trust >= 0.5).sum()) if len(world) else 0
+    table.add_row("walls", f"{len(world):,} segments (MIN nodes over linear pieces under one MAX), {trusted:,} "
+                           f"trusted; stored to {arrays.unit * 1000:g} mm"
+                           + (f", lengths to {arrays.half_unit * 2000:g} mm" if arrays.half_unit else ""))
+    area = float(world.region.area) if world.region is not None else 0.0
+    table.add_row("observed region", f"{area:,.1f} m² where some position observed (unknown elsewhere)")
+    positions = 0 if world.positions is None else len(world.positions)
+    table.add_row("positions", f"{positions:,} kept (the free level rises away from them)")
+    table.add_row("a byte grid at 0.1 m", f"{world.grid_bytes(0.1):,} bytes over the same extent")
+    table.add_row("settings", ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                                        for k, v in world.params().items() if k != "band"))
+    return table
+
+
+def _occmap_version() -> int:
+    from occtool.formats.occmap import FORMAT_VERSION
+
+    return FORMAT_VERSION
+
+
+def _nav2_summary(path):
+    """A Nav2 map as map_server loads it: mode, size, resolution, origin and its cells."""
+    import numpy as np
+
+    from occtool.formats.nav2 import read_nav2
+
+    nav2 = read_nav2(path)
+    rows, cols = nav2.cells.shape
+    table = _key_value_table(f"Nav2 map: {path}")
+    table.add_row("image", f"{nav2.image} ({nav2.mode} mode, negate {nav2.negate})")
+    table.add_row("size", f"{cols} x {rows} cells at {nav2.resolution:g} m "
+                          f"({cols * nav2.resolution:.1f} x {rows * nav2.resolution:.1f} m)")
+    x, y, yaw = nav2.origin
+    table.add_row("origin", f"x {x:g} m, y {y:g} m, yaw {yaw:g} rad (the bottom-left cell's corner)")
+    table.add_row("thresholds", f"occupied >= {nav2.occupied_thresh:g}, free <= {nav2.free_thresh:g}")
+    free, occupied, unknown = (int(np.count_nonzero(nav2.cells == v)) for v in (0, 100, -1))
+    graded = nav2.cells.size - free - occupied - unknown
+    table.add_row("cells", f"{free:,} free, {occupied:,} occupied, {unknown:,} unknown"
+                           + (f", {graded:,} graded" if graded else ""))
+    return table
+
+
+def _model_set_summary(path):
+    """A model set: its positions, what they were fitted from, and the files."""
+    from occtool.modelset import read_model_set
+
+    folder, entries = read_model_set(path)
+    table = _key_value_table(f"occtool model set: {folder}")
+    table.add_row("models", f"{len(entries):,} positions")
+    posed = sum(1 for entry in entries if entry.get("pose") is not None)
+    table.add_row("poses", f"{posed:,} of {len(entries):,} in the world frame (occtool extract --world, occtool map)")
+    if entries:
+        first, last = entries[0]["position"], entries[-1]["position"]
+        table.add_row("positions", f"{first} to {last} of the log")
+    size = sum((folder / entry["file"]).stat().st_size for entry in entries)
+    table.add_row("files", f"{size:,} bytes of model files")
+    return table

@@ -92,6 +92,8 @@ class MapArrays:
     unit: float
     origin: np.ndarray
     half_unit: float | None
+    #: The file's format version (:data:`FORMAT_VERSION` for a map quantised here).
+    version: int = FORMAT_VERSION
 
     def params(self) -> dict[str, Any]:
         """The scalar settings as a map's ``params()`` gives them (the header's ``settings``)."""
@@ -406,7 +408,8 @@ def decode(data: bytes, name: str = "occmap") -> MapArrays:
         scalars = {k: float(v) for k, v in settings.items()}
     except (TypeError, KeyError, IndexError, ValueError) as exc:
         raise fail(str(exc)) from None
-    return MapArrays(first, last, thickness, trust, region, band, positions, facing, scalars, unit, origin, half_unit)
+    return MapArrays(first, last, thickness, trust, region, band, positions, facing, scalars, unit, origin, half_unit,
+                     version)
 
 
 def read_map(path: str | os.PathLike[str]) -> MapArrays:
