@@ -87,10 +87,9 @@ def _model_summary(path: str, model, show_pieces: bool):
     table.add_row("constraints", f"c >= {model.c_min:g}, |dF/dalpha| <= {model.a_max:g}, |b| <= {model.b_max:g}")
     table.add_row("slope bounds", ", ".join(f"{k} {v:.4g}" for k, v in model.slope_bounds_.items()))
     table.add_row(
-        "fit error", f"RMSE {model.rmse_:.4f} of F against the samples' evidence m (weighted; F is not clipped to "
-                     f"[0, 1], so samples far past an obstacle add much), loss {model.loss_:.5f} ({model.loss} "
-                     f"loss), {model.n_sweeps_} sweeps"
+        "fit error", f"RMSE {model.rmse_:.4f}, loss {model.loss_:.5f} ({model.loss} loss), {model.n_sweeps_} sweeps"
     )
+    table.add_row("", "(RMSE of F against the samples' evidence m, weighted; F is not clipped to [0, 1])")
     counts = ", ".join(f"{k} {v}" for k, v in model.sample_counts_.items() if v)
     table.add_row("training", f"{model.n_features_} features -> {model.n_samples_} samples ({counts})")
     table.add_row("input sha256", model.features_digest_)
