@@ -56,7 +56,7 @@ Protocol:
   pyoctomap at 0.05 and 0.1 m, its default sensor model, ``insertPointCloud`` per frame
   with the frame's origin and the max range; bytes: the size of its own ``.bt`` file.
 * occtool's input: the depth folder with a ``depth.txt`` listing the training frames only
-  (the images and poses linked), ``--depth-features TRAIN_RAYS --no-return-range 8``; lidar
+  (the images and poses copied), ``--depth-features TRAIN_RAYS --no-return-range 8``; lidar
   (occtool reads no scans folder with poses yet): the kept training rays as occtool's CSV
   (``x,y,z,m,pose_x,pose_y,pose_z,pose_yaw``: points in the sensor-centred frame turned by
   the scan's yaw, so that the pose's yaw and position put them back exactly; ``m`` 0.9 for a
@@ -497,23 +497,28 @@ def run_map(source: Path, out: Path, options: list[str]) -> dict[str, Any]:
     figures.update(_time_v(done.stderr) if timer else {})
     figures["cpu_s"] = figures["user_s"] + figures["system_s"]
     if done.returncode:
-        lines = [line for line in done.stderr.strip().splitlines() if not line.startswith("\t")]
+        lines = [line for line in done.stderr.strip().splitlines() if not line.startswith(("\t", "Command "))]
         figures["error"] = lines[-1] if lines else f"exit status {done.returncode}"
     return figures
 
 
 def write_depth_input(spec: dict[str, Any], train: NDArray[np.bool_], scratch: Path) -> Path:
-    """The depth folder with ``depth.txt`` listing the training frames (images and poses linked)."""
+    """A copy of the depth folder with the training frames only (occtool refuses a linked
+    image that resolves outside the folder)."""
     folder: Path = spec["folder"]
     target = scratch / "train"
     target.mkdir()
-    for name in ("depth", "groundtruth.txt", "camera-intrinsics.txt"):
-        (target / name).symlink_to(folder / name)
+    for name in ("groundtruth.txt", "camera-intrinsics.txt"):
+        shutil.copyfile(folder / name, target / name)
     lines = [line for line in (folder / "depth.txt").read_text(encoding="utf-8").splitlines()
              if line.strip() and not line.lstrip().startswith("#")]
     kept = set(np.asarray(spec["stamps"])[train])
-    (target / "depth.txt").write_text("# timestamp filename\n" + "\n".join(
-        line for line in lines if line.split()[0] in kept) + "\n", encoding="utf-8")
+    lines = [line for line in lines if line.split()[0] in kept]
+    for line in lines:
+        image = target / line.split()[1]
+        image.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(folder / line.split()[1], image)
+    (target / "depth.txt").write_text("# timestamp filename\n" + "\n".join(lines) + "\n", encoding="utf-8")
     return target / "depth.txt"
 
 
