@@ -28,10 +28,11 @@ Protocol:
   Seosan, 10 for the Livox run), ``max(1, round(0.15 n / block))`` of them held out, picked
   by ``numpy.random.default_rng(seed)``. Every method gets the training frames only.
 * Subsampling (so that the four sequences take a few minutes of CPU on one core): each
-  training frame keeps :data:`TRAIN_RAYS` rays drawn by the seeded generator (every
-  method, occtool included: its depth budget ``--depth-features`` is set to the same
-  number and the lidar CSV holds exactly these rays); each held-out frame keeps
-  ``TEST_RAYS`` rays.
+  training frame keeps ``train_rays`` rays drawn by the seeded generator (every method,
+  occtool included: its depth budget ``--depth-features`` is set to the same number and the
+  lidar CSV holds exactly these rays), each held-out frame ``test_rays``: 5,000 / 3,000 for
+  the depth frames, 3,000 / 600 for Seosan's 60k-point scans, 600 / 250 for the Livox
+  run's 3-5k-point scans (241 of them, 0.1 s apart).
 * Test points, per kept held-out ray: the return is occupied (positive); points every 0.1 m
   from 0.1 m after the sensor to 0.1 m before the return (to the max range, for a cut ray)
   are free (negative).
@@ -61,7 +62,7 @@ Protocol:
   pyoctomap at 0.05 and 0.1 m, its default sensor model, ``insertPointCloud`` per frame
   with the frame's origin and the max range; bytes: the size of its own ``.bt`` file.
 * occtool's input: the depth folder with a ``depth.txt`` listing the training frames only
-  (the images and poses copied), ``--depth-features TRAIN_RAYS --no-return-range 8``; lidar
+  (the images and poses copied), ``--depth-features`` as above, ``--no-return-range 8``; lidar
   (occtool reads no scans folder with poses yet): the kept training rays as occtool's CSV
   (``x,y,z,m,pose_x,pose_y,pose_z,pose_yaw``: points in the sensor-centred frame turned by
   the scan's yaw, so that the pose's yaw and position put them back exactly; ``m`` 0.9 for a
