@@ -173,7 +173,7 @@ def read_pcd(path: str | os.PathLike[str]) -> FloatArray:
                       in enumerate(zip(fields, sizes, types, counts))])
     if len(raw) - at < n * dtype.itemsize:
         raise InputError(f"{path}: PCD holds fewer than its {n} points")
-    table = np.frombuffer(raw, dtype=dtype, count=n, offset=at)
+    table: Any = np.frombuffer(raw, dtype=dtype, count=n, offset=at)
     return np.column_stack([table[f"{a}_{fields.index(a)}"][:, 0] for a in "xyz"]).astype(np.float64)
 
 
@@ -594,9 +594,9 @@ def read_nav2(yaml_path: Path) -> tuple[FloatArray, float, tuple[float, float, f
     p = (255.0 - read_pgm(yaml_path.parent / fields["image"])) / 255.0
     if int(fields.get("negate", "0")):
         p = 1.0 - p
-    value = np.where(p > float(fields["occupied_thresh"]), 1.0, np.where(p < float(fields["free_thresh"]), 0.0, 0.5))
+    cells = np.where(p > float(fields["occupied_thresh"]), 1.0, np.where(p < float(fields["free_thresh"]), 0.0, 0.5))
     ox, oy, yaw = (float(v) for v in fields["origin"].strip("[]").split(","))
-    return np.ascontiguousarray(value[::-1]), float(fields["resolution"]), (ox, oy, yaw)
+    return np.ascontiguousarray(cells[::-1]), float(fields["resolution"]), (ox, oy, yaw)
 
 
 def nav2_lookup(nav2: tuple[FloatArray, float, tuple[float, float, float]], xy: FloatArray) -> FloatArray:
