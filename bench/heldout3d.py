@@ -173,8 +173,8 @@ def read_pcd(path: str | os.PathLike[str]) -> FloatArray:
                       in enumerate(zip(fields, sizes, types, counts))])
     if len(raw) - at < n * dtype.itemsize:
         raise InputError(f"{path}: PCD holds fewer than its {n} points")
-    table: Any = np.frombuffer(raw, dtype=dtype, count=n, offset=at)
-    return np.column_stack([table[f"{a}_{fields.index(a)}"][:, 0] for a in "xyz"]).astype(np.float64)
+    records: Any = np.frombuffer(raw, dtype=dtype, count=n, offset=at)
+    return np.column_stack([records[f"{a}_{fields.index(a)}"][:, 0] for a in "xyz"]).astype(np.float64)
 
 
 def read_kitti_poses(path: str | os.PathLike[str]) -> FloatArray:
