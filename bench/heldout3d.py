@@ -19,11 +19,12 @@ Protocol:
   (241 Livox scans of 3-5k points, hand-held, turning in place): binary PCD (the points, any
   padding after them ignored), ``optimized_poses.txt`` line i a row-major 3x4 scan-to-world
   transform of ``Scans/%06d.pcd`` i, lines beyond the scans ignored.
-* Rays: every valid depth pixel (depth 0 dropped) or lidar point nearer than 0.1 m (lidar:
-  0.5 m) dropped; a ray longer than the sequence's max range (8 m depth, 30 m lidar; the
-  same for every method and for scoring) is cut there as a free-only ray (no return).
-  The lidar max range is 20 m, not 30, to keep the 0.05 m grids' traversal within the
-  bench's CPU budget (Seosan: half its returns lie beyond 18 m).
+* Rays: one a valid depth pixel (depth 0 dropped) or a lidar point, from the frame's
+  origin (the camera's optical centre; the scan pose's position); rays shorter than 0.1 m
+  (lidar: 0.5 m) dropped; a ray longer than the sequence's max range (8 m depth, 20 m
+  lidar; the same for every method and for scoring) is cut there as a free-only ray (no
+  return). 20 m rather than 30 keeps the 0.05 m grids' traversal within the bench's CPU
+  budget (Seosan: half its returns lie beyond 18 m).
 * Split: blocks of consecutive frames (5 for the cabinet, 1 for the 8-frame office, 2 for
   Seosan, 10 for the Livox run), ``max(1, round(0.15 n / block))`` of them held out, picked
   by ``numpy.random.default_rng(seed)``. Every method gets the training frames only.
