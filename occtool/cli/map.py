@@ -115,6 +115,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
 
     from occtool import fuse
     from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs, read_log_from_kwargs
+    from occtool.features import log_notes
 
     logger = logging.getLogger("occtool.map")
     georeference = None
@@ -163,8 +164,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
                               registration=registration, keyframe_share=keyframe_share, **written)
         report = result.report
         assert report is not None
-        for note in report.notes:
-            logger.warning("%s: %s", Path(source).name, note)
+        log_notes(logger, Path(source).name, report.notes)
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
         logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,

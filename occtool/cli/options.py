@@ -282,10 +282,11 @@ def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
     """Pop the :data:`log_options` out of a command's keyword arguments and read the log.
 
     Returns the :class:`occtool.features.RangeLog`; its notes (skipped rows, missing
-    poses) are logged at warning level.
+    poses at WARNING, routine facts at INFO) are logged by :func:`occtool.features.log_notes`.
     """
     import logging
 
+    from occtool.features import log_notes
     from occtool.io import read_log
 
     options = pop_log_options(kwargs)
@@ -295,9 +296,7 @@ def read_log_from_kwargs(path: str, kwargs: dict[str, Any]) -> RangeLog:
         log = read_log_stream(**options)
     else:
         log = read_log(path, **options)
-    logger = logging.getLogger("occtool.io")
-    for note in log.notes:
-        logger.warning("%s: %s", Path(path).name, note)
+    log_notes(logging.getLogger("occtool.io"), Path(path).name, log.notes)
     return log
 
 # --- sensor model and fit (owner: core model) -----------------------------------------
