@@ -76,3 +76,13 @@ def test_a_note_keeps_its_level_through_copies_and_processes(caplog):
         log_notes(logger, "x.log", ["a routine fact", note])
     assert [(r.levelno, r.getMessage()) for r in caplog.records] == [
         (logging.INFO, "x.log: a routine fact"), (logging.WARNING, f"x.log: {note}")]
+
+
+def test_other_readers_mark_what_to_act_on(tmp_path):
+    plain = read_log(FIXTURES / "tiny.xyz").notes
+    assert plain and all(note_level(note) == logging.INFO for note in plain)  # constant evidence: routine
+    rows = tmp_path / "rows.csv"
+    rows.write_text("x,y,z,m\n1,0,0,0.9\n1,zero,0,0.9\n0,1,0,0.9\n")
+    notes = read_log(rows, skip_invalid=True).notes
+    skipped = [note for note in notes if note.startswith("skipped 1 invalid row")]
+    assert skipped and note_level(skipped[0]) == logging.WARNING
