@@ -8,7 +8,8 @@ robot :class:`Position`, each with its pose in the world frame when the log has 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import logging
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -292,9 +293,62 @@ class Position:
     source: str = ""
 
 
+class Note(str):
+    """A note a reader leaves for the user: its text, and the logging level it is reported at.
+
+    A reader's ``notes`` are plain strings for routine facts (the constant evidence used, the
+    features kept after a budget, the no-return readings found, where the poses came from):
+    they are logged at INFO, shown with ``-v`` and always by ``occtool info``. A note the user
+    should act on (lines skipped as unparsable, records of unknown type, invalid rows dropped,
+    poses that could not be used, data that disagrees with the options) is a
+    ``Note.warn(text)``: logged at WARNING, shown by default. :func:`log_notes` is the one
+    place that tells them apart. A ``Note`` is a ``str`` (it compares, formats and pickles
+    as its text), so code that only reads notes needs no change.
+
+    Examples
+    --------
+    >>> note_level("constant evidence 0.9 for laser readings (evidence=)") == logging.INFO
+    True
+    >>> note = Note.warn("skipped 2 laser line(s) that do not parse")
+    >>> note, note_level(note) == logging.WARNING
+    ('skipped 2 laser line(s) that do not parse', True)
+    """
+
+    level: int
+
+    def __new__(cls, text: str, level: int = logging.INFO) -> Note:
+        note = super().__new__(cls, text)
+        note.level = level
+        return note
+
+    def __reduce__(self) -> tuple[Any, ...]:  # a worker process's notes keep their level
+        return (Note, (str(self), self.level))
+
+    @classmethod
+    def warn(cls, text: str) -> Note:
+        """A note the user should act on (logged at WARNING)."""
+        return cls(text, logging.WARNING)
+
+
+def note_level(note: str) -> int:
+    """The logging level of a note: a :class:`Note`'s own, INFO for a plain string."""
+    return getattr(note, "level", logging.INFO)
+
+
+def log_notes(logger: logging.Logger, where: str, notes: Iterable[str]) -> None:
+    """Log each note as ``where: note`` at its level (:class:`Note`): routine facts at INFO,
+    what the user should act on at WARNING."""
+    for note in notes:
+        logger.log(note_level(note), "%s: %s", where, note)
+
+
 @dataclass(eq=False)
 class RangeLog:
-    """What a reader returns: the positions of a recording and notes for the user."""
+    """What a reader returns: the positions of a recording and notes for the user.
+
+    ``notes`` are routine facts (plain strings, logged at INFO) and, as :class:`Note` s at
+    WARNING (``Note.warn``), what the user should act on; :func:`log_notes` logs them.
+    """
 
     positions: list[Position]
     source: str = ""

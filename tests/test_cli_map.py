@@ -214,11 +214,13 @@ def test_no_overwrite_refuses_before_work(mapped):
     assert (out / "map.pgm").stat().st_mtime_ns == before
 
 
-def test_evaluate_log_prints_the_figures(mapped):
+def test_evaluate_log_prints_the_figures(mapped, tmp_path):
     log, _ = mapped
-    result = run("evaluate-log", log, "--block", "5", "--holdout", "0.2", "--json", *LASER)
+    # --json FILE: the figures to FILE, the text still printed (bare --json or '-': JSON on stdout).
+    result = run("evaluate-log", log, "--block", "5", "--holdout", "0.2", "--json", tmp_path / "figures.json", *LASER)
     assert result.exit_code == 0, result.output
-    figures = json.loads(result.output)
+    assert "AUC fused_log_odds" in result.output and "issue" not in result.output
+    figures = json.loads((tmp_path / "figures.json").read_text())
     expected = {"fused_log_odds", "fused_dempster_shafer", "fused_mean", "grid", "textbook_0.05m", "textbook_0.1m",
                 "world", "nav2_map",
                 "textbook_fixed_0.05m", "textbook_fixed_0.1m", "counting_0.05m", "counting_0.1m"}
@@ -294,6 +296,26 @@ def test_plot_map_draws_the_folder(mapped, tmp_path):
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["path"]) == summary["positions"]
+
+
+def test_plot_map_walls_have_a_trust_colour_bar(mapped):
+    pytest.importorskip("matplotlib")
+    from occtool.plot import map_figure
+
+    _, out = mapped
+    plain = map_figure(out, size=(4.0, 4.0))
+    assert len(plain.axes) == 1  # no walls, no key
+    figure = map_figure(out, size=(4.0, 4.0), walls=True)
+    assert len(figure.axes) == 2
+    bar = figure.axes[1]
+    assert "trust" in bar.get_ylabel() and bar.get_ylim() == (0.0, 1.0)
+    # The key's colours are the ones the walls are drawn in (trust 0 pale, 1 dark red).
+    from occtool.fuse import load_map
+
+    walls = next(c for c in figure.axes[0].collections if c.get_label() == "walls (world.occmap)")
+    cmap = next(c.get_cmap() for c in bar.collections if c.get_cmap().name == "wall trust")
+    trust = load_map(out / "world.occmap").trust
+    assert len(trust) and np.allclose(cmap(trust)[:, :3], walls.get_colors()[:, :3], atol=0.01)
 
 
 def test_plot_map_draws_a_scale_map_in_greys(mapped, tmp_path):

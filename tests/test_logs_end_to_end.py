@@ -122,12 +122,13 @@ def test_convert_keeps_the_no_return_beams_as_evidence_0_rows(runner, shared_dat
     no_return = sum(int((ranges == 81.83).sum()) for ranges in scans)
     assert len(scans) == 16 and no_return == 213
 
-    result = run(runner, "convert", log, "--group-by", "message", "-o", tmp_path / "plain.csv")
+    result = run(runner, "-v", "convert", log, "--group-by", "message", "-o", tmp_path / "plain.csv")
     assert f"dropped {no_return} of 2880 readings as no return (readings >= 81.83 m)" in messages(result)
     plain = read_log(tmp_path / "plain.csv")
     assert not any((p.features.evidence == 0).any() for p in plain.positions)
 
-    result = run(runner, "convert", log, "--group-by", "message", "--no-return-range", 5, "-o", tmp_path / "free.csv")
+    result = run(runner, "-v", "convert", log, "--group-by", "message", "--no-return-range", 5,
+                 "-o", tmp_path / "free.csv")
     assert (f"kept {no_return} of 2880 readings with no return (readings >= 81.83 m) as free rays at 5 m "
             "with evidence 0 (--no-return-range 5)") in messages(result)
     free = read_log(tmp_path / "free.csv")
@@ -198,7 +199,7 @@ def test_ccny_laser_mcap_is_one_position_with_a_note(runner, shared_data, tmp_pa
 def test_octomap_scan_gives_a_navigation_polygon(runner, shared_data, tmp_path):
     # The floor near the scanner lies 4 to 9 cm below its origin (z -0.04 .. -0.09 within
     # 3 m): with the default 1 m sensor height it would be an obstacle ring at 0.47 m.
-    result = run(runner, "fit", shared_data / OCTOMAP, "--pieces", 8, "-o", tmp_path / "model.json",
+    result = run(runner, "-v", "fit", shared_data / OCTOMAP, "--pieces", 8, "-o", tmp_path / "model.json",
                  "--sensor-height", 0.08, "--body-height", 0.5)
     assert "constant evidence 0.9" in messages(result)
     model = json.loads((tmp_path / "model.json").read_text())

@@ -11,10 +11,12 @@ from occtool.cli.options import (
     config_option,
     extract_options,
     fit_options,
+    json_option,
     log_options,
     overwrite_option,
     refuse_existing,
     seed_option,
+    write_json_report,
 )
 from occtool.limits import MAX_REPEATS
 
@@ -60,8 +62,7 @@ def _holdout(ctx: click.Context | None, param: click.Parameter | None, value: fl
               help="Build and extract each model this many times; report the shortest time.")
 @click.option("--position", type=click.IntRange(min=0), default=None,
               help="Robot position of a multi-position log (default: the only one).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, allow_dash=True), default=None,
-              help="Write the report as JSON to this file ('-': standard output, instead of the table).")
+@json_option("the report")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Draw the navigation polygons to this image (needs the plot extra).")
 @overwrite_option
@@ -100,7 +101,6 @@ def compare_grid(
     import logging
 
     refuse_existing(overwrite, json_path, plot_path)
-    from occtool._files import atomic_write
     from occtool.cli.options import (
         extract_from_kwargs,
         fit_from_kwargs,
@@ -142,14 +142,12 @@ def compare_grid(
         unknown=unknown,
     )
     report["input"] = str(log_path)
-    if json_path is not None:
-        with atomic_write(json_path, "w") as handle:
-            handle.write(report_json(report) + "\n")
+    to_stdout = write_json_report(json_path, report_json(report))
     if plot_path is not None:
         from occtool.plot import compare_figure, save_figure
 
         save_figure(compare_figure(report, source=str(log_path)), plot_path)
-    if json_path != "-":
+    if not to_stdout:
         from rich.console import Console
 
         Console().print(report_table(report))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from occtool.cli.options import config_option
+from occtool.cli.options import config_option, json_option, write_json_report
 from occtool.limits import MAX_DISTANCE, MAX_RAYS, MAX_ROBOT_SIZE
 
 
@@ -19,10 +19,10 @@ from occtool.limits import MAX_DISTANCE, MAX_RAYS, MAX_ROBOT_SIZE
               help="Rays of the angular sweep tracing the reachable region.")
 @click.option("--point-tolerance", type=click.FloatRange(min=0.0), default=0.05, show_default=True,
               help="Metres short of the max range that still count as open, judging the map's points.")
-@click.option("--json", "as_json", is_flag=True, default=False, help="Print the scores as JSON.")
+@json_option("the scores")
 @config_option
 def evaluate(navigation: str, truth: str, robot_radius: float | None, max_range: float | None, rays: int,
-             point_tolerance: float, as_json: bool) -> None:
+             point_tolerance: float, json_path: str | None) -> None:
     """Compare the navigation polygon in NAV.geojson with the region reachable in TRUTH.json.
 
     IoU is area(nav & truth) / area(nav | truth); violation is the share of the
@@ -59,9 +59,8 @@ def evaluate(navigation: str, truth: str, robot_radius: float | None, max_range:
     result = evaluate_navigation(polygon, scene, robot_radius=radius, max_range=limit, n_rays=rays,
                                  obstacle_points=obstacle_points, exploration_points=exploration_points,
                                  point_tolerance=point_tolerance)
-    if as_json:
-        click.echo(json.dumps({"navigation": navigation, "truth": truth, "scene": scene.name, **result.to_dict()},
-                              indent=1))
+    if write_json_report(json_path, json.dumps(
+            {"navigation": navigation, "truth": truth, "scene": scene.name, **result.to_dict()}, indent=1)):
         return
     from rich.console import Console
     from rich.table import Table

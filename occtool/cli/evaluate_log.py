@@ -6,7 +6,15 @@ from typing import Any
 
 import click
 
-from occtool.cli.options import config_option, fit_options, log_options, seed_option
+from occtool.cli.options import (
+    KEYFRAME_SHARE_HELP,
+    config_option,
+    fit_options,
+    json_option,
+    log_options,
+    seed_option,
+    write_json_report,
+)
 
 
 @click.command(short_help="Score the fused map of a log against a grid on held-out scans.")
@@ -18,15 +26,14 @@ from occtool.cli.options import config_option, fit_options, log_options, seed_op
 @click.option("--resolution", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.05,
               show_default=True, help="Cell size of the grid and of the map's raster, metres.")
 @click.option("--keyframe-share", type=click.FloatRange(min=0.0, max=1.0), default=None,
-              help="Fit a training position only when this share of the cells its returns hit is new "
-                   "(default 0.05; 0 fits every position).")
-@click.option("--json", "as_json", is_flag=True, default=False, help="Print the figures as JSON.")
+              help=KEYFRAME_SHARE_HELP + " Default 0.05; 0 fits every training position.")
+@json_option("the figures")
 @fit_options
 @log_options
 @seed_option
 @config_option
 def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, keyframe_share: float | None,
-                 as_json: bool, seed: int, **kwargs: Any) -> None:
+                 json_path: str | None, seed: int, **kwargs: Any) -> None:
     """Hold out --holdout of LOG's scans in blocks of --block consecutive scans, fuse the
     local models of the rest, build a dense 2D log-odds grid (OctoMap's parameters), the
     textbook log-odds grid at 0.05 and 0.1 m (tuned on an inner split of the training
@@ -46,8 +53,7 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
     no_return = options.pop("no_return_range", None)
     result = score(log_path, template, holdout=holdout, block=block, seed=seed, resolution=resolution,
                    no_return_range=no_return, read_options=options, keyframe_share=keyframe_share).as_dict()
-    if as_json:
-        click.echo(json.dumps(result, indent=1))
+    if write_json_report(json_path, json.dumps(result, indent=1)):
         return
     auc = result["auc"]
     click.echo(f"{result['source']}: {result['scans']} scans, {result['held_out_scans']} held out "
@@ -69,7 +75,7 @@ def evaluate_log(log_path: str, holdout: float, block: int, resolution: float, k
                    f"free points on occupied {hits['free_on_occupied']:.1%}, on unknown {hits['free_on_unknown']:.1%}")
     for name, figures in (result["textbook"] or {}).items():
         how = ("tuned on an inner split of the training scans" + (f", {figures['note']}" if figures.get("note") else "")
-               if "inner_auc" in figures else "the issue's fixed setting")
+               if "inner_auc" in figures else "fixed, not tuned")
         setting = (f"prior {figures['prior']:g} pseudo-beams" if "prior" in figures else
                    f"l_occ {figures['l_occ']:g}, l_free {figures['l_free']:g}, clamp "
                    f"[{figures['clamp'][0]:g}, {figures['clamp'][1]:g}]")

@@ -48,7 +48,7 @@ def _robot_given(ctx: click.Context) -> set[str]:
                    "promise), or every point where the body fits.")
 @click.option("--world", is_flag=True, default=False,
               help="Model set: move each position's map into the world (map) frame by its pose.")
-@jobs_options
+@jobs_options("the number of position models whose navigation maps are extracted at once")
 @overwrite_option
 @config_option
 def extract(

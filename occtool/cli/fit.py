@@ -22,7 +22,7 @@ from occtool.cli.options import (
 @overwrite_option
 @click.option("--position", type=click.IntRange(min=0), default=None,
               help="Robot position of a multi-position log to fit (default: the only one).")
-@jobs_options
+@jobs_options("the number of robot positions whose models are fitted at once")
 @click.option("--skip-existing", is_flag=True, default=False,
               help="Model sets: keep each model file whose input and settings match (resume a stopped run).")
 @fit_options

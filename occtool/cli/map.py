@@ -7,6 +7,7 @@ from typing import Any
 import click
 
 from occtool.cli.options import (
+    KEYFRAME_SHARE_HELP,
     config_option,
     fit_options,
     log_options,
@@ -65,10 +66,15 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
                    "map.png with the fused occupancy graded between free and occupied, unknown transparent "
                    "(needs Pillow: the png extra).")
 @click.option("--threshold", type=float, default=0.6, show_default=True, callback=_occupancy,
-              help="Fused occupancy at or above which a cell is occupied, in (0, 1).")
+              help="Fused occupancy at or above which a place is occupied, in (0, 1): it cuts each "
+                   "position's navigation polygon (navigation.geojson) and, in fusing, marks the occupied margin "
+                   "in front of a position's first obstacles that is left to the other positions. It does not "
+                   "grade the Nav2 map: map.pgm is occupied where the world "
+                   "map's occupancy reaches 0.65 and free where it is at most 0.35 (unknown between), and "
+                   "map.yaml says occupied_thresh 0.65, free_thresh 0.196, which is how map_server reads "
+                   "those pixels (not map_saver's old 0.25, which reads unknown as free).")
 @click.option("--keyframe-share", type=click.FloatRange(min=0.0, max=1.0), default=0.05, show_default=True,
-              help="Fit a position of LOG only when this share of the cells its returns hit is new (0: every "
-                   "position).")
+              help=KEYFRAME_SHARE_HELP + " 0 fits every position.")
 @click.option("--combination", type=click.Choice(["log_odds", "dempster_shafer", "mean"]), default="log_odds",
               show_default=True, help="How the positions that observed a place are combined.")
 @click.option("--max-range", type=click.FloatRange(min=0.0, min_open=True), default=1.5, show_default=True,
@@ -115,6 +121,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
 
     from occtool import fuse
     from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs, read_log_from_kwargs
+    from occtool.features import log_notes
 
     logger = logging.getLogger("occtool.map")
     georeference = None
@@ -163,8 +170,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
                               registration=registration, keyframe_share=keyframe_share, **written)
         report = result.report
         assert report is not None
-        for note in report.notes:
-            logger.warning("%s: %s", Path(source).name, note)
+        log_notes(logger, Path(source).name, report.notes)
         for index, message in report.skipped:
             logger.warning("position %d skipped: %s", index, message)
         logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,

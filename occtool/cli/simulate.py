@@ -18,7 +18,21 @@ def _scene_name(ctx: click.Context, param: click.Parameter, value: str) -> str:
     return value
 
 
-@click.command("simulate")
+class _SimulateCommand(click.Command):
+    """``simulate``, whose help lists every scene of the catalogue with its description, read
+    from :data:`occtool.simulate.SCENES` itself so that the list cannot drift from it."""
+
+    def format_help_text(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        super().format_help_text(ctx, formatter)
+        # Imported here, not at the module's top: the catalogue imports numpy and the scene
+        # geometry (cold start), and only the help needs it before a scene is built.
+        from occtool.simulate import SCENES
+
+        with formatter.section("Scenes (see docs/scenes.md)"):
+            formatter.write_dl(list(SCENES.items()))
+
+
+@click.command("simulate", cls=_SimulateCommand)
 @click.argument("scene", callback=_scene_name, metavar="SCENE")
 @click.option("-o", "--output", "output", required=True, type=click.Path(file_okay=False),
               help="Folder to write features.csv and truth.json into (created if missing).")
@@ -55,9 +69,9 @@ def simulate(scene: str, output: str, features: int, seed: int, noise: float, ou
              sensor_range: float, depth_frames: str | None, overwrite: bool) -> None:
     """Simulate a pan-tilt stereo camera in SCENE and write DIR/features.csv and DIR/truth.json.
 
-    Scenes: office, corridor, clutter, open (see docs/scenes.md). Features are in the
-    sensor-centred robot frame (x forward, y left, z up, metres); the truth holds the
-    scene's obstacles as prisms with heights above the floor.
+    SCENE is one of the scenes listed below. Features are in the sensor-centred robot
+    frame (x forward, y left, z up, metres); the truth holds the scene's obstacles as
+    prisms with heights above the floor.
     """
     import logging
 

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.features import Pose, RangeLog
+from occtool.features import Note, Pose, RangeLog
 from occtool.io.csv import open_text
 from occtool.io.positions import Scan, group_scans
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
@@ -343,9 +343,9 @@ class CarmenScans:
                 notes.append(f"dropped {invalid} of {readings} readings <= 0 or NaN")
         notes.append(f"constant evidence {self.evidence} for laser readings (evidence=)")
         if self.skipped_lines:
-            notes.append(f"skipped {self.skipped_lines} laser line(s) that do not parse")
+            notes.append(Note.warn(f"skipped {self.skipped_lines} laser line(s) that do not parse"))
         if self.unknown:
-            notes.append(f"ignored records of unknown type: {', '.join(sorted(self.unknown)[:5])}")
+            notes.append(Note.warn(f"ignored records of unknown type: {', '.join(sorted(self.unknown)[:5])}"))
         return notes
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features, Pose, Position, RangeLog
+from occtool.features import Features, Note, Pose, Position, RangeLog
 from occtool.io.positions import assign_positions, to_reference_frame
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 from occtool.limits import MAX_COORDINATE
@@ -236,7 +236,7 @@ def read_csv(path: str | os.PathLike[str], options: ReadOptions | None = None, *
     # (mypy: without an evidence column the layout has a constant evidence, checked in _find_layout.)
     m = columns[layout.evidence] if layout.evidence is not None else np.full(data.shape[0], float(evidence))  # type: ignore[arg-type]
     if skipped:
-        notes.append(f"skipped {skipped} invalid row(s) of {name}")
+        notes.append(Note.warn(f"skipped {skipped} invalid row(s) of {name}"))
         logger.debug("skipped %d invalid rows of %s", skipped, name)
     if data.shape[0] == 0:
         raise InputError(f"{name} holds no valid rows ({skipped} skipped)")

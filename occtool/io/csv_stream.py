@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features, Pose, Position
+from occtool.features import Features, Note, Pose, Position
 from occtool.io.csv import (
     _checked_rows,
     _content,
@@ -87,7 +87,7 @@ def iter_csv(
     if rows == 0 and not skipped:
         raise InputError(f"{name} has a header but no data rows")
     if skipped:
-        notes.append(f"skipped {skipped} invalid row(s) of {name}")
+        notes.append(Note.warn(f"skipped {skipped} invalid row(s) of {name}"))
         logger.debug("skipped %d invalid rows of %s", skipped, name)
     if gatherer.count == 0 and not gatherer.pending:
         raise InputError(f"{name} holds no valid rows ({skipped} skipped)")

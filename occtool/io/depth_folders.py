@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError, MissingDependencyError
-from occtool.features import RangeLog
+from occtool.features import Note, RangeLog
 from occtool.io.depth import (
     DEFAULT_DEPTH_MIN_RANGE,
     DepthCounts,
@@ -236,7 +236,7 @@ def _tum_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[flo
                 matrix[:3, 3] = values[1:4]
                 poses.append((values[0], matrix))
     else:
-        notes.append(f"{folder} has no groundtruth.txt: the frames have no poses")
+        notes.append(Note.warn(f"{folder} has no groundtruth.txt: the frames have no poses"))
     result: list[_Frame] = []
     if poses:
         poses.sort(key=lambda item: item[0])
@@ -250,8 +250,8 @@ def _tum_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[flo
                 continue
             result.append(_Frame(image, poses[best][1], stamp, where))
         if unposed:
-            notes.append(f"dropped {unposed} depth frame(s) without a ground-truth pose within "
-                         f"{TUM_MAX_POSE_GAP:g} s")
+            notes.append(Note.warn(f"dropped {unposed} depth frame(s) without a ground-truth pose within "
+                                   f"{TUM_MAX_POSE_GAP:g} s"))
         if not result:
             raise InputError(f"{folder}: no depth frame has a ground-truth pose within {TUM_MAX_POSE_GAP:g} s")
     else:
@@ -267,13 +267,15 @@ def _tum_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[flo
             intrinsics = TUM_INTRINSICS[key]
             notes.append(f"intrinsics: TUM's {key} camera {intrinsics} (fx, fy, cx, cy; from the folder's name)")
             if key in TUM_DISTORTED:
-                notes.append(f"warning: TUM's {key} camera has lens distortion (its published d0-d4), ignored: "
-                             "the images are back-projected through the pinhole K alone (undistorting them "
-                             "needs OpenCV, not a dependency)")
+                notes.append(Note.warn(
+                    f"warning: TUM's {key} camera has lens distortion (its published d0-d4), ignored: "
+                    "the images are back-projected through the pinhole K alone (undistorting them "
+                    "needs OpenCV, not a dependency)"))
         else:
             intrinsics = ROS_DEFAULT_INTRINSICS
-            notes.append(f"no camera-intrinsics.txt: the ROS default intrinsics {intrinsics} (fx, fy, cx, cy) "
-                         "were taken")
+            notes.append(Note.warn(
+                f"no camera-intrinsics.txt: the ROS default intrinsics {intrinsics} (fx, fy, cx, cy) "
+                "were taken"))
     return result, intrinsics, True
 
 
@@ -292,7 +294,7 @@ def _match_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[f
         values = _matrix(pose_file, 4, "a pose")
         if not np.isfinite(values).all():
             # 7-Scenes and 3DMatch mark a frame whose tracking failed with -inf or NaN poses.
-            notes.append(f"{pose_file.name}: the pose is not finite (tracking lost): frame dropped")
+            notes.append(Note.warn(f"{pose_file.name}: the pose is not finite (tracking lost): frame dropped"))
             continue
         frames.append(_Frame(image, check_rigid(values, where), None, f"{image.parent.name}/{image.name}"))
     intrinsics_file = next((p for p in (folder / "camera-intrinsics.txt", folder.parent / "camera-intrinsics.txt")
@@ -412,12 +414,14 @@ class DepthFolderScans:
                 found = floor_mounting((points @ OPTICAL_TO_BODY)[evidence > 0.0])
             self.unposed = (None if found is None else found[0] @ OPTICAL_TO_BODY.T, found)
             if found is None:
-                notes.append("warning: frames without a pose, and no floor plane in the first: the camera taken as "
-                             "level (optical axis horizontal)")
+                notes.append(Note.warn(
+                    "warning: frames without a pose, and no floor plane in the first: the camera taken as "
+                    "level (optical axis horizontal)"))
             else:
-                notes.append(f"warning: frames without a pose: the camera's tilt ({found[2]:.1f} degrees) and "
-                             f"height ({found[1]:.2f} m) estimated from the floor plane in the first; give the fit "
-                             f"--sensor-height {found[1]:.2f}")
+                notes.append(Note.warn(
+                    f"warning: frames without a pose: the camera's tilt ({found[2]:.1f} degrees) and "
+                    f"height ({found[1]:.2f} m) estimated from the floor plane in the first; give the fit "
+                    f"--sensor-height {found[1]:.2f}"))
         self._notes = notes
         self._prepared = True
 
@@ -445,7 +449,7 @@ class DepthFolderScans:
             yield Scan(moved, evidence, pose, frame.stamp, frame.source)
         notes = list(self._notes)
         if unreadable:
-            notes.append(f"skipped {unreadable} depth frame(s) whose image could not be read")
+            notes.append(Note.warn(f"skipped {unreadable} depth frame(s) whose image could not be read"))
         if heights and self.floor_offset != 0.0:
             notes.append(f"camera heights above the floor: median {np.median(heights):.2f} m "
                          f"({min(heights):.2f} to {max(heights):.2f} m); give the fit --sensor-height "
@@ -499,8 +503,8 @@ def _level_world(posed: list[tuple[FloatArray, FloatArray, _Frame]], z_up: bool
         if z_up:
             notes.append("no floor plane found in the frames: the world's z is taken as up and heights as given")
             return np.eye(4), 0.0, notes
-        notes.append("warning: the poses' world is not level and no floor plane was found: up taken as the "
-                     "first camera's -y axis (give level poses, or frames that see the floor)")
+        notes.append(Note.warn("warning: the poses' world is not level and no floor plane was found: up taken as the "
+                               "first camera's -y axis (give level poses, or frames that see the floor)"))
         level = np.eye(4)
         level[:3, :3] = level_rotation(guess)
         return level, 0.0, notes
@@ -510,12 +514,13 @@ def _level_world(posed: list[tuple[FloatArray, FloatArray, _Frame]], z_up: bool
         notes.append(f"floor plane found ({inliers:,} of {cloud.shape[0]:,} sampled returns, {tilt:.1f} degrees "
                      f"from the world's z): heights measured from it")
         if tilt > 5.0:
-            notes.append("warning: the floor is tilted more than 5 degrees from the world's z; the world's z is "
-                         "kept as up")
+            notes.append(Note.warn(
+                "warning: the floor is tilted more than 5 degrees from the world's z; the world's z is "
+                "kept as up"))
         return np.eye(4), float(offset / normal[2]), notes
-    notes.append(f"warning: the poses' world (3DMatch / 7-Scenes: the first camera's) is not level: up "
-                 f"estimated from the floor plane ({inliers:,} of {cloud.shape[0]:,} sampled returns, "
-                 f"{tilt:.1f} degrees from the first camera's -y axis)")
+    notes.append(Note.warn(f"warning: the poses' world (3DMatch / 7-Scenes: the first camera's) is not level: up "
+                           f"estimated from the floor plane ({inliers:,} of {cloud.shape[0]:,} sampled returns, "
+                           f"{tilt:.1f} degrees from the first camera's -y axis)"))
     level = np.eye(4)
     level[:3, :3] = level_rotation(normal)
     return level, offset, notes

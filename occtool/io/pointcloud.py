@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.features import Pose, RangeLog
+from occtool.features import Note, Pose, RangeLog
 from occtool.io.csv import open_text
 from occtool.io.positions import Scan, build_log
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
@@ -144,12 +144,12 @@ def _notes(counts: dict[str, int]) -> list[str]:
     if counts["origin"]:
         notes.append(f"dropped {counts['origin']} point(s) at the sensor origin (no return)")
     if counts["invalid"]:
-        notes.append(f"skipped {counts['invalid']} point(s) with evidence outside [0, 1] or farther than "
-                     f"{MAX_COORDINATE:g} m")
+        notes.append(Note.warn(f"skipped {counts['invalid']} point(s) with evidence outside [0, 1] or farther than "
+                               f"{MAX_COORDINATE:g} m"))
     if counts.get("scans"):
-        notes.append(f"dropped {counts['scans']} scan(s) whose NODE pose is not finite, with their points")
+        notes.append(Note.warn(f"dropped {counts['scans']} scan(s) whose NODE pose is not finite, with their points"))
     if counts.get("lines"):
-        notes.append(f"skipped {counts['lines']} line(s) that do not parse")
+        notes.append(Note.warn(f"skipped {counts['lines']} line(s) that do not parse"))
     return notes
 
 

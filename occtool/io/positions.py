@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.features import Features, Pose, Position, RangeLog
+from occtool.features import Features, Note, Pose, Position, RangeLog
 from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE, GROUP_BY_CHOICES, check_tolerance
 
 
@@ -203,7 +203,8 @@ def group_scans(
     # A single scan without a pose is the normal case of a one-shot file; say so only when
     # several scans were merged on the assumption that the robot did not move.
     if count > 1 and not has_poses and group_by == "position":
-        notes.append(f"the log has no poses: its {count} scans form one position (group_by='message' splits them)")
+        notes.append(Note.warn(
+            f"the log has no poses: its {count} scans form one position (group_by='message' splits them)"))
     if dropped_at_origin:
         notes.append(f"{dropped_at_origin} point(s) fell on the position's sensor origin and were dropped")
     if not produced:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from occtool.errors import InputError
-from occtool.features import Pose, RangeLog
+from occtool.features import Note, Pose, RangeLog
 from occtool.io.positions import Scan, build_log
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
@@ -110,7 +110,7 @@ def iter_urg_scans(path: str | os.PathLike[str], *, evidence: float = 0.9, skip_
         if dropped:
             notes.append(f"dropped {dropped} of {readings} readings of 0 (no detection) or beyond {MAX_RANGE:g} m")
         if skipped:
-            notes.append(f"skipped {skipped} line(s) that do not parse")
+            notes.append(Note.warn(f"skipped {skipped} line(s) that do not parse"))
 
 
 def read_urg(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:

@@ -202,6 +202,7 @@ def fit_model_set(
     """
     from occtool._version import __version__
     from occtool.executor import check_jobs, make_executor
+    from occtool.features import log_notes
     from occtool.fit import OccupancyRegressor, features_digest
     from occtool.formats.model import save_model_text, with_run
     from occtool.observation import returns_per_degree
@@ -280,8 +281,7 @@ def fit_model_set(
                 state["logs_read"] += 1
                 notify("failed", name)
                 continue
-            for note in stream.notes:
-                log.warning("%s: %s", Path(name).name, note)
+            log_notes(log, Path(name).name, stream.notes)
             log_template = survey.result()
             params = log_template.get_params(deep=False)
             settings = log_settings[number] = settings_digest(log_template)

@@ -128,13 +128,31 @@ def decimate(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
     return reduced
 
 
+#: A wall's colour is ``(1, 1 - trust, 1 - trust) * _WALL_SHADE``: dark red at trust 1,
+#: pale red at 0, linear between (so a two-colour map is its exact key).
+_WALL_SHADE = np.array([0.85, 0.6, 0.6, 1.0])
+
+
+def _trust_key(figure: Any, axes: Any) -> None:
+    """The colour bar naming what a wall's colour means: its trust, 0 to 1."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+
+    colours = np.array([[1.0, 1.0, 1.0, 1.0], [1.0, 0.0, 0.0, 1.0]]) * _WALL_SHADE
+    scale = ScalarMappable(Normalize(0.0, 1.0), LinearSegmentedColormap.from_list("wall trust", colours))
+    bar = figure.colorbar(scale, ax=axes, fraction=0.04, pad=0.02)
+    bar.set_label("wall trust (0-1): share of the positions that saw the wall\nthat returned from it "
+                  "(low: mostly seen through)", fontsize="small")
+    bar.ax.tick_params(labelsize="small")
+
+
 def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SIZE, dpi: float = 100.0,
                title: str | None = None, path: bool = True, frontiers: bool = True, walls: bool = False) -> Any:
     """Free (white), occupied (black) and unknown (grey; pale blue in a scale map, whose graded
     cells are greys) cells in the map frame, the run's
     path (blue), the frontier points (green) and (``walls``) the world map's wall
     segments, from ``world.occmap``, red where every position that saw them returned from
-    them and paler as more saw through them.
+    them and paler as more saw through them, with a colour bar of that trust (0-1).
 
     A map with more cells than the axes have pixels is drawn block by block, each block
     its darkest cell (:func:`decimate`)."""
@@ -170,8 +188,9 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
         world = load_map(Path(folder) / "world.occmap")
         lines = list(np.stack([world.start, world.end], axis=1))
         colours = np.column_stack([np.ones(len(world)), 1.0 - world.trust, 1.0 - world.trust, np.ones(len(world))])
-        axes.add_collection(LineCollection(lines, colors=colours * [0.85, 0.6, 0.6, 1.0], linewidths=0.6,
+        axes.add_collection(LineCollection(lines, colors=colours * _WALL_SHADE, linewidths=0.6,
                                            label="walls (world.occmap)"))
+        _trust_key(figure, axes)
     if frontiers and len(frontier_points):
         axes.scatter(frontier_points[:, 0], frontier_points[:, 1], s=6, color="tab:green", label="frontiers")
     axes.set_aspect("equal")

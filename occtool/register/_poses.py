@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from occtool.features import Pose, RangeLog
+from occtool.features import Pose, RangeLog, log_notes
 from occtool.register._core import RegistrationReport, RegistrationSettings
 from occtool.register._scans import read_registered_log
 
@@ -31,14 +31,13 @@ def read_map_log(source: str | os.PathLike[str], read_options: Mapping[str, Any]
     """Read the log of a map (:func:`occtool.fuse.map_log`): with ``read_options`` (the
     keywords of :func:`occtool.io.read_log`), registered when ``register`` is true or, by
     default (``None``), when it needs it (:func:`needs_registration`). Its notes are logged
-    (``occtool.io``, warning). Returns the log and the registration report (``None`` when
-    its own poses are kept)."""
+    (``occtool.io``, each at its level: :func:`occtool.features.log_notes`). Returns the log
+    and the registration report (``None`` when its own poses are kept)."""
     import logging
 
     log, report = read_registered_log(str(source), dict(read_options or {}), register, settings=settings)
     logger = logging.getLogger("occtool.io")
-    for note in log.notes:
-        logger.warning("%s: %s", Path(source).name, note)
+    log_notes(logger, Path(source).name, log.notes)
     return log, report
 
 

@@ -11,7 +11,7 @@ free. ROC AUC (:func:`roc_auc`) with model bytes and build times.
 Beside that grid, the textbook one (:func:`occtool.grid.textbook_grid`: each cell updated
 once a scan, ``l_occ`` at the return, ``l_free`` before it, clamped after every scan) at
 0.05 and 0.1 m, its settings tuned on an inner split of the training scans alone
-(:func:`tune_textbook`), and with the issue's fixed ones; and the counting-model
+(:func:`tune_textbook`), and with the textbook's fixed ones (:data:`TEXTBOOK_DEFAULTS`); and the counting-model
 grid (:func:`occtool.grid.counting_grid`: per cell the share of the beams reaching it that
 returned there), its prior tuned the same way (:func:`textbook_scores`).
 
@@ -104,7 +104,7 @@ class LogScore:
     octomap_s: float | None = None
     octomap_note: str = ""
     #: The textbook grids (``auc["textbook_0.05m"]`` tuned, ``auc["textbook_fixed_0.05m"]`` the
-    #: issue's setting, ``auc["counting_0.05m"]`` the counting model...): per name the chosen
+    #: textbook's fixed setting, ``auc["counting_0.05m"]`` the counting model...): per name the chosen
     #: setting, its inner AUC, bytes at one byte a cell over the training box, and the
     #: candidates tried (:func:`textbook_scores`).
     textbook: dict[str, Any] | None = None
@@ -156,7 +156,7 @@ def evaluate_log(path: str, template: Any, *, holdout: float = HOLDOUT, block: i
 
     The textbook grids at 0.05 and 0.1 m are always scored (:func:`textbook_scores`): tuned on
     an inner split of the training scans with the same ``holdout``, ``block`` and ``seed``,
-    and with the issue's fixed setting, and the counting-model grids (prior tuned the same
+    and with the textbook's fixed setting, and the counting-model grids (prior tuned the same
     way); :attr:`LogScore.textbook` holds their settings.
     """
     from occtool.fuse import fuse_log

@@ -35,7 +35,7 @@ from occtool.scoring._metrics import grouped_auc
 
 FloatArray = NDArray[np.float64]
 
-#: Candidate settings: the issue's 0.85 / -0.4 / [-2, 3.5] and a few around it.
+#: Candidate settings: the textbook's 0.85 / -0.4 / [-2, 3.5] and a few around it.
 RESOLUTIONS = (0.05, 0.1)
 #: On Intel's training scans the inner AUC peaks on a flat ridge near l_occ / -l_free = 30-40
 #: (l_occ 0.85-1.5 with l_free -0.02 to -0.05); FR-079's at the weakest l_free tried first
@@ -59,7 +59,7 @@ class TunedGrid:
     params: TextbookParams
     grid: TextbookGrid
     inner_auc: float
-    #: The issue's fixed setting (:data:`TEXTBOOK_DEFAULTS`) at this resolution, from all training scans.
+    #: The textbook's fixed setting (:data:`TEXTBOOK_DEFAULTS`) at this resolution, from all training scans.
     default_grid: TextbookGrid
     candidates: list[dict[str, Any]] = field(default_factory=list)
     note: str = ""

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
+from occtool.features import Note
 from occtool.io.depth import (
     DEFAULT_DEPTH_FEATURES,
     DEFAULT_DEPTH_MAX_RANGE,
@@ -184,18 +185,19 @@ def decode_depth(kind: str, message: Any, settings: DepthSettings, no_return_ran
 def depth_notes(settings: DepthSettings, no_return_range: float | None) -> list[str]:
     notes = settings.counts.notes(no_return_range, settings.max_range)
     if settings.distorted & set(settings.cameras):
-        notes.append(f"distortion coefficients of {', '.join(sorted(settings.distorted))} ignored "
-                     "(a rectified image_rect topic has none)")
+        notes.append(Note.warn(f"distortion coefficients of {', '.join(sorted(settings.distorted))} ignored "
+                               "(a rectified image_rect topic has none)"))
     for frame, found in sorted(settings.from_floor.items()):
         if found is not None:
-            notes.append(f"warning: no /tf_static transform from {frame} to the base frame: the camera's tilt "
-                         f"({found[2]:.1f} degrees) and height ({found[1]:.2f} m) estimated from the floor plane "
-                         "in its first image")
+            notes.append(Note.warn(
+                f"warning: no /tf_static transform from {frame} to the base frame: the camera's tilt "
+                f"({found[2]:.1f} degrees) and height ({found[1]:.2f} m) estimated from the floor plane "
+                "in its first image"))
     level = settings.level_frames - {f for f, found in settings.from_floor.items() if found is not None}
     if level:
-        notes.append(f"warning: no /tf_static transform from {', '.join(sorted(level))} to the base "
-                     "frame and no floor plane in its first image: the depth camera taken as level, looking "
-                     "along the base's x axis (optical z)")
+        notes.append(Note.warn(f"warning: no /tf_static transform from {', '.join(sorted(level))} to the base "
+                               "frame and no floor plane in its first image: the depth camera taken as level, looking "
+                               "along the base's x axis (optical z)"))
     return notes
 
 

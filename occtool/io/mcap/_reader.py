@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from occtool.errors import InputError
-from occtool.features import Features, Pose, Position, RangeLog
+from occtool.features import Features, Note, Pose, Position, RangeLog
 from occtool.io.mcap._channels import (
     CAMERA_INFO,
     DEPTH_KINDS,
@@ -326,10 +326,10 @@ def _reading_notes(scans: _Scans) -> list[str]:
     evidence, no_return_range = options.settings.evidence, options.settings.no_return_range
     notes: list[str] = []
     if scans.unmounted:
-        notes.append(
+        notes.append(Note.warn(
             f"no /tf_static transform from {', '.join(sorted(scans.unmounted))} to {scans.base_name}: "
             "points kept in the sensor frame's axes"
-        )
+        ))
     if options.constant_for:
         value = DEFAULT_CONSTANT_EVIDENCE if evidence is None else evidence
         notes.append(f"constant evidence {value} (evidence=) for {' and '.join(sorted(options.constant_for))}")
@@ -344,14 +344,14 @@ def _reading_notes(scans: _Scans) -> list[str]:
                          f"(+inf or above range_max) as free rays at {at} with evidence 0 "
                          f"(no_return_range={no_return_range:g})")
     if options.invalid_beams:
-        notes.append(f"dropped {options.invalid_beams} of {options.beams} invalid laser beam(s) "
-                     "(NaN, -inf, <= 0 or below range_min)")
+        notes.append(Note.warn(f"dropped {options.invalid_beams} of {options.beams} invalid laser beam(s) "
+                               "(NaN, -inf, <= 0 or below range_min)"))
     if scans.dropped_nan:
         notes.append(f"dropped {scans.dropped_nan} point(s) with NaN coordinates (no return)")
     if scans.dropped_origin:
         notes.append(f"dropped {scans.dropped_origin} point(s) at the sensor origin (no return)")
     if options.skipped_invalid:
-        notes.append(f"skipped {options.skipped_invalid} point(s) with evidence outside [0, 1] or NaN")
+        notes.append(Note.warn(f"skipped {options.skipped_invalid} point(s) with evidence outside [0, 1] or NaN"))
     if options.depth is not None:
         notes += depth_notes(options.depth, no_return_range)
     return notes
