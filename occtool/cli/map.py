@@ -120,7 +120,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
     from pathlib import Path
 
     from occtool import fuse
-    from occtool.cli.options import LOG_OPTION_NAMES, fit_from_kwargs, read_log_from_kwargs
+    from occtool.cli.options import fit_from_kwargs, pop_log_options, read_log_from_kwargs
     from occtool.features import log_notes
 
     logger = logging.getLogger("occtool.map")
@@ -162,10 +162,8 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
         estimator = fit_from_kwargs(kwargs, seed=seed)
         registration = RegistrationSettings(loop_closure=kwargs.pop("loop_closure", True))
         register = kwargs.pop("register", None)
-        read_options = {name: kwargs.pop(name) for name in LOG_OPTION_NAMES if name in kwargs}
-        if "topics" in read_options:
-            read_options["topics"] = list(read_options["topics"]) or None
-        log = read_log_from_kwargs(source, read_options) if str(source) == "-" else source
+        read_options = pop_log_options(kwargs)
+        log = read_log_from_kwargs(source, dict(read_options)) if str(source) == "-" else source
         result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
                               registration=registration, keyframe_share=keyframe_share, **written)
         report = result.report
