@@ -41,3 +41,11 @@ MAX_SWEEPS = 1000
 MAX_REPEATS = 1000
 #: Largest simulated range noise, metres per metre squared (the default is 0.01).
 MAX_RANGE_NOISE = 10.0
+#: Largest world coordinate (a pose's x, y, z or yaw, a world map's corner), metres
+#: (radians): 100,000 km, beyond every frame on Earth (UTM northings reach 1e7 m, ECEF
+#: coordinates 6.4e6 m) and far below where squares overflow.
+MAX_WORLD_COORDINATE = 1e8
+#: Largest ``world.occmap`` read, bytes: 1,500 times the Intel lab's map (44 KB). Decoding
+#: takes up to ~20 times the file's size (a float64 end point pair and a shapely vertex
+#: for a few bytes), so this bounds a hostile file's memory near 1.3 GB.
+MAX_MAP_BYTES = 64 * 2**20
