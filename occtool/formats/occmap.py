@@ -375,7 +375,9 @@ def _grid_fields(header: dict[str, Any], version: int) -> tuple[float, float | N
     if not (isinstance(corner, list) and len(corner) == 2):
         raise ValueError(f"origin {_short(corner)} is not two numbers")
     origin = np.array([_number(corner[0]), _number(corner[1])])
-    if not (MIN_UNIT <= unit and np.abs(origin).max() <= MAX_WORLD_COORDINATE
+    if unit < MIN_UNIT:
+        raise ValueError(f"unit {unit:g} m is below {MIN_UNIT:g} m")
+    if not (np.abs(origin).max() <= MAX_WORLD_COORDINATE
             and np.abs(origin + 65535 * unit).max() <= MAX_WORLD_COORDINATE):
         raise ValueError(f"a grid of {unit:g} m from {origin.tolist()} reaches past {MAX_WORLD_COORDINATE:g} m")
     if half_unit is not None and not MIN_UNIT <= half_unit <= MAX_DISTANCE / 255:
