@@ -286,7 +286,7 @@ def test_files_that_are_no_regular_file_or_too_large_are_refused_before_reading(
         handle.truncate(1_500_000_000)
     tracemalloc.start()
     try:
-        with pytest.raises(InputError, match="1500000000 bytes, more than the 64 MB"):
+        with pytest.raises(InputError, match="1500000000 bytes, more than the 32 MB"):
             load_map(big)
         assert tracemalloc.get_traced_memory()[1] < 10_000_000
     finally:
