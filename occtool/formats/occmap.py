@@ -31,8 +31,13 @@ units; version 3 stored every vertex as ``region_coords`` uint16), and its
 quantised to this precision when it is built (:func:`quantise`, which also lists its
 segments in the file's order), so a map read back answers exactly as the one written;
 files of versions 1-3 are read into that order too.
-:func:`decode` checks the magic, the version, the sizes, the checksum and every value:
-a damaged or foreign file is one :class:`~occtool.errors.InputError`.
+:func:`decode` checks the magic, the checksum, the version, every array's name, dtype and
+shape against the bytes present, every count and offset against the others (before shapely
+or numpy index with them) and every number's range (:data:`MIN_UNIT`,
+:data:`occtool.limits.MAX_WORLD_COORDINATE`, :data:`occtool.limits.MAX_DISTANCE`);
+:func:`read_map` checks the file (regular, at most :data:`occtool.limits.MAX_MAP_BYTES`,
+the signature and header length) before reading its body. A damaged, crafted or foreign
+file is one :class:`~occtool.errors.InputError` naming it.
 
 This module knows the file, not the map: :func:`encode` takes anything with a world map's
 attributes, and :func:`quantise` and :func:`decode` give the numbers as :class:`MapArrays`,
