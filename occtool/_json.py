@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from typing import Any
 
 from occtool.errors import ModelFormatError, OcctoolError
@@ -71,10 +72,59 @@ def _parse_int(text: str) -> int:
     return int(text)
 
 
-def loads(text: str) -> Any:
+#: Longest number literal :func:`loads` takes when asked to bound them (``repr`` of a
+#: float is at most 24 characters).
+MAX_NUMBER_LENGTH = 64
+_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+
+
+def _parse_float(text: str) -> float:
+    if len(text) > MAX_NUMBER_LENGTH:
+        raise json.JSONDecodeError(f"a number of {len(text)} characters ({text[:12]}...) is too long to be a value",
+                                   text, 0)
+    return float(text)
+
+
+_BRACKETS = b"[]{}"
+_NOT_BRACKETS = bytes(b for b in range(256) if b not in _BRACKETS)
+
+
+def _depth(text: str) -> int:
+    """How deep ``text``'s arrays and objects nest (strings blanked first), without
+    recursing: the brackets alone (``bytes.translate``), counted by numpy."""
+    import numpy as np
+
+    brackets = _STRING.sub('""', text).encode("utf-8", "replace").translate(None, _NOT_BRACKETS)
+    code = np.frombuffer(brackets, dtype=np.uint8)
+    step = np.where((code == ord("[")) | (code == ord("{")), 1, -1)
+    return int(np.cumsum(step).max(initial=0))
+
+
+def loads(text: str, *, max_depth: int | None = None, bounded_numbers: bool = False) -> Any:
     """``json.loads`` with integers of at most :data:`MAX_INTEGER_DIGITS` digits and a
-    nesting the parser can follow; both failures are :class:`json.JSONDecodeError`."""
+    nesting the parser can follow; both failures are :class:`json.JSONDecodeError`.
+
+    ``max_depth``: arrays and objects nested deeper are refused before parsing (a file
+    format that knows its depth says so); ``bounded_numbers``: number literals longer
+    than :data:`MAX_NUMBER_LENGTH` characters and ``NaN`` / ``Infinity`` are refused too.
+
+    >>> loads('[[[1]]]', max_depth=2)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    json.decoder.JSONDecodeError: nested 3 deep, more than 2: line 1 column 1 (char 0)
+    """
+    if max_depth is not None:
+        depth = _depth(text)
+        if depth > max_depth:
+            raise json.JSONDecodeError(f"nested {depth} deep, more than {max_depth}", text, 0)
+    hooks: dict[str, Any] = {}
+    if bounded_numbers:
+        hooks = {"parse_float": _parse_float, "parse_constant": _refuse_constant}
     try:
-        return json.loads(text, parse_int=_parse_int)
+        return json.loads(text, parse_int=_parse_int, **hooks)
     except RecursionError:
         raise json.JSONDecodeError("nested too deeply", text, 0) from None
+
+
+def _refuse_constant(name: str) -> Any:
+    raise json.JSONDecodeError(f"{name} is not a JSON number", name, 0)

@@ -41,3 +41,12 @@ MAX_SWEEPS = 1000
 MAX_REPEATS = 1000
 #: Largest simulated range noise, metres per metre squared (the default is 0.01).
 MAX_RANGE_NOISE = 10.0
+#: Largest world coordinate (a pose's x, y, z or yaw, a world map's corner), metres
+#: (radians): 100,000 km, beyond every frame on Earth (UTM northings reach 1e7 m, ECEF
+#: coordinates 6.4e6 m) and far below where squares overflow.
+MAX_WORLD_COORDINATE = 1e8
+#: Largest ``world.occmap`` read, bytes: 750 times the Intel lab's map (44 KB). Reading a
+#: map takes up to ~26 times its file's size (a 9.9 MB file of a million segments and
+#: 200,000 region polygons grew the process by 256 MB: float64 end points and GEOS
+#: vertices for a few bytes each), so a hostile file stays under ~0.9 GB.
+MAX_MAP_BYTES = 32 * 2**20

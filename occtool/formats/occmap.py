@@ -31,8 +31,13 @@ units; version 3 stored every vertex as ``region_coords`` uint16), and its
 quantised to this precision when it is built (:func:`quantise`, which also lists its
 segments in the file's order), so a map read back answers exactly as the one written;
 files of versions 1-3 are read into that order too.
-:func:`decode` checks the magic, the version, the sizes, the checksum and every value:
-a damaged or foreign file is one :class:`~occtool.errors.InputError`.
+:func:`decode` checks the magic, the checksum, the version, every array's name, dtype and
+shape against the bytes present, every count and offset against the others (before shapely
+or numpy index with them) and every number's range (:data:`MIN_UNIT`,
+:data:`occtool.limits.MAX_WORLD_COORDINATE`, :data:`occtool.limits.MAX_DISTANCE`);
+:func:`read_map` checks the file (regular, at most :data:`occtool.limits.MAX_MAP_BYTES`,
+the signature and header length) before reading its body. A damaged, crafted or foreign
+file is one :class:`~occtool.errors.InputError` naming it.
 
 This module knows the file, not the map: :func:`encode` takes anything with a world map's
 attributes, and :func:`quantise` and :func:`decode` give the numbers as :class:`MapArrays`,
@@ -45,6 +50,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
 import struct
 import zlib
 from dataclasses import dataclass
@@ -319,9 +325,154 @@ def save_map(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True
     return len(data)
 
 
-def decode(data: bytes, name: str = "occmap") -> MapArrays:
-    """A world map's numbers from the file's bytes; :class:`InputError` naming ``name`` if damaged."""
+#: Smallest unit (metres) of a file's grid and of its half-lengths: a micrometre, far finer
+#: than any map is written at (5 mm), coarse enough that no coordinate divides to infinity.
+MIN_UNIT = 1e-6
+#: Deepest the header's JSON nests (it nests 4 deep: ``"arrays": [[name, dtype, [shape]]]``).
+MAX_HEADER_DEPTH = 8
+#: Most tiles along x or y: a middle's 65,535 units hold 256 tiles of :data:`TILE`.
+MAX_TILES = 65536 // TILE
+
+
+def _schema(version: int) -> dict[str, tuple[tuple[str, ...], tuple[int, ...] | None]]:
+    """The arrays a file of ``version`` may hold: each one's dtypes and the sizes after its
+    first (``None``: two sizes of at most :data:`MAX_TILES`, the tile counts)."""
+    schema: dict[str, tuple[tuple[str, ...], tuple[int, ...] | None]] = {
+        "thickness": (("uint8",), ()), "trust": (("uint8",), ()), "positions": (("uint16",), (2,))}
+    if version == 1:
+        schema["segments"] = (("uint16",), (4,))
+    else:
+        schema["middles"] = (("uint8",) if version >= 4 else ("uint16",), (2,))
+        schema["directions"] = schema["half_lengths"] = (("uint8",), ())
+    if version >= 3:
+        schema["facing"] = (("uint8",), ())
+    if version >= 4:
+        schema["tile_counts"] = (("uint8", "uint16", "uint32"), None)
+        schema["region_steps"] = (("int8",), (2,))
+        schema["region_anchors"] = (("uint16",), (2,))
+        wide: tuple[str, ...] = ("uint16", "uint32")
+    else:
+        schema["region_coords"] = (("uint16",), (2,))
+        wide = ("uint32",)
+    for n in range(3):
+        schema[f"region_offsets_{n}"] = (wide, ())
+    return schema
+
+
+def _short(value: Any) -> str:
+    """``repr(value)``, cut to fit a one-line message."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:30] + "..." + text[-6:]
+
+
+def _number(value: Any) -> float:
+    """``value`` as a finite float; ``ValueError`` for anything else (a boolean, a string)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{_short(value)} is not a finite number")
+    return float(value)
+
+
+def _grid_fields(header: dict[str, Any], version: int) -> tuple[float, float | None, np.ndarray, dict[str, Any]]:
+    """The header's unit, half-unit, origin and settings, checked in range (``ValueError``, ``KeyError``)."""
+    from occtool.limits import MAX_DISTANCE, MAX_WORLD_COORDINATE
+
+    unit = _number(header["unit"])
+    half_unit = _number(header["half_unit"]) if version >= 2 else None
+    corner = header["origin"]
+    if not (isinstance(corner, list) and len(corner) == 2):
+        raise ValueError(f"origin {_short(corner)} is not two numbers")
+    origin = np.array([_number(corner[0]), _number(corner[1])])
+    if unit < MIN_UNIT:
+        raise ValueError(f"unit {unit:g} m is below {MIN_UNIT:g} m")
+    if not (np.abs(origin).max() <= MAX_WORLD_COORDINATE
+            and np.abs(origin + 65535 * unit).max() <= MAX_WORLD_COORDINATE):
+        raise ValueError(f"a grid of {unit:g} m from {origin.tolist()} reaches past {MAX_WORLD_COORDINATE:g} m")
+    if half_unit is not None and not MIN_UNIT <= half_unit <= MAX_DISTANCE / 255:
+        raise ValueError(f"half_unit {half_unit:g} m is outside [{MIN_UNIT:g}, {MAX_DISTANCE / 255:g}]")
+    settings = header["settings"]
+    if not isinstance(settings, dict):
+        raise ValueError("settings is not an object")
+    checked: dict[str, Any] = {}
+    for key, value in settings.items():
+        if key == "band":
+            if not (isinstance(value, list) and len(value) == 2):
+                raise ValueError(f"band {_short(value)} is not two heights")
+            low, high = _number(value[0]), _number(value[1])
+            if max(abs(low), abs(high)) > MAX_WORLD_COORDINATE:
+                raise ValueError(f"band {_short(value)} lies past {MAX_WORLD_COORDINATE:g} m")
+            checked[key] = [low, high]
+        else:
+            number = _number(value)
+            if abs(number) > MAX_DISTANCE:
+                raise ValueError(f"setting {_short(key)} = {number:g} is past {MAX_DISTANCE:g}")
+            checked[key] = number
+    if "band" not in checked:
+        raise KeyError("band")
+    return unit, half_unit, origin, checked
+
+
+def _layout(listed: Any, version: int, fail: Any) -> list[tuple[str, str, tuple[int, ...]]]:
+    """The header's ``arrays``: names this version writes, once each, with their dtypes and shapes."""
+    schema = _schema(version)
+    if not isinstance(listed, list):
+        raise fail("header field missing or malformed: arrays is not a list")
+    layout: list[tuple[str, str, tuple[int, ...]]] = []
+    for item in listed:
+        if not (isinstance(item, list) and len(item) == 3 and isinstance(item[0], str) and isinstance(item[2], list)):
+            raise fail(f"header field missing or malformed: array {_short(item)} is not [name, dtype, shape]")
+        array_name, dtype, shape = item
+        if array_name not in schema or any(array_name == seen for seen, _, _ in layout):
+            raise fail(f"array {_short(array_name)} is unknown to version {version} or listed twice")
+        dtypes, trailing = schema[array_name]
+        if dtype not in dtypes:
+            raise fail(f"array {array_name} has dtype {_short(dtype)}, not {' or '.join(dtypes)}")
+        if any(isinstance(s, bool) or not isinstance(s, int) for s in shape) or any(s < 0 for s in shape):
+            raise fail(f"array {array_name} has a negative size or a shape of no whole numbers: {_short(shape)}")
+        fits = (len(shape) == 2 and max(shape) <= MAX_TILES if trailing is None
+                else len(shape) == 1 + len(trailing) and tuple(shape[1:]) == trailing)
+        if not fits:
+            raise fail(f"array {array_name} has shape {_short(shape)}")
+        layout.append((array_name, dtype, tuple(shape)))
+    return layout
+
+
+def _ragged_offsets(arrays: dict[str, np.ndarray], vertices: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The region's ring, part and geometry offsets, checked against the vertices and each
+    other before shapely indexes with them (it does not check: an offset past the vertices
+    crashed the interpreter): each runs from 0 to the count of the level below, every ring
+    has four vertices or more and closes, every polygon a ring, one geometry of them all."""
+    offsets = []
+    below = vertices.shape[0]
+    for n, least in ((0, 4), (1, 1), (2, 1)):
+        offset = arrays[f"region_offsets_{n}"].astype(np.int64)
+        if offset.size < 2 or offset[0] != 0 or offset[-1] != below or (np.diff(offset) < least).any():
+            raise ValueError(f"region_offsets_{n} do not run from 0 to {below} in steps of {least} or more")
+        offsets.append(offset)
+        below = offset.size - 1
+    if below != 1:
+        raise ValueError(f"{below} geometries, not one")
+    rings = offsets[0]
+    if (vertices[rings[:-1]] != vertices[rings[1:] - 1]).any():
+        raise ValueError("a ring does not close")
+    return tuple(offsets)
+
+
+def decode(data: bytes | bytearray, name: str = "occmap") -> MapArrays:
+    """A world map's numbers from the file's bytes; :class:`InputError` naming ``name`` if damaged.
+
+    Every size, offset, count and number is checked against the bytes present and each
+    other before anything is allocated from it or indexed with it; the header is parsed
+    with depth and number lengths bounded (:func:`occtool._json.loads`)."""
+    try:
+        return _decode(data, name)
+    except MemoryError:
+        raise unreadable(name, f"not enough memory to decode its {len(data)} bytes") from None
+
+
+def _decode(data: bytes | bytearray, name: str) -> MapArrays:
     import shapely
+
+    from occtool._json import loads
 
     def fail(why: str) -> InputError:
         return unreadable(name, why)
@@ -336,91 +487,131 @@ def decode(data: bytes, name: str = "occmap") -> MapArrays:
     if length > MAX_HEADER or start + length > len(data) - 4:
         raise fail("header length out of range")
     try:
-        header = json.loads(data[start:start + length].decode("utf-8"))
+        header = loads(bytes(data[start:start + length]).decode("utf-8"), max_depth=MAX_HEADER_DEPTH,
+                       bounded_numbers=True)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise fail(f"header is not JSON: {exc.msg if hasattr(exc, 'msg') else exc}") from None
     if not isinstance(header, dict) or header.get("format") != "occtool.occmap":
         raise fail("header does not name the occmap format")
     version = header.get("version")
-    if version not in READS:
-        raise fail(f"format version {version!r}, this occtool reads {', '.join(map(str, READS[:-1]))} and {READS[-1]}")
+    if isinstance(version, bool) or version not in READS:
+        raise fail(f"format version {_short(version)}, this occtool reads "
+                   f"{', '.join(map(str, READS[:-1]))} and {READS[-1]}")
     try:
-        unit = float(header["unit"])
-        half_unit = float(header["half_unit"]) if version >= 2 else None
-        origin = np.array(header["origin"], dtype=np.float64).reshape(2)
-        settings = dict(header["settings"])
-        layout = [(str(n), _DTYPES[str(t)], tuple(int(s) for s in shape)) for n, t, shape in header["arrays"]]
-    except (KeyError, TypeError, ValueError) as exc:
+        unit, half_unit, origin, settings = _grid_fields(header, version)
+    except KeyError as exc:
+        raise fail(f"header field missing or malformed: no {exc}") from None
+    except ValueError as exc:
         raise fail(f"header field missing or malformed: {exc}") from None
-    if not (math.isfinite(unit) and unit > 0 and np.isfinite(origin).all()
-            and (half_unit is None or (math.isfinite(half_unit) and half_unit > 0))):
-        raise fail("unit, half_unit or origin is not a finite positive number")
     offset = start + length
     arrays: dict[str, np.ndarray] = {}
-    for array_name, dtype, shape in layout:
-        if any(s < 0 for s in shape):
-            raise fail(f"array {array_name} has a negative size")
-        size = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+    for array_name, dtype, shape in _layout(header.get("arrays"), version, fail):
+        itemsize = np.dtype(dtype).itemsize
+        size = math.prod(shape) * itemsize  # Python integers: no overflow
         if offset + size > len(data) - 4:
             raise fail(f"array {array_name} runs past the end of the file")
-        arrays[array_name] = np.frombuffer(data, dtype=np.dtype(dtype).newbyteorder("<"), count=size //
-                                           np.dtype(dtype).itemsize, offset=offset).reshape(shape).astype(dtype)
+        arrays[array_name] = np.frombuffer(data, dtype=np.dtype(dtype).newbyteorder("<"), count=size // itemsize,
+                                           offset=offset).reshape(shape).astype(dtype)
         offset += size
     if offset != len(data) - 4:
         raise fail(f"{len(data) - 4 - offset} bytes after the last array")
     try:
-        if half_unit is None:  # version 1: both end points
-            segments = arrays["segments"].reshape(-1, 4).astype(np.float64) * unit
-            first, last = origin + segments[:, :2], origin + segments[:, 2:]
-        else:
-            middles = (_tiled_middles(arrays["tile_counts"], arrays["middles"].reshape(-1, 2)) if version >= 4
-                       else arrays["middles"].reshape(-1, 2))
-            first, last = _segment_ends(middles, arrays["directions"].reshape(-1),
-                                        arrays["half_lengths"].reshape(-1), origin, unit, half_unit)
-        thickness = arrays["thickness"].astype(np.float64) / 1000.0
-        trust = arrays["trust"].astype(np.float64) / 255.0
-        facing = (_unpack_facing(arrays["facing"].reshape(-1), first.shape[0]) if version >= 3
-                  else np.zeros(first.shape[0], dtype=np.int8))
-        if version < 4:  # into the file's order, as a map quantise() made
-            order, _ = _tiles(np.clip(np.round((0.5 * (first + last) - origin) / unit), 0, None))
-            first, last, thickness, trust, facing = (a[order] for a in (first, last, thickness, trust, facing))
+        first, last, thickness, trust, facing = _segments(arrays, version, origin, unit, half_unit)
     except (KeyError, ValueError) as exc:
         raise fail(f"segment arrays missing or misshapen: {exc}") from None
     region = shapely.MultiPolygon()
-    if "region_coords" in arrays or "region_steps" in arrays:
+    regional = [n for n in arrays if n.startswith("region_")]
+    if regional:
         try:
-            vertices = (_stepped_vertices(arrays["region_steps"].reshape(-1, 2),
-                                          arrays["region_anchors"].reshape(-1, 2))
-                        if version >= 4 else arrays["region_coords"].reshape(-1, 2))
-        except (KeyError, ValueError) as exc:
+            if version >= 4:
+                vertices = _stepped_vertices(arrays["region_steps"], arrays["region_anchors"])
+            else:
+                vertices = arrays["region_coords"].astype(np.int64)
+            offsets = _ragged_offsets(arrays, vertices)
+        except KeyError as exc:
+            raise fail(f"observed region is malformed: no array {exc}") from None
+        except ValueError as exc:
             raise fail(f"observed region is malformed: {exc}") from None
         coords = origin + vertices.astype(np.float64) * unit
-        offsets = [arrays[f"region_offsets_{n}"].astype(np.int64) for n in range(3) if f"region_offsets_{n}" in arrays]
         try:
-            region = shapely.from_ragged_array(shapely.GeometryType.MULTIPOLYGON, coords, tuple(offsets))[0]
+            region = shapely.from_ragged_array(shapely.GeometryType.MULTIPOLYGON, coords, offsets)[0]
         except (ValueError, IndexError, shapely.errors.ShapelyError) as exc:
             raise fail(f"observed region is malformed: {exc}") from None
-    try:
-        band = settings.pop("band")
-        positions = (origin + arrays["positions"].reshape(-1, 2).astype(np.float64) * unit
-                     if "positions" in arrays else None)
-        band = (float(band[0]), float(band[1]))
-        scalars = {k: float(v) for k, v in settings.items()}
-    except (TypeError, KeyError, IndexError, ValueError) as exc:
-        raise fail(str(exc)) from None
-    return MapArrays(first, last, thickness, trust, region, band, positions, facing, scalars, unit, origin, half_unit,
-                     version)
+    positions = origin + arrays["positions"].astype(np.float64) * unit if "positions" in arrays else None
+    band_values = settings.pop("band")
+    return MapArrays(first, last, thickness, trust, region, (band_values[0], band_values[1]), positions, facing,
+                     settings, unit, origin, half_unit, version)
+
+
+def _segments(arrays: dict[str, np.ndarray], version: int, origin: np.ndarray, unit: float,
+              half_unit: float | None) -> tuple[np.ndarray, ...]:
+    """The segments' end points, thickness, trust and facing in the file's order;
+    ``KeyError`` / ``ValueError`` if their arrays are missing or disagree."""
+    if half_unit is None:  # version 1: both end points
+        segments = arrays["segments"].astype(np.float64) * unit
+        first, last = origin + segments[:, :2], origin + segments[:, 2:]
+    else:
+        count = arrays["middles"].shape[0]
+        for other in ("directions", "half_lengths"):
+            if arrays[other].shape[0] != count:
+                raise ValueError(f"{arrays[other].shape[0]} {other} for {count} middles")
+        middles = _tiled_middles(arrays["tile_counts"], arrays["middles"]) if version >= 4 else arrays["middles"]
+        first, last = _segment_ends(middles, arrays["directions"], arrays["half_lengths"], origin, unit, half_unit)
+    for other in ("thickness", "trust"):
+        if arrays[other].shape[0] != first.shape[0]:
+            raise ValueError(f"{arrays[other].shape[0]} {other} values for {first.shape[0]} segments")
+    thickness = arrays["thickness"].astype(np.float64) / 1000.0
+    trust = arrays["trust"].astype(np.float64) / 255.0
+    facing = (_unpack_facing(arrays["facing"], first.shape[0]) if version >= 3
+              else np.zeros(first.shape[0], dtype=np.int8))
+    if version < 4:  # into the file's order, as a map quantise() made
+        order, _ = _tiles(np.clip(np.round((0.5 * (first + last) - origin) / unit), 0, 65535))
+        first, last, thickness, trust, facing = (a[order] for a in (first, last, thickness, trust, facing))
+    return first, last, thickness, trust, facing
 
 
 def read_map(path: str | os.PathLike[str]) -> MapArrays:
     """:func:`decode` of a ``.occmap`` file (``occtool map`` writes ``DIR/world.occmap``);
-    a file that cannot be read or is damaged is an :class:`InputError`."""
+    a file that cannot be read or is damaged is an :class:`InputError`.
+
+    The file is checked before its body is read: a regular file (not a FIFO or a device
+    such as ``/dev/zero``, which never end) of at most :data:`occtool.limits.MAX_MAP_BYTES`,
+    with the signature and a header length that fits it; then exactly the bytes it had
+    when it was looked at are read."""
+    from occtool.limits import MAX_MAP_BYTES
+
+    name = str(path)
     try:
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode):
+            raise InputError(f"{name}: not a regular file, so not a map occtool wrote")
+        if info.st_size > MAX_MAP_BYTES:
+            raise unreadable(name, f"{info.st_size} bytes, more than the {MAX_MAP_BYTES >> 20} MB a map may have")
         with open(path, "rb") as stream:
-            data = stream.read()
+            size = os.fstat(stream.fileno()).st_size
+            if size != info.st_size:
+                raise unreadable(name, "the file changed while it was read")
+            data = bytearray(size)
+            view = memoryview(data)
+            prefix = stream.readinto(view[:len(MAGIC) + 4])
+            if prefix < len(MAGIC) + 4 or not data.startswith(MAGIC):
+                raise unreadable(name, "no occmap signature")
+            (length,) = struct.unpack("<I", data[len(MAGIC):len(MAGIC) + 4])
+            if length > MAX_HEADER or len(MAGIC) + 8 + length > size:
+                raise unreadable(name, "header length out of range")
+            got = prefix
+            while got < size:
+                chunk = stream.readinto(view[got:])
+                if not chunk:
+                    break
+                got += chunk
     except OSError as exc:
-        raise InputError(f"{path}: cannot read the map: {exc.strerror or exc}") from None
-    return decode(data, str(path))
+        raise InputError(f"{name}: cannot read the map: {exc.strerror or exc}") from None
+    except MemoryError:
+        raise unreadable(name, f"not enough memory to read its {info.st_size} bytes") from None
+    if got != size:
+        raise unreadable(name, "the file changed while it was read")
+    return decode(data, name)
 
 
 __all__ = ["FORMAT_VERSION", "MAGIC", "UNIT", "MapArrays", "array_bytes", "decode", "encode", "quantise", "read_map",

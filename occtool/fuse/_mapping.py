@@ -2,9 +2,10 @@
 
 :func:`map_log` reads a log (registering its scans when it needs it), fits its keyframes,
 fuses them, builds the map of the run and writes it (:func:`occtool.fuse.write_run_map`,
-and ``poses.csv`` when the poses were registered); :func:`map_model_set` does the same
-from the models of ``occtool fit LOG -o DIR/``. Both return a :class:`MapResult`; the
-command line only parses its options, calls one of them and reports.
+and ``poses.csv`` when the poses were registered, the files moved into place as one set);
+:func:`map_model_set` does the same from the models of ``occtool fit LOG -o DIR/``. Both
+return a :class:`MapResult`; the command line only parses its options, calls one of them
+and reports.
 """
 
 from __future__ import annotations
@@ -49,11 +50,14 @@ def _write(run: RunMap, output: str | os.PathLike[str], extra: dict[str, Any], r
     run.trajectory = trajectory(registration)
     if registration is not None:
         extra["registration"] = registration.to_dict()
-    written, summary = _write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision,
-                                      mcap=mcap, georeference=georeference, extra_summary=extra,
-                                      nav2_mode=nav2_mode)
-    poses = write_map_poses(registration, output, overwrite=overwrite)
-    return written + ([poses] if poses is not None else []), summary
+
+    def poses_csv(staging: Path) -> list[Path]:
+        # In the set: written beside the others and moved into place with them.
+        poses = write_map_poses(registration, staging)
+        return [poses] if poses is not None else []
+
+    return _write_run_map(run, output, overwrite=overwrite, simplify=simplify, precision=precision, mcap=mcap,
+                          georeference=georeference, extra_summary=extra, nav2_mode=nav2_mode, also=poses_csv)
 
 
 def map_log(source: str | os.PathLike[str] | RangeLog, output: str | os.PathLike[str], *,

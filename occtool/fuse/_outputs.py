@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -51,10 +55,21 @@ def check_outputs(folder: str | os.PathLike[str], *, nav2_mode: str = "trinary",
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{folder} exists and is not a folder")
+    for path in output_paths(folder, nav2_mode):
+        if path.is_dir():
+            raise InputError(f"{path} is a folder, not an output this run may replace")
     if not overwrite:
         for path in output_paths(folder, nav2_mode):
             if path.exists():
                 raise FileExistsError(f"{path} exists already (pass overwrite=True to replace it)")
+
+
+#: Every file a run's map may hold (:func:`write_run_map` and ``poses.csv`` of
+#: :func:`occtool.fuse.map_log`): a run replacing a map removes those of them it does not write.
+OUTPUT_NAMES = ("world.occmap", "map.yaml", "map.pgm", "map.png", "map.mcap", "navigation.geojson",
+                "obstacles.geojson", "frontiers.geojson", "summary.json", "poses.csv")
+#: Hidden folders a run's outputs are written into before they are moved into place.
+STAGING_PREFIX = ".occtool-map-"
 
 
 def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bool = True,
@@ -62,8 +77,26 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
                   georeference: Any | None = None, extra_summary: dict[str, Any] | None = None,
                   nav2_mode: str = "trinary") -> list[Path]:
     """Write the world map (``world.occmap``), the Nav2 map, the Foxglove MCAP, the GeoJSON
-    layers and ``summary.json`` into ``folder`` (created if missing). Every file is written
-    completely or not at all, and everything is computed before the first file is written.
+    layers and ``summary.json`` into ``folder`` (created if missing), as one set.
+
+    Everything is computed before the first file is written, and every file is written
+    into a hidden temporary folder first (:data:`STAGING_PREFIX`; beside ``folder`` when
+    ``folder`` is new, inside it when it exists: the same file system either way), then
+    moved into place: a run interrupted by an exception, Ctrl-C or SIGTERM leaves the
+    previous complete set or the new complete set, never a mix, and no temporary folder.
+
+    * A new ``folder`` is the temporary folder renamed: it appears whole or not at all
+      (missing parent folders are created first and stay).
+    * In an existing ``folder`` the previous outputs are moved aside, the new ones in and
+      the previous ones deleted, with SIGINT and SIGTERM held back meanwhile (a signal
+      arriving then is raised once the new set is whole); an error half way moves the
+      previous ones back. Files of other names in ``folder`` are never touched.
+    * Outputs of a previous run that this run does not write (:data:`OUTPUT_NAMES`:
+      ``map.png`` of a ``"scale"`` run when this one writes ``map.pgm``, ``map.mcap``
+      without ``mcap``, ``poses.csv`` of a registered run) would describe another map:
+      with ``overwrite`` they are removed with the rest of the previous set; without it
+      nothing is removed, and an output that exists (checked before any work, and again
+      before anything is moved) is a :class:`FileExistsError`.
 
     ``nav2_mode``: ``"trinary"`` writes ``map.pgm`` (free / occupied / unknown), ``"scale"``
     ``map.png`` with the fused occupancy graded (needs Pillow)."""
@@ -73,10 +106,12 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
 
 def _write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bool, simplify: float | None,
                    precision: int | None, mcap: bool, georeference: Any | None,
-                   extra_summary: dict[str, Any] | None, nav2_mode: str) -> tuple[list[Path], dict[str, Any]]:
-    """:func:`write_run_map`, and the summary it wrote (``summary.json``)."""
+                   extra_summary: dict[str, Any] | None, nav2_mode: str,
+                   also: Callable[[Path], list[Path]] | None = None) -> tuple[list[Path], dict[str, Any]]:
+    """:func:`write_run_map`, and the summary it wrote (``summary.json``); ``also`` writes
+    more files of the set into the folder it is given (:func:`occtool.fuse.map_log`'s
+    ``poses.csv``) and returns them."""
     from occtool.formats.geojson import run_map_layers
-    from occtool.formats.nav2 import write_nav2, write_nav2_scale
     from occtool.formats.occmap import encode
 
     check_outputs(folder, nav2_mode=nav2_mode, overwrite=overwrite)  # before any file is written
@@ -91,30 +126,126 @@ def _write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bo
         from occtool.formats.foxglove import run_map_mcap_bytes
 
         mcap_bytes = run_map_mcap_bytes(run)
-    folder.mkdir(parents=True, exist_ok=True)
-    with atomic_write(folder / "world.occmap", "wb", overwrite=overwrite) as handle:
+    with _output_set(folder, overwrite=overwrite) as staging:
+        written = _write_files(run, staging, world_bytes, mcap_bytes, layers, summary, nav2_mode)
+        if also is not None:
+            written += also(staging)
+    return [folder / path.name for path in written], summary
+
+
+def _write_files(run: RunMap, staging: Path, world_bytes: bytes, mcap_bytes: bytes | None,
+                 layers: dict[str, Any], summary: dict[str, Any], nav2_mode: str) -> list[Path]:
+    """The set's files, written into the (new, empty) folder ``staging``."""
+    from occtool.formats.nav2 import write_nav2, write_nav2_scale
+
+    with atomic_write(staging / "world.occmap", "wb") as handle:
         handle.write(world_bytes)
-    written = [folder / "world.occmap"]
+    written = [staging / "world.occmap"]
     if nav2_mode == "scale":
         written += list(write_nav2_scale(run.raster.graded(), run.raster.resolution, run.raster.origin,
-                                         folder / "map.yaml", overwrite=overwrite))
+                                         staging / "map.yaml"))
     else:
-        written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, folder / "map.yaml",
-                                  overwrite=overwrite))
+        written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, staging / "map.yaml"))
     if mcap_bytes is not None:
-        with atomic_write(folder / "map.mcap", "wb", overwrite=overwrite) as handle:
+        with atomic_write(staging / "map.mcap", "wb") as handle:
             handle.write(mcap_bytes)
-        written.append(folder / "map.mcap")
+        written.append(staging / "map.mcap")
     for name, collection in layers.items():
-        with atomic_write(folder / f"{name}.geojson", "w", overwrite=overwrite) as handle:
+        with atomic_write(staging / f"{name}.geojson", "w") as handle:
             json.dump(collection, handle, separators=(",", ":"))
             handle.write("\n")
-        written.append(folder / f"{name}.geojson")
-    with atomic_write(folder / "summary.json", "w", overwrite=overwrite) as handle:
+        written.append(staging / f"{name}.geojson")
+    with atomic_write(staging / "summary.json", "w") as handle:
         json.dump(summary, handle, indent=1)
         handle.write("\n")
-    written.append(folder / "summary.json")
-    return written, summary
+    written.append(staging / "summary.json")
+    return written
 
 
-__all__ = ["NAV2_MODES", "check_outputs", "output_paths", "write_run_map"]
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM held back (delivered when the block ends) where the platform can
+    (POSIX, the main thread): a few renames that must not stop half way."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    can = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if can else None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+@contextmanager
+def _output_set(folder: Path, *, overwrite: bool) -> Iterator[Path]:
+    """A new hidden folder to write a set into; moved into ``folder`` as one set when the
+    block ends normally, removed in every case (:func:`write_run_map` says how)."""
+    import shutil
+
+    fresh = not folder.exists()
+    if fresh:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+    staging = _new_folder(folder.parent if fresh else folder)
+    try:
+        yield staging
+        with _signals_held():
+            try:
+                if fresh and not folder.exists():
+                    os.rename(staging, folder)
+                else:
+                    _swap_in(staging, folder, overwrite=overwrite)
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
+    finally:
+        if staging.exists():  # interrupted while writing
+            with _signals_held():
+                shutil.rmtree(staging, ignore_errors=True)
+
+
+def _new_folder(parent: Path) -> Path:
+    """A new hidden folder in ``parent`` made as ``mkdir`` makes one (its mode from the
+    umask, unlike ``tempfile.mkdtemp``'s 0700: a new output folder is this one renamed)."""
+    import secrets
+
+    for _ in range(100):
+        candidate = parent / f"{STAGING_PREFIX}{secrets.token_hex(4)}"
+        try:
+            candidate.mkdir()
+        except FileExistsError:
+            continue
+        return candidate
+    raise FileExistsError(f"no free name for a temporary folder in {parent}")
+
+
+def _swap_in(staging: Path, folder: Path, *, overwrite: bool) -> None:
+    """Move the files of ``staging`` into ``folder``, the previous outputs (and, with
+    ``overwrite``, those of :data:`OUTPUT_NAMES` this set lacks) into ``staging`` to be
+    deleted with it; an error half way moves everything back."""
+    new = sorted(path.name for path in staging.iterdir())
+    present = [name for name in dict.fromkeys(new + (list(OUTPUT_NAMES) if overwrite else []))
+               if os.path.lexists(folder / name)]
+    for name in present:
+        if (folder / name).is_dir() and not (folder / name).is_symlink():
+            raise InputError(f"{folder / name} is a folder, not an output this run may replace")
+    if present and not overwrite:
+        raise FileExistsError(f"{folder / present[0]} exists already (pass overwrite=True to replace it)")
+    previous = staging / (STAGING_PREFIX + "previous")
+    previous.mkdir()
+    aside: list[str] = []
+    placed: list[str] = []
+    try:
+        for name in present:
+            os.rename(folder / name, previous / name)
+            aside.append(name)
+        for name in new:
+            os.rename(staging / name, folder / name)
+            placed.append(name)
+    except BaseException:
+        for name in placed:
+            os.rename(folder / name, staging / name)
+        for name in aside:
+            os.rename(previous / name, folder / name)
+        raise
+
+
+__all__ = ["NAV2_MODES", "OUTPUT_NAMES", "check_outputs", "output_paths", "write_run_map"]

@@ -445,6 +445,14 @@ def load_map(path: Any) -> WorldMap:
 
 
 def _from_file(arrays: MapArrays, name: str) -> WorldMap:
+    import inspect
+
+    # The header's settings must be the map's keywords (a file's own names, not any keyword).
+    known = {key for key, p in inspect.signature(WorldMap).parameters.items()
+             if p.kind is p.KEYWORD_ONLY and isinstance(p.default, float)}
+    unknown = sorted(set(arrays.settings) - known)
+    if unknown:
+        raise unreadable(name, f"unknown setting {unknown[0][:40]!r}")
     try:
         return WorldMap.from_arrays(arrays)
     except (InputError, TypeError, KeyError, IndexError, ValueError) as exc:

@@ -8,6 +8,7 @@ checks that every file it names is a regular file inside the set's folder.
 from __future__ import annotations
 
 import json
+import math
 import os
 import stat
 from pathlib import Path
@@ -41,6 +42,34 @@ def save_model_set_index(folder: str | os.PathLike[str], entries: list[dict[str,
 
 #: Largest index.json read (a set of a million positions takes about 300 MB).
 MAX_INDEX_BYTES = 512 * 1024 * 1024
+#: Versions of the index :func:`read_model_set` reads.
+READS = (1,)
+#: The keys of an entry's pose (:meth:`occtool.features.Pose.to_dict`), every one required.
+POSE_KEYS = ("x", "y", "z", "yaw")
+#: Deepest an index's JSON nests (entries nest 3 deep: ``"models": [{"pose": {}}]``).
+MAX_INDEX_DEPTH = 16
+
+
+def check_pose(pose: Any, where: str) -> None:
+    """An :class:`InputError` naming ``where`` unless ``pose`` is an object of exactly
+    :data:`POSE_KEYS`, each a finite number (not a boolean) of at most
+    :data:`occtool.limits.MAX_WORLD_COORDINATE` (metres, radians for ``yaw``)."""
+    from occtool.limits import MAX_WORLD_COORDINATE
+
+    if not isinstance(pose, dict):
+        raise InputError(f"{where}: 'pose' is not an object")
+    missing = [key for key in POSE_KEYS if key not in pose]
+    extra = sorted(str(key)[:20] for key in pose if key not in POSE_KEYS)
+    if missing or extra:
+        raise InputError(f"{where}: 'pose' needs exactly {', '.join(POSE_KEYS)}"
+                         + (f" (missing {', '.join(missing)})" if missing else f" (unknown {', '.join(extra)})"))
+    for key in POSE_KEYS:
+        value = pose[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"{where}: pose {key} is {type(value).__name__}, not a number")
+        if not (math.isfinite(value) and abs(value) <= MAX_WORLD_COORDINATE):
+            raise InputError(f"{where}: pose {key} = {value!r:.30} is not a finite number of at most "
+                             f"{MAX_WORLD_COORDINATE:g}")
 
 
 def _set_member(folder: Path, name: str, where: str) -> Path:
@@ -75,14 +104,18 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
     -------
     folder, entries
         Each entry has ``position``, ``file`` and ``pose`` (a dict or ``None``); every
-        ``file`` is a regular file inside ``folder`` and no position appears twice.
+        ``file`` is a regular file inside ``folder``, no position appears twice and every
+        pose is checked once here (:func:`check_pose`): readers of the set take it as it is.
 
     Raises
     ------
     InputError
-        If the index is missing or malformed, or an entry names a file outside the
-        folder, a missing or non-regular file, or a position listed before; the message
-        names the file.
+        If the index is missing or malformed (JSON nested deeper than
+        :data:`MAX_INDEX_DEPTH`, a ``format_version`` not in :data:`READS`), or an entry
+        names a file outside the folder, a missing or non-regular file, a position listed
+        before, or a pose that is no pose (a key missing or unknown, a boolean, NaN,
+        infinite or past :data:`occtool.limits.MAX_WORLD_COORDINATE`); the message names
+        the file and the entry.
     """
     index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
     try:
@@ -96,12 +129,16 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
     if os.stat(index).st_size > MAX_INDEX_BYTES:
         raise InputError(f"{index}: larger than {MAX_INDEX_BYTES >> 20} MB, not a model-set index")
     try:
-        data = loads(index.read_text(encoding="utf-8"))
+        data = loads(index.read_text(encoding="utf-8"), max_depth=MAX_INDEX_DEPTH)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{index}: not valid JSON ({exc})") from None
     is_index = isinstance(data, dict) and data.get("format") == MODEL_SET_FORMAT
     if not (is_index and isinstance(data.get("models"), list)):
         raise InputError(f"{index}: not an occtool model-set index")
+    version = data.get("format_version")
+    if isinstance(version, bool) or version not in READS:
+        raise InputError(f"{index}: format_version {version!r:.30}, this occtool reads "
+                         f"{', '.join(map(str, READS))} (a newer occtool wrote it, or it is damaged)")
     folder = index.parent
     entries = []
     positions: set[int] = set()
@@ -112,8 +149,8 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
             raise InputError(f"{index}: model entry {number} needs an integer 'position' and a 'file'")
         if entry["position"] < 0:
             raise InputError(f"{index}: model entry {number}'s position {entry['position']} is negative")
-        if entry.get("pose") is not None and not isinstance(entry["pose"], dict):
-            raise InputError(f"{index}: model entry {number}'s 'pose' is not an object")
+        if entry.get("pose") is not None:
+            check_pose(entry["pose"], f"{index}: model entry {number} (position {entry['position']})")
         if entry["position"] in positions:
             raise InputError(f"{index}: position {entry['position']} is listed twice")
         _set_member(folder, entry["file"], f"{index}: model entry {number}")
@@ -127,4 +164,4 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
     return folder, entries
 
 
-__all__ = ["MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "read_model_set", "save_model_set_index"]
+__all__ = ["MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "POSE_KEYS", "check_pose", "read_model_set", "save_model_set_index"]
