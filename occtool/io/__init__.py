@@ -264,7 +264,8 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
     if not target.exists():
         raise FileNotFoundError(2, "No such file or directory", str(path))
     fmt = detect_format(target)
-    size = target.stat().st_size
+    # A folder (depth frames, scans): the bytes of the files in it, not of the folder's entry.
+    size = sum(p.stat().st_size for p in target.iterdir() if p.is_file()) if target.is_dir() else target.stat().st_size
     header = Table.grid(padding=(0, 2))
     header.add_column(style="bold")
     header.add_column(overflow="fold")  # a long path or note wraps, it is not cut to "..."
