@@ -311,3 +311,17 @@ def test_map_of_the_first_three_seosan_scans(tmp_path, shared_data):
     assert (tmp_path / "out" / "world.occmap").stat().st_size > 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["positions"] == 3
+
+
+def test_info_describes_a_folder_of_scans(tmp_path):
+    from rich.console import Console
+
+    from occtool.io import describe_log
+
+    folder, _, _ = scan_folder(tmp_path)
+    console = Console(width=200, record=True)
+    console.print(describe_log(folder))
+    text = console.export_text()
+    assert "scans" in text and "1,200" in text  # three scans of 400 points
+    size = sum(p.stat().st_size for p in folder.iterdir())
+    assert f"{size:,} bytes" in text
