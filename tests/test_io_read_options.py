@@ -43,7 +43,7 @@ def test_one_registry_reads_and_streams_every_format() -> None:
     from occtool.io._formats import READERS, STREAMS
 
     assert set(READERS) == set(FORMATS)
-    assert set(STREAMS) == {"csv", "carmen", "mcap", "rosbag", "tum", "3dmatch"}
+    assert set(STREAMS) == {"csv", "carmen", "mcap", "rosbag", "tum", "3dmatch", "scans"}
 
 
 def test_read_options_check_every_field_with_the_readers_messages() -> None:

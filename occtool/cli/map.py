@@ -26,7 +26,7 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 #: What a model set's map takes from the command line: the map's own options and the robot's
 #: (its navigation maps'); the fit, log, keyframe and registration options apply to a log.
 MODEL_SET_OPTIONS = frozenset({
-    "source", "output", "resolution", "nav2_mode", "threshold", "combination", "max_range", "simplify", "precision",
+    "sources", "output", "resolution", "nav2_mode", "threshold", "combination", "max_range", "simplify", "precision",
     "origin", "mcap", "overwrite", "config", "register",
 })
 #: The robot options and the :class:`occtool.robot.Robot` fields they set.
@@ -56,7 +56,7 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
 
 
 @click.command(short_help="Fuse every position of a log into one world map (Nav2, Foxglove, GeoJSON).")
-@click.argument("source", metavar="LOG|MODELS", type=click.Path(exists=True, dir_okay=True))
+@click.argument("sources", metavar="LOG|MODELS", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=True))
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
               help="Output folder (created if missing).")
 @click.option("--resolution", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.05,
@@ -94,7 +94,8 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
 @seed_option
 @overwrite_option
 @config_option
-def map_command(source: str, output: str, resolution: float, nav2_mode: str, threshold: float, keyframe_share: float,
+def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_mode: str, threshold: float,
+                keyframe_share: float,
                 combination: str, max_range: float,
                 simplify: float | None, precision: int | None, origin: str | None, mcap: bool, seed: int,
                 overwrite: bool,
@@ -150,7 +151,11 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
         "resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
         "max_range": max_range, "simplify": simplify, "precision": precision, "georeference": georeference,
         "mcap": mcap, "overwrite": overwrite}
-    if Path(source).is_dir() or Path(source).name == "index.json":
+    from occtool.io.scans import is_scan_folder
+
+    source = sources[0]  # several files: one scan sequence, each file a scan
+    folder = Path(source).is_dir() and ((Path(source) / "index.json").exists() or not is_scan_folder(source))
+    if len(sources) == 1 and (folder or Path(source).name == "index.json"):
         if kwargs.get("register"):
             raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")
         robot = _model_set_robot(click.get_current_context(), kwargs)
@@ -163,7 +168,8 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
         registration = RegistrationSettings(loop_closure=kwargs.pop("loop_closure", True))
         register = kwargs.pop("register", None)
         read_options = pop_log_options(kwargs)
-        log = read_log_from_kwargs(source, dict(read_options)) if str(source) == "-" else source
+        log = read_log_from_kwargs(source, dict(read_options)) if str(source) == "-" else \
+            source if len(sources) == 1 else list(sources)
         result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
                               registration=registration, keyframe_share=keyframe_share, **written)
         report = result.report

@@ -288,6 +288,10 @@ LOG_FLAGS: dict[str, tuple[tuple[str, ...], dict[str, Any]]] = {
         type=click.FloatRange(min=DEFAULT_DEPTH_MIN_RANGE, max=MAX_DISTANCE, min_open=True), show_default=True,
         metavar="METRES",
         help="Depth images: farther depths are no returns (dropped, or free rays with --no-return-range).")),
+    "poses": (("--poses",), dict(
+        type=click.Path(exists=True, dir_okay=False), metavar="POSES.txt",
+        help="Scans (a folder of *.pcd, *.ply, KITTI *.bin, or point-cloud files): a KITTI-style poses file, "
+             "line i the row-major 3x4 scan-to-world transform of scan i.")),
 }
 #: The log options' names: :class:`occtool.io.ReadOptions`' fields, the keywords of :func:`occtool.io.read_log`.
 LOG_OPTION_NAMES = OPTION_NAMES

@@ -11,7 +11,7 @@ and reports.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,7 +60,8 @@ def _write(run: RunMap, output: str | os.PathLike[str], extra: dict[str, Any], r
                           georeference=georeference, extra_summary=extra, nav2_mode=nav2_mode, also=poses_csv)
 
 
-def map_log(source: str | os.PathLike[str] | RangeLog, output: str | os.PathLike[str], *,
+def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | RangeLog,
+            output: str | os.PathLike[str], *,
             estimator: Any | None = None, read_options: Mapping[str, Any] | None = None,
             register: bool | None = None, registration: Any | None = None,
             combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
@@ -73,7 +74,9 @@ def map_log(source: str | os.PathLike[str] | RangeLog, output: str | os.PathLike
     Parameters
     ----------
     source
-        A log file (read with :func:`occtool.io.read_log` and ``read_options``), or a
+        A log file or folder (read with :func:`occtool.io.read_log` and ``read_options``;
+        a folder of scans with ``read_options={"poses": ...}``), several point-cloud files
+        (a list, read as one scan sequence: each file a scan, registered without poses), or a
         :class:`~occtool.features.RangeLog` read already (mapped on its own poses).
     output
         The folder the map is written into (created if missing): ``world.occmap``, the
@@ -121,7 +124,7 @@ def map_log(source: str | os.PathLike[str] | RangeLog, output: str | os.PathLike
 
         log, report_of_registration = read_map_log(source, read_options, register=register,
                                                    settings=registration or RegistrationSettings())
-        name = str(source)
+        name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
     fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
                                      keyframe_share=keyframe_share, progress=progress)
     positions = list(zip(report.fitted, fused.poses, fused.stamps))

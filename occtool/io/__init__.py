@@ -26,6 +26,10 @@ a time, for fitting a long log in bounded memory. Supported formats (docs/format
 ``tum``, ``3dmatch``
     folders of depth PNGs with camera poses: TUM RGB-D (``depth.txt``) and 3DMatch /
     7-Scenes (``frame-NNNNNN.depth.png``), :mod:`occtool.io.depth_folders`.
+``scans``
+    a folder of 3D scans (``*.pcd``, ``*.ply``, KITTI ``*.bin``), or several point-cloud
+    files given as a list, each file a scan, with a KITTI-style poses file (``poses=``):
+    :mod:`occtool.io.scans`.
 
 The readers are imported only when used, and nothing here imports the model or
 GeoJSON writers.
@@ -34,6 +38,7 @@ GeoJSON writers.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -92,6 +97,10 @@ def detect_format(path: str | os.PathLike[str]) -> str:
         if layout is not None:
             return layout
     if target.is_dir():
+        from occtool.io.scans import is_scan_folder
+
+        if is_scan_folder(target):
+            return "scans"
         raise InputError(f"{target} is a folder, not a range log")
     head = _head(target)
     if not head:
@@ -124,12 +133,13 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     suffixes = [s.lower() for s in target.suffixes]
     for suffix in reversed([s for s in suffixes if s not in (".gz", ".bz2")]):
         by_suffix = {".csv": "csv", ".mcap": "mcap", ".log": "carmen", ".dat": "xyz", ".xyz": "xyz",
-                     ".pcd": "pcd", ".ply": "ply", ".bag": "rosbag", ".db3": "rosbag"}.get(suffix)
+                     ".pcd": "pcd", ".ply": "ply", ".bag": "rosbag", ".db3": "rosbag",
+                     ".bin": "scans"}.get(suffix)  # a KITTI .bin scan: a sequence of one
         if by_suffix:
             return by_suffix
     raise InputError(
         f"cannot tell the format of {target}: expected CSV with an x,y,z header, MCAP, "
-        "a CARMEN log, x y z point lines, PCD, PLY or a ROS bag (or give format=)"
+        "a CARMEN log, x y z point lines, PCD, PLY, a KITTI .bin scan or a ROS bag (or give format=)"
     )
 
 
@@ -144,13 +154,14 @@ def _numeric_fields(line: str) -> int:
     return count
 
 
-def read_log(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
+def read_log(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
     """Read a range log into positions of features.
 
     Parameters
     ----------
     path
-        The log file (or a folder of depth frames).
+        The log file (or a folder of depth frames or scans), or several point-cloud files
+        read as one scan sequence (format ``scans``, each file a scan).
     options
         How to read it: a :class:`~occtool.io.read_options.ReadOptions`, whose fields are
         the options (``format``, ``topics``, ``evidence``, ``no_return_range``, ...; see
@@ -176,14 +187,14 @@ def read_log(path: str | os.PathLike[str], options: ReadOptions | None = None, *
     >>> log = read_log("fixtures/office/features.csv")  # doctest: +SKIP
     >>> features = log.single().features                # doctest: +SKIP
     """
-    fmt, checked = _checked(path, options, keywords)
+    path, fmt, checked = _checked(path, options, keywords)
     from occtool.io._formats import read_errors, read_whole
 
     with read_errors(path):
         return read_whole(path, fmt, checked)
 
 
-def iter_positions(path: str | os.PathLike[str], options: ReadOptions | None = None,
+def iter_positions(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], options: ReadOptions | None = None,
                    **keywords: Any) -> PositionStream:
     """The positions of a range log, read one at a time (bounded memory).
 
@@ -202,20 +213,33 @@ def iter_positions(path: str | os.PathLike[str], options: ReadOptions | None = N
     """
     from occtool.io.position_stream import PositionStream
 
-    fmt, checked = _checked(path, options, keywords)
+    path, fmt, checked = _checked(path, options, keywords)
     return PositionStream(path, fmt, checked)
 
 
-def _checked(path: str | os.PathLike[str], options: ReadOptions | None,
-             keywords: dict[str, Any]) -> tuple[str, ReadOptions]:
-    """The log's format and the reading options, checked (see :func:`read_log`)."""
-    if not Path(path).exists():
-        raise FileNotFoundError(2, "No such file or directory", str(path))
+def _checked(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], options: ReadOptions | None,
+             keywords: dict[str, Any]) -> tuple[Any, str, ReadOptions]:
+    """The log's path (a list of one file: the file), format and reading options, checked
+    (see :func:`read_log`)."""
+    paths = [path] if isinstance(path, (str, os.PathLike)) else list(path)
+    for each in paths:
+        if not Path(each).exists():
+            raise FileNotFoundError(2, "No such file or directory", str(each))
     checked = as_read_options(options, **keywords)
-    fmt = checked.format or detect_format(path)
+    if len(paths) != 1:  # several files: one scan sequence
+        if checked.format not in (None, "scans"):
+            raise InputError(f"several files are read as one scan sequence (format scans), not {checked.format}")
+        return paths, "scans", checked
+    path = paths[0]
+    fmt = checked.format or detect_format(paths[0])
+    if checked.poses is not None and fmt != "scans":
+        if fmt not in ("pcd", "ply", "xyz"):
+            raise InputError(f"poses= applies to scans (a folder of *.pcd, *.ply or *.bin files, or point-cloud "
+                             f"files), and {paths[0]} is {fmt}")
+        fmt = "scans"  # a point-cloud file with a poses file: a sequence of one scan
     if checked.topics and fmt not in ("mcap", "rosbag"):
         raise InputError(f"topics= applies to MCAP logs only, and {path} is {fmt}")
-    return fmt, checked
+    return path, fmt, checked
 
 
 options_as_keywords(read_log)
@@ -240,7 +264,8 @@ def describe_log(path: str | os.PathLike[str], *, skip_invalid: bool = False,
     if not target.exists():
         raise FileNotFoundError(2, "No such file or directory", str(path))
     fmt = detect_format(target)
-    size = target.stat().st_size
+    # A folder (depth frames, scans): the bytes of the files in it, not of the folder's entry.
+    size = sum(p.stat().st_size for p in target.iterdir() if p.is_file()) if target.is_dir() else target.stat().st_size
     header = Table.grid(padding=(0, 2))
     header.add_column(style="bold")
     header.add_column(overflow="fold")  # a long path or note wraps, it is not cut to "..."

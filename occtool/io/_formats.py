@@ -17,7 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 import zlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from occtool.errors import InputError
@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from occtool.io.read_options import ReadOptions
 
 PathLike = str | os.PathLike[str]
+#: A log's path, or (a scan sequence, ``scans``) its files.
+Paths = PathLike | Sequence[PathLike]
 
 
 def _read_csv(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog:
@@ -69,6 +71,12 @@ def _read_pointcloud(path: PathLike, fmt: str, options: ReadOptions) -> RangeLog
     from occtool.io.pointcloud import read_pointcloud
 
     return read_pointcloud(path, options, format=fmt)
+
+
+def _read_scans(path: Paths, fmt: str, options: ReadOptions) -> RangeLog:
+    from occtool.io.scans import read_scans
+
+    return read_scans(path, options)
 
 
 class _Grouped:
@@ -134,25 +142,31 @@ def _stream_depth_folder(path: PathLike, fmt: str, options: ReadOptions) -> _Gro
     return _Grouped(DepthFolderScans(path, options, format=fmt), options)
 
 
-Reader = Callable[[PathLike, str, "ReadOptions"], "RangeLog"]
+def _stream_scans(path: Paths, fmt: str, options: ReadOptions) -> _Grouped:
+    from occtool.io.scans import ScanSequence
+
+    return _Grouped(ScanSequence(path, options), options)
+
+
+Reader = Callable[[Any, str, "ReadOptions"], "RangeLog"]  # Any: a path, or the files of a scan sequence
 
 #: Format name -> reader of the whole log.
 READERS: dict[str, Reader] = {
     "csv": _read_csv, "mcap": _read_mcap, "rosbag": _read_mcap, "carmen": _read_carmen, "urg": _read_urg,
     "tum": _read_depth_folder, "3dmatch": _read_depth_folder,
-    "xyz": _read_pointcloud, "pcd": _read_pointcloud, "ply": _read_pointcloud,
+    "xyz": _read_pointcloud, "pcd": _read_pointcloud, "ply": _read_pointcloud, "scans": _read_scans,
 }
 #: Format name -> source of its positions one at a time (absent: read whole, one position in practice).
-STREAMS: dict[str, Callable[[PathLike, str, ReadOptions], Any]] = {
+STREAMS: dict[str, Callable[[Any, str, ReadOptions], Any]] = {
     "csv": _stream_csv, "carmen": _stream_carmen, "mcap": _stream_mcap, "rosbag": _stream_mcap,
-    "tum": _stream_depth_folder, "3dmatch": _stream_depth_folder,
+    "tum": _stream_depth_folder, "3dmatch": _stream_depth_folder, "scans": _stream_scans,
 }
 assert set(READERS) == set(FORMATS) and set(STREAMS) <= set(FORMATS)  # one list of names
 
 
 
 @contextlib.contextmanager
-def read_errors(path: str | os.PathLike[str]) -> Iterator[None]:
+def read_errors(path: Paths) -> Iterator[None]:
     """A damaged compressed file or an I/O error while reading as one :class:`InputError`."""
     try:
         yield
@@ -166,7 +180,7 @@ def read_errors(path: str | os.PathLike[str]) -> Iterator[None]:
         raise InputError(f"{path} cannot be read: {exc}") from None
 
 
-def read_whole(path: str | os.PathLike[str], fmt: str, options: ReadOptions) -> RangeLog:
+def read_whole(path: Paths, fmt: str, options: ReadOptions) -> RangeLog:
     """Read a whole log of format ``fmt`` with its registered reader."""
     return READERS[fmt](path, fmt, options)
 

@@ -390,6 +390,17 @@ def camera_scan(points_body: FloatArray, camera_to_world: FloatArray) -> tuple[F
     not), and the :class:`Pose` (camera position and heading).
     """
     r_world_body = camera_to_world[:3, :3] @ OPTICAL_TO_BODY.T
+    return body_scan(points_body, r_world_body, camera_to_world[:3, 3])
+
+
+def body_scan(points_body: FloatArray, r_world_body: FloatArray, translation: ArrayLike) -> tuple[FloatArray, Pose]:
+    """Points in a sensor's body frame (REP-103: x forward, z up) and the body's rotation and
+    position in a z-up world: the points rotated into the frame centred at the sensor with
+    z up and x along its heading (its roll and pitch applied, its heading not), and the
+    :class:`Pose` (position and heading) of that frame. A depth camera
+    (:func:`camera_scan`) and a lidar scan with its scan-to-world transform
+    (:mod:`occtool.io.scans`) are placed so.
+    """
     forward = r_world_body[:, 0]
     if math.hypot(forward[0], forward[1]) > 1e-9:
         yaw = math.atan2(forward[1], forward[0])
@@ -399,7 +410,7 @@ def camera_scan(points_body: FloatArray, camera_to_world: FloatArray) -> tuple[F
     c, s = math.cos(yaw), math.sin(yaw)
     unturn = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     rotation = unturn @ r_world_body
-    t = camera_to_world[:3, 3]
+    t = np.asarray(translation, dtype=np.float64)
     return points_body @ rotation.T, Pose(float(t[0]), float(t[1]), float(t[2]), yaw)
 
 

@@ -7,8 +7,11 @@
 * ``pcd``: PCL's format, ``DATA ascii`` or ``binary`` (``binary_compressed`` is
   refused with a clear error). ``VIEWPOINT`` is the sensor pose in the cloud's frame:
   points are re-centred at it and turned by its yaw, and it becomes the pose.
+  Bytes of zeros after the ``POINTS`` records of binary data (SC-A-LOAM's scans) are
+  padding, ignored.
 * ``ply``: ``ascii``, ``binary_little_endian`` or ``binary_big_endian``; the
   ``vertex`` element's ``x, y, z`` (and the evidence property, if any).
+* KITTI ``.bin`` (read for :mod:`occtool.io.scans`): float32 ``x y z intensity`` records.
 
 Evidence comes from the field named by ``evidence_field`` when the file has one,
 else the constant ``evidence`` (0.9 by default). Points with a NaN coordinate or at
@@ -290,7 +293,9 @@ def _read_pcd(path: str | os.PathLike[str], name: str, evidence_field: str, cons
             raw = handle.read()  # bounded by the file (or the decompression limit), not by POINTS
             if len(raw) < points_count * stride:
                 raise InputError(f"{name}: PCD binary data is truncated ({len(raw)} of {points_count * stride} bytes)")
-            if len(raw) - points_count * stride >= stride > 0:
+            # Bytes beyond the points are an error unless they are zeros: SC-A-LOAM and
+            # others save binary PCDs zero-padded after POINTS records.
+            if len(raw) - points_count * stride >= stride > 0 and raw[points_count * stride:].strip(b"\0"):
                 raise InputError(f"{name}: PCD binary data holds {len(raw) // stride} points, the header says "
                                  f"POINTS {points_count}")
             dtype = np.dtype({"names": wanted, "formats": [offsets[w][1] for w in wanted],
@@ -397,6 +402,52 @@ def _read_ply(path: str | os.PathLike[str], name: str, evidence_field: str, cons
     return [Scan(points, evidence, None, None, name)], notes
 
 
+#: KITTI's Velodyne ``.bin`` scans: float32 records of x, y, z and a reflectance, no header.
+KITTI_BIN_FIELDS = 4
+
+
+def _read_kitti_bin(path: str | os.PathLike[str], name: str, constant: float, skip_invalid: bool,
+                    counts: dict[str, int]) -> tuple[list[Scan], list[str]]:
+    with _open_binary(path) as handle:
+        raw = handle.read()
+    record = 4 * KITTI_BIN_FIELDS
+    if len(raw) % record:
+        raise InputError(f"{name}: a KITTI .bin scan holds float32 x y z intensity records of {record} bytes, "
+                         f"and its {len(raw):,} bytes are not a whole number of them")
+    data = np.frombuffer(raw, dtype="<f4").reshape(-1, KITTI_BIN_FIELDS)
+    points = data[:, :3].astype(np.float64)
+    evidence = np.full(points.shape[0], constant)
+    points, evidence = _checked(points, evidence, name, skip_invalid, counts)
+    return [Scan(points, evidence, None, None, name)], [f"constant evidence {constant} for KITTI .bin points (evidence=)"]
+
+
+def pointcloud_scans(path: str | os.PathLike[str], settings: ReadOptions, format: str | None = None
+                     ) -> tuple[list[Scan], list[str]]:
+    """The scans of one ``xyz``, ``pcd``, ``ply`` or KITTI ``bin`` file (``format``, else ``settings.format``,
+    else from the extension) and the notes of reading it (:func:`read_pointcloud` groups them;
+    :mod:`occtool.io.scans` reads a folder of such files with this)."""
+    name = str(path)
+    format = format or settings.format
+    if format is None:
+        suffixes = [s.lower() for s in Path(name).suffixes if s.lower() not in (".gz", ".bz2")]
+        format = {".pcd": "pcd", ".ply": "ply"}.get(suffixes[-1] if suffixes else "", "xyz")
+    constant, skip_invalid = settings.constant_evidence, settings.skip_invalid
+    counts = {"nan": 0, "origin": 0, "invalid": 0, "lines": 0}
+    if format == "bin":
+        scans, notes = _read_kitti_bin(path, name, constant, skip_invalid, counts)
+    elif format == "xyz":
+        scans, notes = _read_xyz(path, name, constant, skip_invalid, counts)
+        notes.append(f"constant evidence {constant} for plain x y z points (evidence=)")
+    elif format == "pcd":
+        scans, notes = _read_pcd(path, name, settings.evidence_field, constant, skip_invalid, counts)
+    elif format == "ply":
+        scans, notes = _read_ply(path, name, settings.evidence_field, constant, skip_invalid, counts)
+    else:
+        raise InputError(f"unknown point-cloud format {format!r}: expected xyz, pcd or ply")
+    notes.extend(_notes(counts))
+    return scans, notes
+
+
 def read_pointcloud(path: str | os.PathLike[str], options: ReadOptions | None = None, **keywords: Any) -> RangeLog:
     """Read an ``xyz``, ``pcd`` or ``ply`` point-cloud file into positions of features.
 
@@ -417,22 +468,7 @@ def read_pointcloud(path: str | os.PathLike[str], options: ReadOptions | None = 
     """
     settings = as_read_options(options, **keywords)
     name = str(path)
-    format = settings.format
-    if format is None:
-        suffixes = [s.lower() for s in Path(name).suffixes if s.lower() not in (".gz", ".bz2")]
-        format = {".pcd": "pcd", ".ply": "ply"}.get(suffixes[-1] if suffixes else "", "xyz")
-    constant, skip_invalid = settings.constant_evidence, settings.skip_invalid
-    counts = {"nan": 0, "origin": 0, "invalid": 0, "lines": 0}
-    if format == "xyz":
-        scans, notes = _read_xyz(path, name, constant, skip_invalid, counts)
-        notes.append(f"constant evidence {constant} for plain x y z points (evidence=)")
-    elif format == "pcd":
-        scans, notes = _read_pcd(path, name, settings.evidence_field, constant, skip_invalid, counts)
-    elif format == "ply":
-        scans, notes = _read_ply(path, name, settings.evidence_field, constant, skip_invalid, counts)
-    else:
-        raise InputError(f"unknown point-cloud format {format!r}: expected xyz, pcd or ply")
-    notes.extend(_notes(counts))
+    scans, notes = pointcloud_scans(path, settings)
     if not any(s.points.shape[0] for s in scans):
         raise InputError(f"{name} holds no valid points")
     return build_log(scans, source=name, tolerance=settings.position_tolerance, group_by=settings.group_by,

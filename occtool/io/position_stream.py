@@ -23,6 +23,10 @@ iteration. What is held at a time depends on the format:
     one depth frame, and the scans of the position being gathered
     (:class:`~occtool.io.depth_folders.DepthFolderScans`: the first iteration reads up to 40
     frames first, for the floor that levels the world).
+``scans``
+    one scan file, and the scans of the position being gathered
+    (:class:`~occtool.io.scans.ScanSequence`: the first iteration reads and checks the poses
+    file first).
 ``xyz``, ``pcd``, ``ply``
     the whole file (one position in practice): read by :func:`occtool.io.read_log`.
 
@@ -34,7 +38,7 @@ keyframes and fusing compare positions across the whole log.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -55,9 +59,10 @@ class PositionStream:
         Checked reading options (as :func:`occtool.io.iter_positions` makes them).
     """
 
-    def __init__(self, path: str | os.PathLike[str], fmt: str, options: ReadOptions) -> None:
+    def __init__(self, path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], fmt: str,
+                 options: ReadOptions) -> None:
         self.path = path
-        self.source = str(path)
+        self.source = str(path) if isinstance(path, (str, os.PathLike)) else " ".join(str(p) for p in path)
         self.format = fmt
         self.options = options
         self.notes: list[str] = []

@@ -19,6 +19,7 @@ This module is light (no numpy at import): the command line reads its defaults f
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
@@ -27,7 +28,7 @@ from occtool.errors import InputError
 from occtool.limits import MAX_DISTANCE
 
 #: Every format :func:`occtool.io.read_log` reads (the registry is :mod:`occtool.io._formats`).
-FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg", "tum", "3dmatch")
+FORMATS = ("csv", "mcap", "carmen", "xyz", "pcd", "ply", "rosbag", "urg", "tum", "3dmatch", "scans")
 #: Evidence of data without an evidence field (laser scans, plain points) when ``evidence`` is None.
 DEFAULT_CONSTANT_EVIDENCE = 0.9
 #: ``(metres, radians)``: consecutive scans this close to a position's first scan join it.
@@ -113,6 +114,21 @@ def check_depth_features(value: int) -> int:
     return int(value)
 
 
+def check_poses_file(value: str | os.PathLike[str] | None) -> str | None:
+    """``None``, or the path of a poses file that exists and can be read (as a string)."""
+    if value is None:
+        return None
+    if isinstance(value, (bytes, bool)) or not isinstance(value, (str, os.PathLike)):
+        raise InputError(f"poses must be the path of a poses file, got {value!r}")
+    path = os.fspath(value)
+    if not os.path.isfile(path):
+        raise InputError(f"poses file {path} does not exist" if not os.path.exists(path)
+                         else f"poses file {path} is not a file")
+    if not os.access(path, os.R_OK):
+        raise InputError(f"poses file {path} cannot be read (permission denied)")
+    return path
+
+
 def check_format(value: str | None) -> str | None:
     """``None`` (from the file), or one of :data:`FORMATS` in any case (``dat`` is ``xyz``)."""
     if value is None:
@@ -177,6 +193,9 @@ class ReadOptions:
         pixel its evidence (:func:`occtool.io.depth.noise_evidence`).
     depth_max_range
         Depth images: farther depths are no returns, metres.
+    poses
+        Folders of scans and point-cloud files (``scans``, :mod:`occtool.io.scans`): a
+        KITTI-style poses file, line i the row-major 3x4 scan-to-world transform of scan i.
 
     Examples
     --------
@@ -203,6 +222,7 @@ class ReadOptions:
     depth_features: int = DEFAULT_DEPTH_FEATURES
     depth_noise: float = DEFAULT_DEPTH_NOISE
     depth_max_range: float = DEFAULT_DEPTH_MAX_RANGE
+    poses: str | None = None
 
     def __post_init__(self) -> None:
         # The order is read_log's of old: a user with two wrong options hears of the same one first.
@@ -217,6 +237,7 @@ class ReadOptions:
         checked["depth_features"] = check_depth_features(self.depth_features)
         checked["depth_noise"] = check_depth_noise(self.depth_noise)
         checked["depth_max_range"] = check_depth_max_range(self.depth_max_range)
+        checked["poses"] = check_poses_file(self.poses)
         for name, value in checked.items():
             object.__setattr__(self, name, value)  # frozen: the checked value replaces the given one
 
@@ -274,5 +295,5 @@ def options_as_keywords(function: Any) -> Any:
 
 __all__ = ["DEFAULT_CONSTANT_EVIDENCE", "DEFAULT_DEPTH_FEATURES", "DEFAULT_DEPTH_MAX_RANGE", "DEFAULT_DEPTH_MIN_RANGE",
            "DEFAULT_DEPTH_NOISE", "DEFAULT_POSITION_TOLERANCE", "FORMATS", "GROUP_BY_CHOICES", "OPTION_NAMES",
-           "ReadOptions", "as_read_options", "check_depth_features", "check_depth_max_range", "check_depth_noise", "check_format",
+           "ReadOptions", "as_read_options", "check_depth_features", "check_depth_max_range", "check_depth_noise", "check_format", "check_poses_file",
            "check_no_return_range", "check_tolerance", "options_as_keywords"]

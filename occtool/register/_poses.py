@@ -4,7 +4,7 @@ map's ``/tf``."""
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,19 +25,23 @@ def write_poses_csv(report: RegistrationReport, path: str | Any, *, overwrite: b
             handle.write(f"{k},{when},{pose.x:.6f},{pose.y:.6f},{pose.z:.6f},{pose.yaw:.6f}\n")
 
 
-def read_map_log(source: str | os.PathLike[str], read_options: Mapping[str, Any] | None = None, *,
+def read_map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+                 read_options: Mapping[str, Any] | None = None, *,
                  register: bool | None = None, settings: RegistrationSettings | None = None
                  ) -> tuple[RangeLog, RegistrationReport | None]:
     """Read the log of a map (:func:`occtool.fuse.map_log`): with ``read_options`` (the
-    keywords of :func:`occtool.io.read_log`), registered when ``register`` is true or, by
+    keywords of :func:`occtool.io.read_log`; ``source`` a log, or point-cloud files read as one
+    scan sequence), registered when ``register`` is true or, by
     default (``None``), when it needs it (:func:`needs_registration`). Its notes are logged
     (``occtool.io``, each at its level: :func:`occtool.features.log_notes`). Returns the log
     and the registration report (``None`` when its own poses are kept)."""
     import logging
 
-    log, report = read_registered_log(str(source), dict(read_options or {}), register, settings=settings)
+    path = str(source) if isinstance(source, (str, os.PathLike)) else list(source)  # several files: a sequence
+    log, report = read_registered_log(path, dict(read_options or {}), register, settings=settings)
     logger = logging.getLogger("occtool.io")
-    log_notes(logger, Path(source).name, log.notes)
+    name = Path(path).name if isinstance(path, str) else f"{len(path)} files"
+    log_notes(logger, name, log.notes)
     return log, report
 
 

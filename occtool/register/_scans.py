@@ -4,6 +4,7 @@ for ``occtool map`` with its poses registered when it needs them."""
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -153,7 +154,8 @@ def needs_registration(log: RangeLog) -> bool:
     return pose_kind(log) in (None, "odometry")
 
 
-def read_registered_log(path: str, read_options: dict[str, Any], register: bool | None = None, *,
+def read_registered_log(path: str | Sequence[str | os.PathLike[str]], read_options: dict[str, Any],
+                        register: bool | None = None, *,
                         settings: RegistrationSettings | None = None
                         ) -> tuple[RangeLog, RegistrationReport | None]:
     """Read a log for ``occtool map``: scan by scan, registered when ``register`` is true,
