@@ -152,6 +152,7 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
     else:
         from occtool.register import RegistrationSettings
 
+        ctx = click.get_current_context()
         estimator = fit_from_kwargs(kwargs, seed=seed)
         registration = RegistrationSettings(loop_closure=kwargs.pop("loop_closure", True))
         register = kwargs.pop("register", None)
@@ -160,7 +161,8 @@ def map_command(source: str, output: str, resolution: float, nav2_mode: str, thr
             read_options["topics"] = list(read_options["topics"]) or None
         log = read_log_from_kwargs(source, read_options) if str(source) == "-" else source
         result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
-                              registration=registration, keyframe_share=keyframe_share, **written)
+                              registration=registration, keyframe_share=keyframe_share, **written,
+                              heights_from_data=not {"sensor_height", "body_height"} & set(_given(ctx)))
         report = result.report
         assert report is not None
         for note in report.notes:
