@@ -52,8 +52,9 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     The data is checked against the template's robot first, as ``occtool fit`` checks it
     (:func:`occtool.modelset.estimator_for_log`): a warning for each disagreement, the
     floor's naming ``--sensor-height`` and the height the data gives. With
-    ``heights_from_data`` (no sensor or body height given) a planar laser log takes a
-    planar scanner's robot and a 3D log whose floor disagrees the data's sensor height.
+    ``heights_from_data`` (no sensor or body height given) a 3D log whose floor disagrees
+    takes the data's sensor height. A planar laser log keeps the template's robot and focus
+    range (the fit's planar defaults are not taken: docs/map.md).
 
     Positions without a pose cannot be placed and raise, unless the log is a single
     position without one (its frame becomes the map's, noted in the report); positions
@@ -79,7 +80,7 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     elif missing:
         raise InputError(f"{log.source or 'the log'}: position {missing[0]} has no pose; a world map needs poses")
     # Once per log, as the fit does: warnings where the data and the robot disagree.
-    template = estimator_for_log(template, positions, planar_defaults=heights_from_data)
+    template = estimator_for_log(template, positions, floor_defaults=heights_from_data)
     params = template.get_params()
     robot = params.get("robot") or Robot()
     keep = select_keyframes(positions, robot, new_share=keyframe_share)

@@ -47,13 +47,14 @@ class _GeometrySurvey:
     and a planar laser's the first position with geometry findings and how many have some,
     and each position's lowest large horizontal layer (:func:`occtool._floor.lowest_layer`)."""
 
-    def __init__(self, estimator: Any, planar_defaults: bool) -> None:
+    def __init__(self, estimator: Any, planar_defaults: bool, floor_defaults: bool | None = None) -> None:
         from dataclasses import replace
 
         from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
 
         self.estimator = estimator
         self.planar_defaults = planar_defaults
+        self.floor_defaults = planar_defaults if floor_defaults is None else floor_defaults
         robot = estimator.robot if estimator.robot is not None else Robot()
         self.robots = {"given": robot}
         if planar_defaults:
@@ -115,7 +116,7 @@ class _GeometrySurvey:
         height, seen = found
         where = (f"the floor that {seen} of the {self.count} positions see lies {height:.2f} m below the sensor"
                  if self.count > 1 else f"the floor lies {height:.2f} m below the sensor")
-        if self.planar_defaults:  # no height given: the data's floor sets it
+        if self.floor_defaults:  # no height given: the data's floor sets it
             log.warning("%s: --sensor-height %.2f taken from the data instead of the default %g; give "
                         "--sensor-height to choose", where, height, robot.sensor_height)
             robot = replace(robot, sensor_height=height)
@@ -151,7 +152,8 @@ class _GeometrySurvey:
         return estimator
 
 
-def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False) -> Any:
+def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False,
+                      floor_defaults: bool | None = None) -> Any:
     """The estimator a log's positions are fitted with, and a warning for each place the
     data and the sensor geometry disagree.
 
@@ -168,13 +170,13 @@ def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaul
     (:mod:`occtool._floor`; never the most populated layer, which may be a table top).
     When the sensor's height above it differs from the robot's ``sensor_height`` by more
     than :data:`FLOOR_DISAGREEMENT`, one warning names ``--sensor-height`` and the height
-    the data gives; with ``planar_defaults`` (the command line's when no height was given)
-    a log that is not planar takes that height. ``occtool fit`` and ``occtool map``
+    the data gives; with ``floor_defaults`` (by default ``planar_defaults``: the command
+    line's when no height was given) a log that is not planar takes that height. ``occtool fit`` and ``occtool map``
     (:func:`occtool.fuse.fuse_log`) both call this. ``positions`` may be any iterable
     read once (a :func:`occtool.io.iter_positions` stream): only a pair of numbers per
     position is held.
     """
-    survey = _GeometrySurvey(estimator, planar_defaults)
+    survey = _GeometrySurvey(estimator, planar_defaults, floor_defaults)
     for position in positions:
         survey.add(position)
     return survey.result()
