@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._floor import lowest_layer
 from occtool._stats import median
 from occtool.errors import InputError
 from occtool.features import FeatureGeometry, Features, wrap_angle
@@ -456,7 +457,7 @@ def geometry_findings(features: Features, robot: Robot, *, floor_layer: bool = T
             f"{below:.0%} of the returns lie more than {BELOW_FLOOR:g} m below the floor (h = {floor:g} m) and are "
             f"taken for floor: is the sensor higher than sensor_height {robot.sensor_height:g} m?"
         )
-    layer = _lowest_layer(features) if floor_layer else None
+    layer = lowest_layer(features.points[features.evidence > 0.0], top=0.0) if floor_layer else None
     if layer is not None and layer[0] > floor + FLOOR_OFFSET and layer[0] < 0.0:
         findings.append(
             f"{layer[1]:.0%} of the returns below the sensor lie in a horizontal layer at h = {layer[0]:.2f} m, "
@@ -471,13 +472,6 @@ def is_planar(features: Features) -> bool:
     """Whether the returns (evidence > 0) all lie in one horizontal plane: a 2D laser's scan."""
     heights = features.points[features.evidence > 0.0, 2]
     return heights.size > 0 and float(heights.max() - heights.min()) <= PLANAR_SPREAD
-
-
-def _lowest_layer(features: Features) -> tuple[float, float] | None:
-    """Height and share of the lowest large horizontal layer of the returns below the sensor."""
-    from occtool._floor import lowest_layer
-
-    return lowest_layer(features.points[features.evidence > 0.0], top=0.0)
 
 
 __all__ = ["FLOOR_MODES", "SAMPLE_KINDS", "Samples", "SensorModel", "geometry_findings", "is_planar"]

@@ -82,7 +82,7 @@ class _GeometrySurvey:
         for name, robot in self.robots.items():
             if name == "planar" and not self.all_planar:
                 continue  # its findings are read only for a log planar throughout
-            # The floor is judged across positions (_floor_height), not one by one.
+            # The floor is judged across positions (floor_height), not one by one.
             findings = geometry_findings(features, robot, floor_layer=False)
             if findings:
                 self.flagged[name] += 1
@@ -171,10 +171,11 @@ def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaul
     When the sensor's height above it differs from the robot's ``sensor_height`` by more
     than :data:`FLOOR_DISAGREEMENT`, one warning names ``--sensor-height`` and the height
     the data gives; with ``floor_defaults`` (by default ``planar_defaults``: the command
-    line's when no height was given) a log that is not planar takes that height. ``occtool fit`` and ``occtool map``
-    (:func:`occtool.fuse.fuse_log`) both call this. ``positions`` may be any iterable
-    read once (a :func:`occtool.io.iter_positions` stream): only a pair of numbers per
-    position is held.
+    line's when no height was given) a log that is not planar takes that height (the other
+    findings are still the given robot's). ``occtool fit`` and ``occtool map``
+    (:func:`occtool.fuse.fuse_log`) both call this. ``positions`` may be any iterable read
+    once (a :func:`occtool.io.iter_positions` stream): only two numbers per position are
+    held.
     """
     survey = _GeometrySurvey(estimator, planar_defaults, floor_defaults)
     for position in positions:
