@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._floor import lowest_layer
 from occtool._stats import median
 from occtool.errors import InputError
 from occtool.features import FeatureGeometry, Features, wrap_angle
@@ -403,7 +404,7 @@ FLOOR_OFFSET = 0.15
 PLANAR_SPREAD = 0.01
 
 
-def geometry_findings(features: Features, robot: Robot) -> list[str]:
+def geometry_findings(features: Features, robot: Robot, *, floor_layer: bool = True) -> list[str]:
     """Ways in which the data and the robot's geometry disagree, as sentences (none: they agree).
 
     The fit keeps the robot's body band (``ground_clearance`` to ``body_height`` above the
@@ -411,8 +412,11 @@ def geometry_findings(features: Features, robot: Robot) -> list[str]:
     lies below the floor for floor. When the data cannot have been taken with that
     geometry the model is still fitted, but it maps nothing useful: a 2D laser's plane at
     the band's edge, no return inside the band, much of the data below the floor (the
-    sensor sits higher than ``sensor_height``) or a floor-like layer well above the floor
-    (it sits lower). The fit itself does not change.
+    sensor sits higher than ``sensor_height``) or, unless ``floor_layer`` is false, the
+    lowest large horizontal layer below the sensor (:func:`occtool._floor.lowest_layer`: the
+    floor, not the most populated layer, which may be a table top) well above the floor (it
+    sits lower). The fit itself does not change. A log's floor across its positions is
+    :func:`occtool.modelset.estimator_for_log`'s (which passes ``floor_layer=False``).
 
     Parameters
     ----------
@@ -453,10 +457,11 @@ def geometry_findings(features: Features, robot: Robot) -> list[str]:
             f"{below:.0%} of the returns lie more than {BELOW_FLOOR:g} m below the floor (h = {floor:g} m) and are "
             f"taken for floor: is the sensor higher than sensor_height {robot.sensor_height:g} m?"
         )
-    layer = _densest_layer(heights)
+    layer = lowest_layer(features.points[features.evidence > 0.0], top=0.0) if floor_layer else None
     if layer is not None and layer[0] > floor + FLOOR_OFFSET and layer[0] < 0.0:
         findings.append(
-            f"{layer[1]:.0%} of the returns lie in a horizontal layer at h = {layer[0]:.2f} m, likely the floor, "
+            f"{layer[1]:.0%} of the returns below the sensor lie in a horizontal layer at h = {layer[0]:.2f} m, "
+            "likely the floor, "
             f"{layer[0] - floor:.2f} m above the floor sensor_height {robot.sensor_height:g} m puts at h = {floor:g} m: "
             "is the sensor lower than that?"
         )
@@ -467,21 +472,6 @@ def is_planar(features: Features) -> bool:
     """Whether the returns (evidence > 0) all lie in one horizontal plane: a 2D laser's scan."""
     heights = features.points[features.evidence > 0.0, 2]
     return heights.size > 0 and float(heights.max() - heights.min()) <= PLANAR_SPREAD
-
-
-def _densest_layer(heights: np.ndarray, thickness: float = 0.06) -> tuple[float, float] | None:
-    """Centre height and share of the thickest-populated ``thickness`` layer, if it holds
-    at least :data:`FINDING_SHARE` of ``heights`` (the floor, in most 3D data)."""
-    step = thickness / 3.0
-    counts, edges = np.histogram(heights, bins=max(1, int(np.ceil((heights.max() - heights.min()) / step))))
-    if counts.size >= 3:
-        counts = np.convolve(counts, np.ones(3), mode="same")
-    k = int(np.argmax(counts))
-    share = float(counts[k]) / heights.size
-    if share < FINDING_SHARE:
-        return None
-    layer = heights[(heights >= edges[k] - step) & (heights <= edges[k + 1] + step)]
-    return median(layer), share
 
 
 __all__ = ["FLOOR_MODES", "SAMPLE_KINDS", "Samples", "SensorModel", "geometry_findings", "is_planar"]

@@ -164,6 +164,7 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
     else:
         from occtool.register import RegistrationSettings
 
+        ctx = click.get_current_context()
         estimator = fit_from_kwargs(kwargs, seed=seed)
         registration = RegistrationSettings(loop_closure=kwargs.pop("loop_closure", True))
         register = kwargs.pop("register", None)
@@ -171,7 +172,8 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
         log = read_log_from_kwargs(source, dict(read_options)) if str(source) == "-" else \
             source if len(sources) == 1 else list(sources)
         result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
-                              registration=registration, keyframe_share=keyframe_share, **written)
+                              registration=registration, keyframe_share=keyframe_share, **written,
+                              heights_from_data=not {"sensor_height", "body_height"} & set(_given(ctx)))
         report = result.report
         assert report is not None
         log_notes(logger, Path(source).name, report.notes)

@@ -41,12 +41,20 @@ class FuseReport:
 
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
              progress: Callable[[int, int], None] | None = None,
-             keyframe_share: float = KEYFRAME_NEW_SHARE) -> tuple[FusedMap, list[Any], FuseReport]:
+             keyframe_share: float = KEYFRAME_NEW_SHARE,
+             heights_from_data: bool = False) -> tuple[FusedMap, list[Any], FuseReport]:
     """Fit the keyframe positions of ``log`` with copies of ``template`` (an unfitted
     :class:`occtool.fit.OccupancyRegressor`) and fuse them.
 
     Keyframes (:func:`select_keyframes`): a position is fitted when at least
     ``keyframe_share`` of the cells its returns fall in are new; 0 fits every position.
+
+    The data is checked against the template's robot first, as ``occtool fit`` checks it
+    (:func:`occtool.modelset.estimator_for_log`): a warning for each disagreement, the
+    floor's naming ``--sensor-height`` and the height the data gives. With
+    ``heights_from_data`` (no sensor or body height given) a 3D log whose floor disagrees
+    takes the data's sensor height. A planar laser log keeps the template's robot and focus
+    range (the fit's planar defaults are not taken: docs/map.md).
 
     Positions without a pose cannot be placed and raise, unless the log is a single
     position without one (its frame becomes the map's, noted in the report); positions
@@ -60,6 +68,7 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     """
     from occtool.errors import OcctoolError
     from occtool.fit import OccupancyRegressor
+    from occtool.modelset import estimator_for_log
 
     notes = []
     positions = list(log.positions)
@@ -70,6 +79,8 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
         notes.append("the log has no poses: its single position is the map frame's origin")
     elif missing:
         raise InputError(f"{log.source or 'the log'}: position {missing[0]} has no pose; a world map needs poses")
+    # Once per log, as the fit does: warnings where the data and the robot disagree.
+    template = estimator_for_log(template, positions, floor_defaults=heights_from_data)
     params = template.get_params()
     robot = params.get("robot") or Robot()
     keep = select_keyframes(positions, robot, new_share=keyframe_share)

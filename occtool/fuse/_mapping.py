@@ -68,7 +68,7 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             keyframe_share: float = KEYFRAME_NEW_SHARE, resolution: float = 0.05, max_range: float = 1.5,
             nav2_mode: str = "trinary", simplify: float | None = None, precision: int | None = None,
             georeference: Any | None = None, mcap: bool = True, overwrite: bool = True,
-            progress: Callable[[int, int], None] | None = None) -> MapResult:
+            progress: Callable[[int, int], None] | None = None, heights_from_data: bool = False) -> MapResult:
     """Map a log: what ``occtool map LOG -o OUTPUT`` does.
 
     Parameters
@@ -99,6 +99,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         As for :func:`occtool.fuse.write_run_map`.
     progress
         Called with ``(done, total)`` as the keyframes are fitted.
+    heights_from_data
+        No sensor or body height was given: the data's sets them (:func:`occtool.fuse.fuse_log`).
 
     Raises
     ------
@@ -126,7 +128,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
                                                    settings=registration or RegistrationSettings())
         name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
     fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
-                                     keyframe_share=keyframe_share, progress=progress)
+                                     keyframe_share=keyframe_share, progress=progress,
+                                     heights_from_data=heights_from_data)
     positions = list(zip(report.fitted, fused.poses, fused.stamps))
     run = map_of_run(fused, models, positions, resolution=resolution,
                      navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings)

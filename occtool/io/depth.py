@@ -414,14 +414,31 @@ def body_scan(points_body: FloatArray, r_world_body: FloatArray, translation: Ar
     return points_body @ rotation.T, Pose(float(t[0]), float(t[1]), float(t[2]), yaw)
 
 
-def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0,
-                   tolerance: float = 0.03) -> tuple[FloatArray, float, int] | None:
-    """The floor plane of world points: the plane of most inliers (within ``tolerance``)
-    whose normal lies within 30 degrees of ``up_guess``, among the lowest 40 % of the points.
+def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0, tolerance: float = 0.03,
+                   groups: NDArray[np.intp] | None = None, origins: FloatArray | None = None
+                   ) -> tuple[FloatArray, float, int] | None:
+    """The floor plane of world points: the lowest large horizontal surface that many
+    positions see, never merely the plane of most points (a table top seen from above holds
+    more returns than the floor round it).
+
+    The floor's normal comes first: the plane of most inliers (within ``tolerance``) whose
+    normal lies within 30 degrees of ``up_guess``, among the lowest 40 % of the points (the
+    floor or a table top: horizontal surfaces share their normal). Along it, each position
+    (``groups``: a position index per point, all one position without) gives its lowest
+    large layer below its sensor (``origins``: each position's sensor in the points' frame;
+    without, every point counts) and the floor is where many of them agree
+    (:func:`occtool._floor.lowest_layer`, :func:`occtool._floor.common_floor`). The plane
+    is then fitted to the returns near that floor (within ``tolerance``, then half of it).
+
+    Gravity is not in the poses of the folders read here (TUM's motion-capture world has z
+    up but its floor is wherever the capture system's origin was; 3DMatch's world is the
+    first camera's), so the floor sets both up and height.
 
     Returns ``(unit normal pointing up, offset d with n . p = d on the floor, inliers)``, or
-    ``None`` when no such plane holds 5 % of the points.
+    ``None`` when no horizontal plane holds 5 % of the points or no floor is supported.
     """
+    from occtool._floor import LAYER, common_floor, lowest_layer
+
     if points.shape[0] < 50:
         return None
     up = up_guess / np.linalg.norm(up_guess)
@@ -447,13 +464,37 @@ def estimate_floor(points: FloatArray, up_guess: FloatArray, *, seed: int = 0,
             best = (normal, offset, inliers)
     if best is None or best[2] < 0.05 * points.shape[0]:
         return None
-    # Refine: the least-squares plane of the inliers.
-    normal, offset, _ = best
-    inlier_points = points[np.abs(points @ normal - offset) < tolerance]
-    centre = inlier_points.mean(axis=0)
-    _, _, vt = np.linalg.svd(inlier_points - centre, full_matrices=False)
-    refined = vt[2] if vt[2] @ up > 0 else -vt[2]
-    return refined, float(refined @ centre), int(inlier_points.shape[0])
+    # The height: each position's lowest large layer along that normal, where many agree.
+    level = level_rotation(best[0])
+    levelled = points @ level.T
+    group = np.zeros(points.shape[0], dtype=np.intp) if groups is None else np.asarray(groups, dtype=np.intp)
+    order = np.argsort(group, kind="stable")
+    ids, first = np.unique(group[order], return_index=True)
+    tops = (np.full(ids.size, np.inf) if origins is None
+            else (np.asarray(origins, dtype=np.float64)[ids] @ level.T)[:, 2])
+    layers = np.full(ids.size, np.nan)
+    for k, part in enumerate(np.split(order, first[1:])):  # a loop over positions, not points
+        found = lowest_layer(levelled[part], tops[k])
+        if found is not None:
+            layers[k] = found[0]
+    floor = common_floor(layers)
+    if floor is None:
+        return None
+    # Refine: the least-squares plane of the returns near that floor, in narrowing bands (the
+    # normal of a small table top may tilt a wide floor out of a narrow band at first; the
+    # narrowest leaves out what stands on the floor, the feet of walls and boxes).
+    normal, offset = best[0], float(floor[0])  # levelled z is the height along best[0]
+    for band in (max(tolerance, LAYER / 2.0), tolerance, tolerance / 2.0):
+        inlier_points = points[np.abs(points @ normal - offset) < band]
+        if inlier_points.shape[0] < 3:
+            return None
+        centre = inlier_points.mean(axis=0)
+        _, _, vt = np.linalg.svd(inlier_points - centre, full_matrices=False)
+        refined = vt[2] if vt[2] @ up > 0 else -vt[2]
+        if refined @ up < cos_limit:
+            return None
+        normal, offset = refined, float(refined @ centre)
+    return normal, offset, int(np.count_nonzero(np.abs(points @ normal - offset) < tolerance))
 
 
 __all__ = [

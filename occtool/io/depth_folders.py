@@ -498,7 +498,11 @@ def _level_world(posed: list[tuple[FloatArray, FloatArray, _Frame]], z_up: bool
         optical = hits @ OPTICAL_TO_BODY  # body -> optical (OPTICAL_TO_BODY is orthonormal)
         clouds.append(optical @ frame.pose[:3, :3].T + frame.pose[:3, 3])
     cloud = np.concatenate(clouds) if clouds else np.empty((0, 3))
-    floor = estimate_floor(cloud, guess)
+    # Each frame is a position of its own: the floor is the lowest large layer many frames
+    # see below their camera, not the plane of most returns (a table top seen from above).
+    groups = np.repeat(np.arange(len(clouds)), [c.shape[0] for c in clouds])
+    origins = np.array([posed[i][2].pose[:3, 3] for i in picks]).reshape(-1, 3)
+    floor = estimate_floor(cloud, guess, groups=groups, origins=origins)
     if floor is None:
         if z_up:
             notes.append("no floor plane found in the frames: the world's z is taken as up and heights as given")

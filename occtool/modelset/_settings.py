@@ -37,18 +37,24 @@ def settings_digest(estimator: Any) -> str:
     return hashlib.sha256(json.dumps(content, sort_keys=True, default=repr).encode()).hexdigest()
 
 
+#: The data's floor and the robot's (``sensor_height`` below the sensor) disagree beyond this, metres.
+FLOOR_DISAGREEMENT = 0.15
+
+
 class _GeometrySurvey:
     """What :func:`estimator_for_log` needs to know of a log's positions, gathered one
-    position at a time: their count, whether all are planar, and for the estimator's robot
-    and a planar laser's the first position with geometry findings and how many have some."""
+    position at a time: their count, whether all are planar, for the estimator's robot
+    and a planar laser's the first position with geometry findings and how many have some,
+    and each position's lowest large horizontal layer (:func:`occtool._floor.lowest_layer`)."""
 
-    def __init__(self, estimator: Any, planar_defaults: bool) -> None:
+    def __init__(self, estimator: Any, planar_defaults: bool, floor_defaults: bool | None = None) -> None:
         from dataclasses import replace
 
         from occtool.robot import PLANAR_LASER_BODY_HEIGHT, PLANAR_LASER_SENSOR_HEIGHT, Robot
 
         self.estimator = estimator
         self.planar_defaults = planar_defaults
+        self.floor_defaults = planar_defaults if floor_defaults is None else floor_defaults
         robot = estimator.robot if estimator.robot is not None else Robot()
         self.robots = {"given": robot}
         if planar_defaults:
@@ -58,21 +64,66 @@ class _GeometrySurvey:
         self.all_planar = True
         self.first: dict[str, tuple[int, list[str]] | None] = dict.fromkeys(self.robots)
         self.flagged: dict[str, int] = dict.fromkeys(self.robots, 0)
+        #: Each position's lowest large layer: in the world (its pose's z added) and below its sensor.
+        self.layers: list[tuple[float, float]] = []
 
     def add(self, position: Any) -> None:
+        from occtool._floor import lowest_layer
         from occtool.sensor import geometry_findings, is_planar
 
         self.count += 1
+        features = position.features
         if self.planar_defaults and self.all_planar:
-            self.all_planar = is_planar(position.features)
+            self.all_planar = is_planar(features)
+        layer = lowest_layer(features.points[features.evidence > 0.0], top=0.0)
+        if layer is not None:
+            z = position.pose.z if position.pose is not None else 0.0
+            self.layers.append((z + layer[0], layer[0]))
         for name, robot in self.robots.items():
             if name == "planar" and not self.all_planar:
                 continue  # its findings are read only for a log planar throughout
-            findings = geometry_findings(position.features, robot)
+            # The floor is judged across positions (floor_height), not one by one.
+            findings = geometry_findings(features, robot, floor_layer=False)
             if findings:
                 self.flagged[name] += 1
                 if self.first[name] is None:
                     self.first[name] = (position.index, findings)
+
+    def floor_height(self) -> tuple[float, int] | None:
+        """The sensor's height above the floor the positions agree on (the median over the
+        positions that see it) and how many see it; ``None`` when no floor is supported."""
+        import numpy as np
+
+        from occtool._floor import common_floor
+
+        if not self.layers:
+            return None
+        world, below = np.array(self.layers).T
+        found = common_floor(world)
+        if found is None:
+            return None
+        members = found[1]
+        return round(float(np.median(-below[members])), 2), int(np.count_nonzero(members))
+
+    def _check_floor(self, estimator: Any, robot: Any) -> Any:
+        """The estimator with the data's sensor height when the user gave none and the data's
+        floor disagrees with the robot's; a warning naming ``--sensor-height`` either way."""
+        from dataclasses import replace
+
+        found = self.floor_height()
+        if found is None or abs(found[0] - robot.sensor_height) <= FLOOR_DISAGREEMENT:
+            return estimator
+        height, seen = found
+        where = (f"the floor that {seen} of the {self.count} positions see lies {height:.2f} m below the sensor"
+                 if self.count > 1 else f"the floor lies {height:.2f} m below the sensor")
+        if self.floor_defaults:  # no height given: the data's floor sets it
+            log.warning("%s: --sensor-height %.2f taken from the data instead of the default %g; give "
+                        "--sensor-height to choose", where, height, robot.sensor_height)
+            robot = replace(robot, sensor_height=height)
+            return type(estimator)(**{**estimator.get_params(deep=False), "robot": robot})
+        log.warning("%s, not %g m as --sensor-height says: give --sensor-height %.2f", where,
+                    robot.sensor_height, height)
+        return estimator
 
     def result(self) -> Any:
         """The estimator for the log (logging what :func:`estimator_for_log` logs)."""
@@ -96,10 +147,13 @@ class _GeometrySurvey:
             more = f" (and {flagged - 1} more position(s))" if flagged > 1 else ""
             for finding in findings:
                 log.warning("%s%s%s", where, finding, more)
+        if name == "given":
+            estimator = self._check_floor(estimator, self.robots[name])
         return estimator
 
 
-def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False) -> Any:
+def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaults: bool = False,
+                      floor_defaults: bool | None = None) -> Any:
     """The estimator a log's positions are fitted with, and a warning for each place the
     data and the sensor geometry disagree.
 
@@ -109,10 +163,21 @@ def estimator_for_log(estimator: Any, positions: Sequence[Any], *, planar_defaul
     is other than the default, a laser's (:data:`occtool.fit.PLANAR_FOCUS_RANGE`): the
     command line does so unless the user gave a sensor or body height. Each finding of
     :func:`occtool.sensor.geometry_findings` is logged as one warning (the first position's,
-    with a count of the others that have findings too). ``positions`` may be any iterable
-    read once (a :func:`occtool.io.iter_positions` stream): nothing of it is held.
+    with a count of the others that have findings too).
+
+    The floor is judged across the positions: each one's lowest large horizontal layer
+    below its sensor, and the lowest height many of them agree on in the world
+    (:mod:`occtool._floor`; never the most populated layer, which may be a table top).
+    When the sensor's height above it differs from the robot's ``sensor_height`` by more
+    than :data:`FLOOR_DISAGREEMENT`, one warning names ``--sensor-height`` and the height
+    the data gives; with ``floor_defaults`` (by default ``planar_defaults``: the command
+    line's when no height was given) a log that is not planar takes that height (the other
+    findings are still the given robot's). ``occtool fit`` and ``occtool map``
+    (:func:`occtool.fuse.fuse_log`) both call this. ``positions`` may be any iterable read
+    once (a :func:`occtool.io.iter_positions` stream): only two numbers per position are
+    held.
     """
-    survey = _GeometrySurvey(estimator, planar_defaults)
+    survey = _GeometrySurvey(estimator, planar_defaults, floor_defaults)
     for position in positions:
         survey.add(position)
     return survey.result()
