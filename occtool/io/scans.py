@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import RangeLog
+from occtool.io._detect import SCAN_SUFFIXES, _suffix, detect_format, is_scan_folder
 from occtool.io.positions import Scan, build_log
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 from occtool.limits import MAX_DISTANCE
@@ -49,29 +50,12 @@ from occtool.limits import MAX_DISTANCE
 FloatArray = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
 
-#: The extensions of a folder's scans, and each one's point-cloud format.
-SCAN_SUFFIXES = {".pcd": "pcd", ".ply": "ply", ".bin": "bin"}
 #: The point-cloud formats a listed file may have (a folder's are :data:`SCAN_SUFFIXES`).
 FILE_FORMATS = ("pcd", "ply", "bin", "xyz")
 #: Most scans in one sequence, and most lines of a poses file.
 MAX_SCANS = 1_000_000
 #: A pose's 3x3 block is a rotation when ``R R^T`` is the identity within this, and ``det R > 0``.
 ROTATION_TOLERANCE = 1e-3
-
-
-def _suffix(path: Path) -> str:
-    """The extension that names the format (``.pcd`` of ``a.pcd.gz``), lower case."""
-    suffixes = [s.lower() for s in path.suffixes if s.lower() not in (".gz", ".bz2")]
-    return suffixes[-1] if suffixes else ""
-
-
-def is_scan_folder(path: PathLike) -> bool:
-    """Whether ``path`` is a folder holding at least one ``*.pcd``, ``*.ply`` or ``*.bin`` file."""
-    try:
-        with os.scandir(path) as entries:
-            return any(_suffix(Path(e.name)) in SCAN_SUFFIXES and e.is_file() for e in entries)
-    except OSError:
-        return False
 
 
 def scan_files(path: PathLike | Sequence[PathLike]) -> list[Path]:
@@ -221,7 +205,6 @@ class ScanSequence:
 
     def _formats(self) -> list[str]:
         """Each file's point-cloud format: from its extension, else (a listed file) its content."""
-        from occtool.io import detect_format
 
         formats = []
         for file in self.files:
