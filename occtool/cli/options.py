@@ -14,10 +14,11 @@ command line win.
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 import click
 
@@ -72,6 +73,95 @@ def float_list(ctx: click.Context | None, param: click.Parameter | None, value: 
 
 # --- configuration file -------------------------------------------------------------
 
+#: Largest ``--config`` file read (a settings file is a few hundred bytes).
+MAX_CONFIG_BYTES = 1 << 20
+
+
+def _config_key(name: str) -> str:
+    return name.strip().lstrip("-").replace("-", "_")
+
+
+def _config_names(command: click.Command) -> dict[str, tuple[click.Parameter, bool]]:
+    """Each spelling a config key may take -> (its parameter, whether it negates a flag).
+
+    A key is the option's flag without its dashes (``topic`` for ``--topic``, ``path`` for
+    ``--path/--no-path``, ``no_path`` for its off switch) or the parameter's name
+    (``topics``, ``draw_path``); dashes and underscores are alike. A flag's own spelling
+    wins over another parameter's name.
+    """
+    names: dict[str, tuple[click.Parameter, bool]] = {}
+    params = [p for p in command.params if p.expose_value and p.name]
+    for param in params:
+        names[_config_key(str(param.name))] = (param, False)
+    for param in params:
+        if isinstance(param, click.Option):
+            for flag in param.opts:
+                if flag.startswith("--"):
+                    names[_config_key(flag)] = (param, False)
+            for flag in param.secondary_opts:
+                if flag.startswith("--"):
+                    names[_config_key(flag)] = (param, True)
+    return names
+
+
+def _flag_of(param: click.Parameter) -> str:
+    """The option as the command line spells it (``--topic``), or an argument's name."""
+    if isinstance(param, click.Option):
+        long = [flag for flag in param.opts if flag.startswith("--")]
+        return (long or param.opts)[0]
+    return str(param.name).upper()
+
+
+def _scalar(value: Any) -> bool:
+    return isinstance(value, (str, int, float))  # bool is an int
+
+
+def _config_value(ctx: click.Context, param: click.Parameter, negated: bool, value: Any,
+                  refuse: Callable[[str], NoReturn]) -> Any:
+    """The value of one setting as the default click will read, checked as click checks the flag.
+
+    TOML gives typed values where the command line gives text: a boolean only for a flag,
+    a list only for an option given several times (or a comma-separated list of numbers),
+    no dates, times or tables; the value then passes the parameter's own type and callback.
+    """
+    flag = _flag_of(param)
+    if isinstance(value, (datetime.date, datetime.time)):
+        refuse(f"a date or time is no value for {flag}")
+    if isinstance(value, dict):
+        refuse(f"a table is no value for {flag}")
+    is_flag = isinstance(param, click.Option) and param.is_flag
+    if is_flag or isinstance(param.type, click.types.BoolParamType):
+        if not isinstance(value, bool):
+            refuse(f"{flag} is a switch: give true or false, got {value!r}")
+        return (not value) if negated else value
+    if isinstance(value, bool):
+        integer = isinstance(param.type, (click.types.IntParamType, click.IntRange))
+        refuse(f"{flag} must be {'a whole number' if integer else 'a value'}, not {str(value).lower()}")
+    many = param.multiple or param.nargs != 1
+    if isinstance(value, list):
+        if any(not _scalar(item) or isinstance(item, bool) for item in value):
+            refuse(f"{flag} takes a list of plain values, not nested lists, tables, dates or true/false")
+        if param.callback in _LIST_CALLBACKS:
+            # A comma-separated option: the list written as the command line spells it.
+            return ",".join(repr(item) if isinstance(item, float) else str(item) for item in value)
+        if not many:
+            refuse(f"{flag} takes one value, not a list (lists are for options given several times)")
+    elif param.multiple:
+        value = [value]  # one value of a repeatable option
+    if isinstance(value, float) and isinstance(param.type, (click.types.IntParamType, click.IntRange)) \
+            and not value.is_integer():
+        refuse(f"{flag} must be a whole number, got {value}")  # click would truncate 8.7 to 8
+    try:
+        converted = param.type_cast_value(ctx, value)
+        if param.callback is not None:
+            param.callback(ctx, param, converted)
+    except click.BadParameter as exc:
+        refuse(f"{flag}: {exc.message}")
+    except (TypeError, ValueError, OverflowError) as exc:
+        refuse(f"{flag}: {value!r} is not a valid value ({exc})")
+    return value
+
+
 def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
     if value is None:
         return None
@@ -81,33 +171,47 @@ def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) 
         import tomli as tomllib
     try:
         with open(value, "rb") as handle:
-            data = tomllib.load(handle)
+            content = handle.read(MAX_CONFIG_BYTES + 1)
     except OSError as exc:
         raise click.BadParameter(f"cannot read {value}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise click.BadParameter(f"{value} is not valid TOML: {exc}") from None
+    if len(content) > MAX_CONFIG_BYTES:
+        raise click.BadParameter(f"{value}: a settings file larger than {MAX_CONFIG_BYTES >> 20} MB")
+    try:
+        data = tomllib.loads(content.decode("utf-8"))
     except UnicodeDecodeError:
         raise click.BadParameter(f"{value} is not a TOML file: not UTF-8 text") from None
-    flat: dict[str, Any] = {}
+    except tomllib.TOMLDecodeError as exc:
+        raise click.BadParameter(f"{value} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise click.BadParameter(f"{value}: arrays or tables nested too deeply") from None
+
+    def refuse(key: str) -> Callable[[str], NoReturn]:
+        def fail(message: str) -> NoReturn:
+            raise click.BadParameter(f"{value}: {key}: {message}")
+        return fail
+
+    names = _config_names(ctx.command)
+    settings: dict[str, tuple[click.Parameter, bool, Any]] = {}
+    unknown: list[str] = []
     for key, item in data.items():
-        if isinstance(item, dict):
-            for sub_key, sub_item in item.items():
-                flat[sub_key.replace("-", "_")] = sub_item
-        else:
-            flat[key.replace("-", "_")] = item
-    known = {p.name for p in ctx.command.params}
-    unknown = sorted(set(flat) - known)
+        # Top-level keys, or keys of one level of tables ([sensor], [fit], [extract], [log]).
+        entries = [(f"[{key}] {sub}", sub, sub_item) for sub, sub_item in item.items()] \
+            if isinstance(item, dict) else [(key, key, item)]
+        for where, name, setting in entries:
+            if isinstance(setting, dict):
+                refuse(where)(f"a table inside [{key}]: settings sit at the top or in one level of tables")
+            found = names.get(_config_key(name))
+            if found is None:
+                unknown.append(name)
+                continue
+            target, negated = found
+            if target.name in settings:
+                refuse(where)(f"{_flag_of(target)} is set twice")
+            settings[str(target.name)] = (target, negated, _config_value(ctx, target, negated, setting,
+                                                                          refuse(where)))
     if unknown:
-        raise click.BadParameter(f"{value}: unknown settings for `{ctx.info_name}`: {', '.join(unknown)}")
-    # Click turns 8.7 into 8 for an integer option: a whole-number setting must be one.
-    for option in ctx.command.params:
-        setting = flat.get(option.name)
-        integer = isinstance(option.type, click.types.IntParamType) or (
-            isinstance(option.type, click.IntRange))
-        if integer and isinstance(setting, float) and not setting.is_integer():
-            raise click.BadParameter(f"{value}: {option.name} must be a whole number, got {setting}")
-        if isinstance(setting, bool) and integer:
-            raise click.BadParameter(f"{value}: {option.name} must be a whole number, got {setting}")
+        raise click.BadParameter(f"{value}: unknown settings for `{ctx.info_name}`: {', '.join(sorted(unknown))}")
+    flat = {name: setting for name, (_, _, setting) in settings.items()}
     ctx.default_map = {**(ctx.default_map or {}), **flat}
     return value
 
@@ -381,6 +485,9 @@ def _pair(ctx: click.Context | None, param: click.Parameter | None, value: Any) 
         raise click.BadParameter(f"expected two comma-separated numbers, got {value!r}")
     return values
 
+
+#: Callbacks that read a comma-separated list of numbers: a TOML list is written out for them.
+_LIST_CALLBACKS = (float_list, _pair, _position_tolerance)
 
 sensor_options = _compose(
     click.option("--depth-error", type=float, default=None,
