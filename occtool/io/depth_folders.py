@@ -51,7 +51,7 @@ from occtool.io.depth import (
     level_rotation,
     rotation_from_quaternion,
 )
-from occtool.io.positions import Scan, build_log
+from occtool.io.positions import Scan, build_log, check_pose
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 FloatArray = NDArray[np.float64]
@@ -247,10 +247,8 @@ def _tum_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[flo
                     raise InputError(f"{where}: expected 'timestamp tx ty tz qx qy qz qw'") from None
                 if len(values) != 8 or not all(math.isfinite(v) for v in values):
                     raise InputError(f"{where}: expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw'")
-                try:
-                    rotation = rotation_from_quaternion(*values[4:8])
-                except InputError as exc:
-                    raise InputError(f"{where}: {exc}") from None
+                check_pose(where, values[1:4], quaternion=values[4:8])
+                rotation = rotation_from_quaternion(*values[4:8])
                 matrix = np.eye(4)
                 matrix[:3, :3] = rotation
                 matrix[:3, 3] = values[1:4]
@@ -316,6 +314,7 @@ def _match_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[f
             # 7-Scenes and 3DMatch mark a frame whose tracking failed with -inf or NaN poses.
             notes.append(Note.warn(f"{pose_file.name}: the pose is not finite (tracking lost): frame dropped"))
             continue
+        check_pose(where, values[:3, 3], rotation=values[:3, :3])
         frames.append(_Frame(image, check_rigid(values, where), None, f"{image.parent.name}/{image.name}"))
     intrinsics_file = next((p for p in (folder / "camera-intrinsics.txt", folder.parent / "camera-intrinsics.txt")
                             if p.is_file()), None)
