@@ -6,9 +6,10 @@ keyword arguments and builds the library's parameter object, so every command th
 fits, extracts or compares reads them the same way.
 
 ``--config FILE`` reads defaults for any option from a TOML file: top-level keys or
-keys under ``[sensor]``, ``[fit]``, ``[extract]``, ``[log]`` tables, named as the
-options are, with dashes or underscores (``depth-error = 0.03``). Options given on the
-command line win.
+keys under ``[sensor]``, ``[fit]``, ``[extract]``, ``[log]`` tables, spelled as the
+flags without their dashes (``topic``, ``depth-error = 0.03``, ``no-path = true``) or as
+the parameter's name, with dashes or underscores. Each value passes the option's own
+click type and callback (:func:`_config_value`). Options given on the command line win.
 """
 
 from __future__ import annotations
