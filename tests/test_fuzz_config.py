@@ -22,8 +22,8 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from occtool.cli._config import MAX_CONFIG_BYTES, _config_names, load_config
 from occtool.cli.main import cli
-from occtool.cli.options import MAX_CONFIG_BYTES, _config_names, _load_config
 
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
@@ -46,7 +46,7 @@ def defaults_from(command: click.Command, name: str, text: str, tmp_path: Path) 
     config = tmp_path / "settings.toml"
     config.write_text(text, encoding="utf-8")
     ctx = click.Context(command, info_name=name)
-    _load_config(ctx, command.params[0], str(config))
+    load_config(ctx, command.params[0], str(config))
     return dict(ctx.default_map or {})
 
 
