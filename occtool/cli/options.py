@@ -6,21 +6,22 @@ keyword arguments and builds the library's parameter object, so every command th
 fits, extracts or compares reads them the same way.
 
 ``--config FILE`` reads defaults for any option from a TOML file: top-level keys or
-keys under ``[sensor]``, ``[fit]``, ``[extract]``, ``[log]`` tables, named as the
-options are, with dashes or underscores (``depth-error = 0.03``). Options given on the
-command line win.
+keys under ``[sensor]``, ``[fit]``, ``[extract]``, ``[log]`` tables, spelled as the
+flags without their dashes (``topic``, ``depth-error = 0.03``, ``no-path = true``) or as
+the parameter's name, with dashes or underscores. Each value passes the option's own
+click type and callback (:mod:`occtool.cli._config`). Options given on the command line win.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from occtool.cli._config import COMMA_LISTS, load_config
 from occtool.io.read_options import (  # a light module: --help imports no numpy
     DEFAULT_CONSTANT_EVIDENCE,
     DEFAULT_DEPTH_MIN_RANGE,
@@ -70,52 +71,12 @@ def float_list(ctx: click.Context | None, param: click.Parameter | None, value: 
         raise click.BadParameter(f"expected comma-separated numbers, got {value!r}") from None
 
 
-# --- configuration file -------------------------------------------------------------
-
-def _load_config(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
-    if value is None:
-        return None
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover
-        import tomli as tomllib
-    try:
-        with open(value, "rb") as handle:
-            data = tomllib.load(handle)
-    except OSError as exc:
-        raise click.BadParameter(f"cannot read {value}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise click.BadParameter(f"{value} is not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise click.BadParameter(f"{value} is not a TOML file: not UTF-8 text") from None
-    flat: dict[str, Any] = {}
-    for key, item in data.items():
-        if isinstance(item, dict):
-            for sub_key, sub_item in item.items():
-                flat[sub_key.replace("-", "_")] = sub_item
-        else:
-            flat[key.replace("-", "_")] = item
-    known = {p.name for p in ctx.command.params}
-    unknown = sorted(set(flat) - known)
-    if unknown:
-        raise click.BadParameter(f"{value}: unknown settings for `{ctx.info_name}`: {', '.join(unknown)}")
-    # Click turns 8.7 into 8 for an integer option: a whole-number setting must be one.
-    for option in ctx.command.params:
-        setting = flat.get(option.name)
-        integer = isinstance(option.type, click.types.IntParamType) or (
-            isinstance(option.type, click.IntRange))
-        if integer and isinstance(setting, float) and not setting.is_integer():
-            raise click.BadParameter(f"{value}: {option.name} must be a whole number, got {setting}")
-        if isinstance(setting, bool) and integer:
-            raise click.BadParameter(f"{value}: {option.name} must be a whole number, got {setting}")
-    ctx.default_map = {**(ctx.default_map or {}), **flat}
-    return value
-
+# --- configuration file (read by occtool.cli._config) ---------------------------------
 
 config_option = click.option(
     "--config",
     type=click.Path(dir_okay=False),
-    callback=_load_config,
+    callback=load_config,
     is_eager=True,
     expose_value=False,
     help="TOML file with defaults for any option of this command.",
@@ -381,6 +342,9 @@ def _pair(ctx: click.Context | None, param: click.Parameter | None, value: Any) 
         raise click.BadParameter(f"expected two comma-separated numbers, got {value!r}")
     return values
 
+
+# Callbacks that read a comma-separated list of numbers: a TOML list is written out for them.
+COMMA_LISTS.update((float_list, _pair, _position_tolerance))
 
 sensor_options = _compose(
     click.option("--depth-error", type=float, default=None,

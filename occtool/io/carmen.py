@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import Note, Pose, RangeLog
 from occtool.io.csv import open_text
-from occtool.io.positions import Scan, group_scans
+from occtool.io.positions import Scan, check_pose, group_scans
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 #: A reading near a laser's largest is one of its no-return codes when it occurs this often
@@ -96,6 +96,10 @@ def _parse_laser(
             if len(fields) < base + 6:
                 raise _Problem(f"ROBOTLASER1 announces {count} readings and {remissions} remissions but is too short")
             x, y, theta = (float(v) for v in fields[base : base + 3])
+            if not (abs(start) <= 2.0 * np.pi and abs(resolution) <= 2.0 * np.pi):
+                # A NaN or absurd angle would put every beam nowhere (or at the sensor origin).
+                raise _Problem(f"ROBOTLASER1 start angle {start:g} and angular resolution {resolution:g} must be "
+                               "finite angles of at most 2 pi radians")
             angles = start + resolution * np.arange(count)  # type: ignore[assignment]  # float64 at run time
             stamp_index = base + 11
         stamp = float(fields[stamp_index]) if len(fields) > stamp_index else None
@@ -103,8 +107,10 @@ def _parse_laser(
         if isinstance(exc, _Problem):
             raise
         raise _Problem(f"{kind} record has a field that is not a number ({exc})") from None
-    if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(theta)):
-        raise _Problem(f"{kind} pose is not finite")
+    try:
+        check_pose(f"{kind}", (x, y, 0.0), yaw=theta)
+    except InputError as exc:
+        raise _Problem(str(exc)) from None
     return ranges, angles, Pose(x, y, 0.0, theta), stamp, line_max
 
 

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.errors import InputError, MissingDependencyError
+from occtool.errors import InputError
 from occtool.features import Note, RangeLog
 from occtool.io.depth import (
     DEFAULT_DEPTH_MIN_RANGE,
@@ -44,12 +44,14 @@ from occtool.io.depth import (
     PinholeCamera,
     back_project,
     camera_scan,
+    check_image_size,
     check_rigid,
+    decode_png,
     estimate_floor,
     level_rotation,
     rotation_from_quaternion,
 )
-from occtool.io.positions import Scan, build_log
+from occtool.io.positions import Scan, build_log, check_pose
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
 FloatArray = NDArray[np.float64]
@@ -103,7 +105,8 @@ def _has_frames(folder: Path) -> bool:
 
 def depth_layout(path: str | os.PathLike[str]) -> str | None:
     """``"tum"`` or ``"3dmatch"`` when ``path`` is such a folder (or its ``depth.txt`` /
-    ``camera-intrinsics.txt``), else ``None``. Looks at names only."""
+    ``camera-intrinsics.txt``), else ``None``. Looks at names only; a ``camera-intrinsics.txt``
+    outside such a folder is an :class:`InputError` (it is no log)."""
     target = Path(path)
     try:
         if target.is_dir():
@@ -112,43 +115,56 @@ def depth_layout(path: str | os.PathLike[str]) -> str | None:
             return "3dmatch" if _has_frames(target) else None
         if target.name == "depth.txt":
             return "tum"
-        if target.name == "camera-intrinsics.txt" and _has_frames(target.parent):
-            return "3dmatch"
+        if target.name == "camera-intrinsics.txt":
+            if (target.parent / "depth.txt").is_file():
+                return "tum"
+            if _has_frames(target.parent):
+                return "3dmatch"
     except OSError:
         return None
+    if target.name == "camera-intrinsics.txt":
+        # Read as a log, its nine numbers would be taken as points.
+        raise InputError(f"{target} holds a depth camera's intrinsics, not range data, and lies in no depth "
+                         "folder: give the folder of depth frames, or a TUM folder's depth.txt")
     return None
 
 
 def read_depth_png(path: Path) -> NDArray[np.generic]:
     """A single-channel depth PNG (16-bit, or 32-bit integer or float) as an array, through Pillow.
 
+    The size is read from the PNG's header and checked before the file is read whole and
+    decoded (:func:`occtool.io.depth.check_png`: at most :data:`~occtool.io.depth.MAX_IMAGE_PIXELS`
+    pixels, every row present, IEND at the end).
+
     Raises
     ------
     MissingDependencyError
         Without Pillow (the ``depth`` extra).
     InputError
-        For a truncated or corrupt file, or an image that is not one greyscale depth channel.
+        For a truncated or corrupt file, a size beyond the limits, or an image that is not one
+        greyscale depth channel.
     """
+    import struct
+
+    where = f"{path} is not a readable depth image"
     try:
-        from PIL import Image
-    except ImportError:
-        raise MissingDependencyError("Pillow", "depth", f"reading the depth image {path}") from None
-    try:
-        with Image.open(path) as image:
-            if image.width * image.height > 16_384 * 16_384:
-                raise InputError(f"{path}: a depth image of {image.width}x{image.height} pixels is too large")
-            image.load()
-            if image.mode not in ("I;16", "I;16B", "I;16L", "I", "F"):
-                raise InputError(f"{path}: a depth image must be one 16-bit (or 32-bit) greyscale channel, "
-                                 f"got Pillow mode {image.mode!r}")
-            data = np.asarray(image)
-    except InputError:
-        raise
+        with open(path, "rb") as handle:
+            head = handle.read(33)
+            if len(head) >= 24 and head[12:16] == b"IHDR":
+                width, height = struct.unpack(">II", head[16:24])
+                check_image_size(width, height, where)
+                # 16-bit RGBA is 8 bytes a pixel; zlib's worst case and ancillary chunks fit in the MB.
+                limit = width * height * 8 + (1 << 20)
+            else:
+                limit = 64  # check_png refuses it: no need to read on
+            data = head + handle.read(limit + 1 - len(head))
     except FileNotFoundError:
         raise InputError(f"{path}: the depth image does not exist") from None
-    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
-        raise InputError(f"{path} is not a readable depth image (truncated or corrupt: {exc})") from None
-    return data
+    except OSError as exc:
+        raise InputError(f"{where} ({exc.strerror or exc})") from None
+    if len(data) > limit:
+        raise InputError(f"{where}: a PNG larger than its pixels could fill (over {limit:,} bytes)")
+    return decode_png(data, where)
 
 
 def _numbers(path: Path) -> FloatArray:
@@ -173,7 +189,11 @@ def _matrix(path: Path, size: int, what: str) -> FloatArray:
 
 
 def _read_k(path: Path) -> FloatArray:
-    return _matrix(path, 3, "camera intrinsics")
+    """The 3x3 K of ``camera-intrinsics.txt``, checked to be a pinhole's (fx, fy > 0, no skew,
+    last row 0 0 1): any other matrix would place every point wrongly."""
+    k = _matrix(path, 3, "camera intrinsics")
+    _check_pinhole(k, path)
+    return k
 
 
 def _inside(folder: Path, name: str, where: str) -> Path:
@@ -227,10 +247,8 @@ def _tum_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[flo
                     raise InputError(f"{where}: expected 'timestamp tx ty tz qx qy qz qw'") from None
                 if len(values) != 8 or not all(math.isfinite(v) for v in values):
                     raise InputError(f"{where}: expected 8 finite numbers 'timestamp tx ty tz qx qy qz qw'")
-                try:
-                    rotation = rotation_from_quaternion(*values[4:8])
-                except InputError as exc:
-                    raise InputError(f"{where}: {exc}") from None
+                check_pose(where, values[1:4], quaternion=values[4:8])
+                rotation = rotation_from_quaternion(*values[4:8])
                 matrix = np.eye(4)
                 matrix[:3, :3] = rotation
                 matrix[:3, 3] = values[1:4]
@@ -296,13 +314,13 @@ def _match_frames(folder: Path, notes: list[str]) -> tuple[list[_Frame], tuple[f
             # 7-Scenes and 3DMatch mark a frame whose tracking failed with -inf or NaN poses.
             notes.append(Note.warn(f"{pose_file.name}: the pose is not finite (tracking lost): frame dropped"))
             continue
+        check_pose(where, values[:3, 3], rotation=values[:3, :3])
         frames.append(_Frame(image, check_rigid(values, where), None, f"{image.parent.name}/{image.name}"))
     intrinsics_file = next((p for p in (folder / "camera-intrinsics.txt", folder.parent / "camera-intrinsics.txt")
                             if p.is_file()), None)
     if intrinsics_file is not None:
         k = _read_k(intrinsics_file)
         intrinsics = (k[0, 0], k[1, 1], k[0, 2], k[1, 2])
-        _check_pinhole(k, intrinsics_file)
     else:
         intrinsics = SEVEN_SCENES_INTRINSICS
         notes.append(f"no camera-intrinsics.txt: 7-Scenes' Kinect intrinsics {intrinsics} (fx, fy, cx, cy) were taken")

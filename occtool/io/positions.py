@@ -15,11 +15,12 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.features import Features, Note, Pose, Position, RangeLog
 from occtool.io.read_options import DEFAULT_POSITION_TOLERANCE, GROUP_BY_CHOICES, check_tolerance
+from occtool.limits import MAX_WORLD_COORDINATE
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,6 +46,73 @@ class Scan:
     pose: Pose | None = None
     stamp: float | None = None
     source: str = ""
+
+
+#: How far a pose's quaternion may be from unit length: float32 storage and text rounding
+#: leave ~1e-7; more is a damaged or hand-edited pose, whose "rotation" would be a guess.
+QUATERNION_TOLERANCE = 1e-2
+#: How far a pose's rotation matrix may be from orthonormal (``|R R^T - I|``, each entry).
+ROTATION_TOLERANCE = 1e-3
+
+
+def check_pose(
+    where: str,
+    translation: ArrayLike,
+    *,
+    yaw: float | None = None,
+    quaternion: ArrayLike | None = None,
+    rotation: ArrayLike | None = None,
+) -> None:
+    """Refuse a world pose that is no pose; every reader calls this once per pose it reads.
+
+    A pose is a translation (metres) and one of a ``yaw`` (radians), a ``quaternion``
+    ``(x, y, z, w)`` or a 3x3 ``rotation`` matrix. Every value must be finite and at most
+    :data:`occtool.limits.MAX_WORLD_COORDINATE` (metres, radians for the yaw) in size; a
+    quaternion must be of unit length within :data:`QUATERNION_TOLERANCE` (the readers
+    normalise it), a matrix orthonormal within :data:`ROTATION_TOLERANCE` with determinant +1.
+
+    Raises
+    ------
+    InputError
+        ``"{where}: ..."`` saying what is wrong, ``where`` naming the line or message.
+
+    Examples
+    --------
+    >>> check_pose("line 3", (1.0, 2.0, 0.0), yaw=0.5)
+    >>> check_pose("line 4", (1.0, 2.0, 0.0), quaternion=(0.0, 0.0, 0.0, 2.0))
+    Traceback (most recent call last):
+    ...
+    occtool.errors.InputError: line 4: the pose's quaternion (0, 0, 0, 2) has length 2, not 1: no rotation
+    """
+    t = np.asarray(translation, dtype=np.float64).reshape(-1)
+    parts = [("translation", t)]
+    if yaw is not None:
+        parts.append(("yaw", np.asarray([yaw], dtype=np.float64)))
+    if quaternion is not None:
+        parts.append(("quaternion", np.asarray(quaternion, dtype=np.float64).reshape(-1)))
+    if rotation is not None:
+        parts.append(("rotation", np.asarray(rotation, dtype=np.float64).reshape(-1)))
+    for name, values in parts:
+        if not np.isfinite(values).all():
+            raise InputError(f"{where}: the pose's {name} ({_values(values)}) holds a NaN or infinity")
+        if not (np.abs(values) <= MAX_WORLD_COORDINATE).all():
+            raise InputError(f"{where}: the pose's {name} ({_values(values)}) reaches past "
+                             f"{MAX_WORLD_COORDINATE:g}: no place in any world frame")
+    if quaternion is not None:
+        q = np.asarray(quaternion, dtype=np.float64).reshape(-1)
+        length = float(np.sqrt(q @ q))
+        if abs(length - 1.0) > QUATERNION_TOLERANCE:
+            raise InputError(f"{where}: the pose's quaternion ({_values(q)}) has length {length:.6g}, not 1: "
+                             "no rotation")
+    if rotation is not None:
+        r = np.asarray(rotation, dtype=np.float64).reshape(3, 3)
+        if not (np.abs(r @ r.T - np.eye(3)) <= ROTATION_TOLERANCE).all() or np.linalg.det(r) < 0.0:
+            raise InputError(f"{where}: the pose's 3x3 rotation is not a rotation (not orthonormal with "
+                             "determinant +1)")
+
+
+def _values(values: NDArray[np.float64]) -> str:
+    return ", ".join(f"{v:.6g}" for v in values[:9])
 
 
 def _angle_difference(a: float, b: float) -> float:
@@ -167,11 +235,15 @@ def group_scans(
     dropped_at_origin = 0
     for k, scan in enumerate(scans):
         pose = scan.pose
-        if pose is not None and not np.isfinite([pose.x, pose.y, pose.z, pose.yaw]).all():
-            raise InputError(
-                f"{source}: scan {scan.source or k} was taken at a pose that is not finite "
-                f"(x {pose.x}, y {pose.y}, z {pose.z}, yaw {pose.yaw})"
-            )
+        # Readers check each pose as they read it (check_pose, naming the line); this is the
+        # net under every reader, in plain Python (a NaN fails the comparison too).
+        if pose is not None and not all(abs(v) <= MAX_WORLD_COORDINATE for v in (pose.x, pose.y, pose.z, pose.yaw)):
+            if not np.isfinite([pose.x, pose.y, pose.z, pose.yaw]).all():
+                raise InputError(
+                    f"{source}: scan {scan.source or k} was taken at a pose that is not finite "
+                    f"(x {pose.x}, y {pose.y}, z {pose.z}, yaw {pose.yaw})"
+                )
+            check_pose(f"{source}: scan {scan.source or k}", (pose.x, pose.y, pose.z), yaw=pose.yaw)
         count += 1
         new_position = False
         if pose is not None:

@@ -13,7 +13,6 @@ gives the intrinsics (the first message of each); distortion coefficients are ig
 from __future__ import annotations
 
 import base64
-import io
 import math
 import struct
 from dataclasses import dataclass, field
@@ -33,6 +32,8 @@ from occtool.io.depth import (
     DepthCounts,
     PinholeCamera,
     back_project,
+    check_image_size,
+    decode_png,
 )
 from occtool.io.mcap._channels import COMPRESSED_DEPTH, FOXGLOVE_RAWIMAGE, _get, _stamp_seconds
 from occtool.io.mcap._transforms import _strip_frame
@@ -97,14 +98,16 @@ def _raw_array(data: Any, encoding: str, height: int, width: int, step: int, big
         raise InputError(f"{where}: the image's encoding is {encoding!r}, not depth ({', '.join(MILLIMETRE_ENCODINGS + METRE_ENCODINGS)}): "
                          "pick the depth topic with topics=")
     size = np.dtype(code).itemsize
-    if not (0 < height <= 16_384 and 0 < width <= 16_384):
-        raise InputError(f"{where}: an image of {width}x{height} pixels")
+    check_image_size(width, height, where)
     step = step or width * size
     raw = np.frombuffer(data, dtype=np.uint8)
-    if step < width * size or raw.size < height * step:
-        raise InputError(f"{where}: {raw.size} data bytes hold fewer than {height} rows of {width} {encoding} pixels "
-                         f"(step {step})")
-    rows = raw[: height * step].reshape(height, step)[:, : width * size]
+    if step < width * size:
+        raise InputError(f"{where}: a row step of {step} bytes is shorter than a row of {width} {encoding} pixels")
+    if raw.size != height * step:
+        # Longer data is no image of this header either: the rows would be taken from the wrong bytes.
+        raise InputError(f"{where}: {raw.size:,} data bytes where {height} rows of step {step} are "
+                         f"{height * step:,} ({width}x{height} {encoding} pixels)")
+    rows = raw.reshape(height, step)[:, : width * size]
     image = np.ascontiguousarray(rows).view((">" if big_endian else "<") + code).reshape(height, width)
     return image, scale
 
@@ -122,18 +125,9 @@ def _compressed_depth(message: Any, where: str) -> tuple[NDArray[Any], float]:
     if len(data) < 12:
         raise InputError(f"{where}: a compressedDepth message of {len(data)} bytes (its header alone is 12)")
     _, quant_a, quant_b = struct.unpack("<iff", data[:12])
-    try:
-        from PIL import Image
-    except ImportError:
-        from occtool.errors import MissingDependencyError
-
-        raise MissingDependencyError("Pillow", "depth", f"decoding {where}") from None
-    try:
-        with Image.open(io.BytesIO(data[12:])) as png:
-            png.load()
-            values = np.asarray(png)
-    except (OSError, SyntaxError, ValueError) as exc:
-        raise InputError(f"{where}: the compressedDepth PNG cannot be decoded ({exc})") from None
+    # The PNG's size and completeness are checked from its header and chunks before Pillow
+    # decodes it (a header claiming 20000x20000 is refused without allocating anything).
+    values = decode_png(data[12:], f"{where}: the compressedDepth PNG cannot be decoded")
     if values.ndim != 2:
         raise InputError(f"{where}: the compressedDepth PNG is not one channel")
     if fmt.split(";")[0].strip() in METRE_ENCODINGS:

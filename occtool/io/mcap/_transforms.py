@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -10,7 +11,8 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.io.mcap._channels import _get
+from occtool.io.mcap._channels import _get, _stamp_seconds
+from occtool.io.positions import check_pose
 
 
 def _rotation_from_quaternion(q: Any) -> NDArray[np.float64]:
@@ -60,8 +62,9 @@ class _Rigid:
 _IDENTITY = _Rigid(np.eye(3), np.zeros(3))
 
 
-def _checked_rigid(rotation: Any, translation: Any, what: str) -> _Rigid:
-    """The transform of a quaternion and a translation, refusing ones that are no rigid motion."""
+def _checked_rigid(rotation: Any, translation: Any, what: str, at: str = "") -> _Rigid:
+    """The transform of a quaternion and a translation, refusing ones that are no rigid motion
+    (``at`` names the message, as `` (message at 12.5 s)``, in :func:`check_pose`'s refusals)."""
     q = (tuple(float(_get(rotation, k, 0.0 if k != "w" else 1.0)) for k in ("x", "y", "z", "w"))
          if rotation is not None else (0.0, 0.0, 0.0, 1.0))
     t = _vector(translation)
@@ -69,7 +72,18 @@ def _checked_rigid(rotation: Any, translation: Any, what: str) -> _Rigid:
         raise InputError(f"{what} is not finite (rotation {q}, translation {tuple(float(v) for v in t)})")
     if not any(q):
         raise InputError(f"{what} has the zero quaternion (0, 0, 0, 0), which is no rotation")
+    check_pose(what + at, t, quaternion=q)  # bounded, and a quaternion of unit length
     return _Rigid(_rotation_from_quaternion(rotation), t)
+
+
+def _at(item: Any) -> str:
+    """`` (message at 12.5 s)``: a transform's message named by its stamp (the reader passes the topic alone)."""
+    try:
+        header = _get(item, "header")
+        stamp = _stamp_seconds(_get(item, "timestamp") if header is None else _get(header, "stamp"))
+    except (TypeError, ValueError, AttributeError):
+        return ""
+    return f" (message at {stamp:.9g} s)" if stamp is not None and math.isfinite(stamp) else ""
 
 
 def _transforms_of(message: Any, topic: str = "tf") -> list[tuple[str, str, _Rigid]]:
@@ -78,7 +92,9 @@ def _transforms_of(message: Any, topic: str = "tf") -> list[tuple[str, str, _Rig
     Raises
     ------
     InputError
-        For a transform with a NaN or infinite value or a zero quaternion.
+        For a transform with a NaN or infinite value, a zero quaternion, or one that
+        :func:`occtool.io.positions.check_pose` refuses (past the world's bounds, a
+        quaternion not of unit length).
     """
     out = []
     if _get(message, "transforms") is not None and _get(message, "parent_frame_id") is None:
@@ -96,7 +112,7 @@ def _transforms_of(message: Any, topic: str = "tf") -> list[tuple[str, str, _Rig
             child = _get(item, "child_frame_id", "")
             rotation, translation = _get(item, "rotation"), _get(item, "translation")
         parent, child = _strip_frame(parent), _strip_frame(child)
-        rigid = _checked_rigid(rotation, translation, f"{topic}: the transform {parent} -> {child}")
+        rigid = _checked_rigid(rotation, translation, f"{topic}: the transform {parent} -> {child}", _at(item))
         out.append((parent, child, rigid))
     return out
 
