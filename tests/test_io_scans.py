@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from occtool.errors import InputError
 from occtool.io import detect_format, iter_positions, read_log
 from occtool.io.scans import read_poses
-from occtool.limits import MAX_DISTANCE
+from occtool.limits import MAX_WORLD_COORDINATE
 
 
 def rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -140,13 +140,13 @@ def test_zero_padded_binary_pcd_reads_and_other_trailing_bytes_do_not(tmp_path):
 
 
 @pytest.mark.parametrize(("line", "message"), [
-    ("1 0 0 0 0 1 0 0 0 0 1 nan", "NaN or infinite"),
+    ("1 0 0 0 0 1 0 0 0 0 1 nan", "NaN or infinity"),
     ("1 0 0 0 0 1 0 0 0 0 1", "expected 12 numbers"),
     ("1 0 0 0 0 1 0 0 0 0 1 0 5", "expected 12 numbers"),
     ("2 0 0 0 0 1 0 0 0 0 1 0", "not a rotation"),
     ("1 0 0 0 0 1 0 0 0 0 -1 0", "not a rotation"),  # a reflection
     ("1 0 0 0 0 1 0 0 0 0 1 x1", "'x1' is not a number"),
-    (f"1 0 0 {2 * MAX_DISTANCE} 0 1 0 0 0 0 1 0", "farther than"),
+    (f"1 0 0 {2 * MAX_WORLD_COORDINATE} 0 1 0 0 0 0 1 0", "reaches past"),
     ("# a comment", "a comment among the poses"),
 ])
 def test_a_bad_poses_line_is_a_one_line_error_naming_the_file_and_line(tmp_path, line, message):
@@ -232,7 +232,7 @@ def test_the_poses_parser_reads_rotations_and_refuses_everything_else_in_one_lin
     elif mutation == "reflect":
         tokens[2], tokens[6], tokens[10] = (f"{-float(tokens[k]):.17g}" for k in (2, 6, 10))
     elif mutation == "far":
-        tokens[3] = f"{2 * MAX_DISTANCE:.17g}"
+        tokens[3] = f"{2 * MAX_WORLD_COORDINATE:.17g}"
     line = " ".join(tokens)
     text = [pose_line(good)] * (lines - 1) + ([""] if mutation == "blank" else []) + [line, pose_line(good)]
     path = tmp_path / "poses.txt"

@@ -13,7 +13,7 @@ A *scan sequence* is a folder of scans, or several point-cloud files given toget
   (``p_world = R p + t``). Lines beyond the scans are allowed (SC-A-LOAM saves every
   keyframe's pose and a sample of the scans); fewer is an error. The file is checked once,
   whole: 12 finite numbers a line, ``R`` a rotation (orthonormal within 1e-3, determinant
-  +1), ``t`` within :data:`~occtool.limits.MAX_DISTANCE`.
+  +1), ``t`` within :data:`~occtool.limits.MAX_WORLD_COORDINATE` (:func:`occtool.io.positions.check_pose`).
 
 Each scan is one robot position's scan: with a pose, its points are rotated into the
 sensor-centred robot frame (REP-103: sensor at the origin, z the world's up, x along the
@@ -30,7 +30,6 @@ and a poses file: the file's pose is composed with the poses file's.
 
 from __future__ import annotations
 
-import math
 import os
 import re
 from collections.abc import Iterator, Sequence
@@ -43,9 +42,8 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.features import RangeLog
 from occtool.io._detect import SCAN_SUFFIXES, _suffix, detect_format, is_scan_folder
-from occtool.io.positions import Scan, build_log
+from occtool.io.positions import Scan, build_log, check_pose
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
-from occtool.limits import MAX_DISTANCE
 
 FloatArray = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
@@ -54,8 +52,6 @@ PathLike = str | os.PathLike[str]
 FILE_FORMATS = ("pcd", "ply", "bin", "xyz")
 #: Most scans in one sequence, and most lines of a poses file.
 MAX_SCANS = 1_000_000
-#: A pose's 3x3 block is a rotation when ``R R^T`` is the identity within this, and ``det R > 0``.
-ROTATION_TOLERANCE = 1e-3
 
 
 def scan_files(path: PathLike | Sequence[PathLike]) -> list[Path]:
@@ -105,16 +101,8 @@ def _pose_line(text: str, where: str) -> FloatArray:
     except ValueError:
         bad = next(v for v in parts if not _is_number(v))
         raise InputError(f"{where}: {bad[:40]!r} is not a number") from None
-    if not all(math.isfinite(v) for v in values):
-        raise InputError(f"{where}: the pose holds a value that is NaN or infinite")
     matrix = np.array(values, dtype=np.float64).reshape(3, 4)
-    rotation = matrix[:, :3]
-    if (not np.allclose(rotation @ rotation.T, np.eye(3), rtol=0.0, atol=ROTATION_TOLERANCE)
-            or np.linalg.det(rotation) <= 0.0):
-        raise InputError(f"{where}: the pose's 3x3 block is not a rotation (orthonormal within "
-                         f"{ROTATION_TOLERANCE:g}, determinant +1)")
-    if float(np.linalg.norm(matrix[:, 3])) > MAX_DISTANCE:
-        raise InputError(f"{where}: the pose's translation lies farther than {MAX_DISTANCE:g} m from the origin")
+    check_pose(where, matrix[:, 3], rotation=matrix[:, :3])  # the one pose check every reader makes
     return matrix
 
 
