@@ -21,7 +21,11 @@ def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: floa
     """Summarise FILE or FOLDER: a model or inverse file (pieces, tree, constraints, fit
     error, samples, run), a model set (`occtool fit LOG -o DIR/`: DIR or its index.json), a
     world map (`world.occmap`), a Nav2 map (`map.yaml`, or the folder `occtool map` wrote:
-    its map.yaml and world.occmap both), or any range log the readers understand."""
+    its map.yaml and world.occmap both), or any range log the readers understand.
+
+    A model's fit error is the RMSE of F against its samples' evidence m (weighted; F is
+    not clipped to [0, 1], so samples far past an obstacle weigh in) and the loss the fit
+    minimised."""
     from pathlib import Path
 
     from rich.console import Console
@@ -89,7 +93,6 @@ def _model_summary(path: str, model, show_pieces: bool):
     table.add_row(
         "fit error", f"RMSE {model.rmse_:.4f}, loss {model.loss_:.5f} ({model.loss} loss), {model.n_sweeps_} sweeps"
     )
-    table.add_row("", "(RMSE of F against the samples' evidence m, weighted; F is not clipped to [0, 1])")
     counts = ", ".join(f"{k} {v}" for k, v in model.sample_counts_.items() if v)
     table.add_row("training", f"{model.n_features_} features -> {model.n_samples_} samples ({counts})")
     table.add_row("input sha256", model.features_digest_)
