@@ -29,7 +29,8 @@ TRUTH = FIXTURES / "office" / "truth.json"
 def run(*args: object):
     if args and args[0] == "plot":
         pytest.importorskip("matplotlib")  # the plot extra
-    return CliRunner().invoke(cli, [str(a) for a in args])
+    # Wide enough that rich folds no line: outputs compare by content, whatever the tmp paths' lengths.
+    return CliRunner().invoke(cli, [str(a) for a in args], env={"COLUMNS": "240"})
 
 
 def assert_fails(result, *fragments: str, exit_code: int | None = None) -> str:
