@@ -1,0 +1,159 @@
+"""Version 5 of the ``.occmap`` file: a 3D world map (:class:`occtool.fuse._world3d.WorldMap3D`).
+
+Layout (little-endian), the header conventions of :mod:`occtool.formats.occmap`::
+
+    8 bytes   magic  b"\\x89OCCMAP\\n"
+    4 bytes   uint32 header length H
+    H bytes   UTF-8 JSON header: format 5, kind "world3d", unit, frame, resolution, box
+              (``lo`` cell indices and ``shape``), falloff, free level, patch count and the
+              arrays' names, dtypes and shapes in the order they follow, and ``packed``,
+              the length of the zlib stream
+    ...       one zlib stream of the arrays' bytes, back to back
+    4 bytes   uint32 CRC-32 of everything before it
+
+Arrays: ``free`` and ``surface`` uint8 ``(ceil(C / 8),)`` bitsets over the box's ``C`` cells
+(x slowest, z fastest; numpy's ``packbits`` order): the cells training rays crossed, the cells
+holding a patch; then the patches in the order of their cells, column by column (each column
+compresses on its own terms): ``offsets`` uint8 ``(S, 3)``, ``normals`` uint8 ``(S, 2)``,
+``axes`` uint8 ``(S,)``, ``extents`` uint8 ``(S, 2)``, ``thickness`` uint8 ``(S,)``,
+``trust`` uint8 ``(S,)`` (:class:`occtool.fuse._patches.PatchCodes`): 10 bytes a patch
+before compression. :func:`decode` checks the magic, version, sizes (before allocating),
+checksum and values: a damaged file is one :class:`~occtool.errors.InputError`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import zlib
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import InputError
+from occtool.formats.occmap import MAGIC, MAX_HEADER
+
+FORMAT_VERSION = 5
+KIND = "world3d"
+#: Most cells a box may hold (a bitset of 256 MB at most, checked before inflating).
+MAX_CELLS = 1 << 31
+#: The patch columns: name, bytes a patch.
+COLUMNS = (("offsets", 3), ("normals", 2), ("axes", 1), ("extents", 2), ("thickness", 1), ("trust", 1))
+
+
+def _bitset(keys: np.ndarray, cells: int) -> np.ndarray:
+    bits = np.zeros(cells, dtype=bool)
+    bits[keys] = True
+    return np.packbits(bits)
+
+
+def encode(world: Any) -> bytes:
+    """The file's bytes for a :class:`~occtool.fuse._world3d.WorldMap3D`."""
+    cells = int(np.prod(world.shape))
+    patches = world.patches
+    arrays = [("free", _bitset(world.free_keys, cells)), ("surface", _bitset(patches.keys, cells))]
+    arrays += [(name, np.ascontiguousarray(getattr(patches, name), dtype=np.uint8).reshape(len(patches), width)
+                .T.reshape(-1)) for name, width in COLUMNS]
+    payload = zlib.compress(b"".join(a.tobytes() for _, a in arrays), 9)
+    header = {"format": FORMAT_VERSION, "kind": KIND, "unit": "m", "frame": world.frame,
+              "resolution": world.resolution, "lo": [int(v) for v in world.lo], "shape": list(world.shape),
+              "falloff": world.falloff, "edge_falloff": world.edge_falloff, "free_level": world.free_level, "patches": len(patches),
+              "arrays": [[name, "uint8", list(a.shape)] for name, a in arrays], "packed": len(payload)}
+    text = json.dumps(header, separators=(",", ":")).encode("utf-8")
+    body = MAGIC + struct.pack("<I", len(text)) + text + payload
+    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+
+
+def save_map3d(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
+    """Write ``world`` to ``path`` atomically; returns the bytes written."""
+    from occtool._files import atomic_write
+
+    data = encode(world)
+    with atomic_write(path, "wb", overwrite=overwrite) as handle:
+        handle.write(data)
+    return len(data)
+
+
+def decode(data: bytes, name: str = "occmap") -> Any:
+    """A :class:`~occtool.fuse._world3d.WorldMap3D` from a version-5 file's bytes."""
+    from occtool.fuse._patches import PatchCodes
+    from occtool.fuse._world3d import WorldMap3D
+
+    def fail(why: str) -> InputError:
+        return InputError(f"{name}: not a readable 3D world map ({why})")
+
+    if len(data) < len(MAGIC) + 8 or not data.startswith(MAGIC):
+        raise fail("no occmap magic")
+    (stored,) = struct.unpack("<I", data[-4:])
+    if zlib.crc32(data[:-4]) & 0xFFFFFFFF != stored:
+        raise fail("checksum mismatch: the file is damaged or truncated")
+    (length,) = struct.unpack("<I", data[len(MAGIC):len(MAGIC) + 4])
+    start = len(MAGIC) + 4
+    if length > MAX_HEADER or start + length > len(data) - 4:
+        raise fail("header length beyond the file")
+    try:
+        header = json.loads(data[start:start + length].decode("utf-8"))
+        version, kind = header["format"], header["kind"]
+        resolution, falloff, edge_falloff, free_level = (float(header[k]) for k in (
+            "resolution", "falloff", "edge_falloff", "free_level"))
+        lo = np.array([int(v) for v in header["lo"]], dtype=np.int64)
+        shape = tuple(int(v) for v in header["shape"])
+        count, packed = int(header["patches"]), int(header["packed"])
+        frame = str(header.get("frame", ""))
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+        raise fail("unreadable header") from None
+    if version != FORMAT_VERSION or kind != KIND:
+        raise fail(f"format {version!r} {kind!r}, this reads {FORMAT_VERSION} {KIND!r}")
+    if lo.shape != (3,) or len(shape) != 3 or min(shape) < 1 or not all(
+            math.isfinite(v) and v > 0 for v in (resolution, falloff, edge_falloff)):
+        raise fail("bad box, resolution or falloff")
+    if not 0.0 <= free_level <= 1.0:
+        raise fail("free level outside [0, 1]")
+    cells = shape[0] * shape[1] * shape[2]
+    if cells > MAX_CELLS or not 0 <= count <= cells:
+        raise fail(f"{cells} cells and {count} patches is not a map this reads")
+    bitset = (cells + 7) // 8
+    expected = 2 * bitset + count * sum(width for _, width in COLUMNS)
+    if packed != len(data) - 4 - start - length:
+        raise fail("array bytes do not match the header")
+    inflater = zlib.decompressobj()
+    try:
+        raw = inflater.decompress(data[start + length:-4], expected + 1)
+    except zlib.error:
+        raise fail("corrupt array stream") from None
+    if len(raw) != expected or inflater.unconsumed_tail or not inflater.eof:
+        raise fail("array bytes do not match the header")
+    buffer = np.frombuffer(raw, dtype=np.uint8)
+
+    def keys(at: int) -> np.ndarray:
+        return np.flatnonzero(np.unpackbits(buffer[at:at + bitset], count=cells)).astype(np.int64)
+
+    free, surface = keys(0), keys(bitset)
+    if surface.size != count:
+        raise fail("the surface cells do not match the patch count")
+    columns: dict[str, np.ndarray] = {}
+    at = 2 * bitset
+    for column, width in COLUMNS:
+        columns[column] = buffer[at:at + count * width].reshape(width, count).T.copy()
+        at += count * width
+    if count and (columns["normals"][:, 0].max() > 255 or columns["trust"].min() == 0
+                  or columns["extents"].min() == 0 or columns["thickness"].min() == 0):
+        raise fail("patch values out of range")
+    patches = PatchCodes(surface, columns["offsets"], columns["normals"], columns["axes"][:, 0],
+                         columns["extents"], columns["thickness"][:, 0], columns["trust"][:, 0])
+    return WorldMap3D(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff, free_level, frame)
+
+
+def read_map3d(path: str | os.PathLike[str]) -> Any:
+    """Read a version-5 ``.occmap`` file."""
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return decode(data, str(path))
+
+
+__all__ = ["FORMAT_VERSION", "KIND", "decode", "encode", "read_map3d", "save_map3d"]
