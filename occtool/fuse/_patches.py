@@ -31,6 +31,13 @@ MIN_THICKNESS = 0.01
 MIN_PLANE_POINTS = 4
 #: Smallest half-extent of a patch along the plane, as a share of the cell.
 MIN_EXTENT = 0.25
+#: Levels each patch number is rounded to before it is stored (zlib then spends about
+#: log2(levels) bits on it): the centre's offset in its cell per axis, the normal's polar
+#: angle and azimuth, the in-plane axis, the two extents and the trust. A ridge falls over
+#: half a cell, so a centre a 32nd of a cell off costs little.
+LEVELS = {"offset": 16, "polar": 33, "azimuth": 64, "axis": 16, "extent": 16, "trust": 16}
+#: Half-thicknesses a patch may take (mm): rounded up to the next.
+THICKNESS_MM = (10, 14, 20, 28, 40, 56, 80, 113, 160, 226, 255)
 #: Normal angle steps: polar over [0, pi/2] (a normal is kept in the upper half-sphere),
 #: azimuth over [0, 2 pi); the in-plane axis over [0, pi).
 ANGLE_STEPS = 256
@@ -145,32 +152,56 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
         seen /= np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-12)
         normals[few] = seen
     normals = np.where((normals[:, 2] < 0.0)[:, None], -normals, normals)
-    polar = np.clip(np.round(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)) / (0.5 * math.pi) * (ANGLE_STEPS - 1)),
-                    0, ANGLE_STEPS - 1)
-    azimuth = np.round((np.arctan2(normals[:, 1], normals[:, 0]) % (2.0 * math.pi)) / (2.0 * math.pi)
-                       * ANGLE_STEPS) % ANGLE_STEPS
-    normal_codes = np.column_stack([polar, azimuth]).astype(np.uint8)
+    normal_codes = np.column_stack([
+        _snap(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)) / (0.5 * math.pi), LEVELS["polar"], closed=True),
+        _snap((np.arctan2(normals[:, 1], normals[:, 0]) % (2.0 * math.pi)) / (2.0 * math.pi), LEVELS["azimuth"])])
     quantised = _normal_of(normal_codes)
     a, b = _frame(quantised)
     axis = axis - np.sum(axis * quantised, axis=1, keepdims=True) * quantised
-    angle = np.arctan2(np.sum(axis * b, axis=1), np.sum(axis * a, axis=1)) % math.pi
-    axis_codes = (np.round(angle / math.pi * ANGLE_STEPS) % ANGLE_STEPS).astype(np.uint8)
-    # Half-extents: the farthest return from the centre along each quantised in-plane axis
-    # (not a multiple of the spread: a square's eigen-axes may lie along its diagonals).
+    axis_codes = _snap((np.arctan2(np.sum(axis * b, axis=1), np.sum(axis * a, axis=1)) % math.pi) / math.pi,
+                       LEVELS["axis"])
+    offset_step = 256 // LEVELS["offset"]
+    offsets = (np.clip(np.floor(mean / resolution * LEVELS["offset"]), 0, LEVELS["offset"] - 1) * offset_step
+               + offset_step // 2).astype(np.uint8)
+    # Extents and thickness are measured from the centre and axes as the file holds them, so
+    # that the coarse codes still cover the returns.
+    centre = (offsets.astype(np.float64) + 0.5) * (resolution / 256.0)
     along = np.cos(axis_codes * (math.pi / ANGLE_STEPS))[:, None] * a + np.sin(
         axis_codes * (math.pi / ANGLE_STEPS))[:, None] * b
     across = np.cross(quantised, along)
-    centred = local - np.repeat(mean, counts, axis=0)
-    spread = np.column_stack([
-        np.maximum.reduceat(np.abs(np.sum(centred * np.repeat(along, counts, axis=0), axis=1)), starts),
-        np.maximum.reduceat(np.abs(np.sum(centred * np.repeat(across, counts, axis=0), axis=1)), starts)])
-    extents = np.clip(np.maximum(spread, MIN_EXTENT * resolution), 0.0, resolution)
-    extent_codes = np.clip(np.round(extents / resolution * 255.0), 1, 255).astype(np.uint8)
-    thickness = np.where(few, MIN_THICKNESS, np.maximum(2.0 * np.sqrt(values[:, 0]), MIN_THICKNESS))
-    thickness_codes = np.clip(np.round(thickness * 1000.0), 1, 255).astype(np.uint8)
-    offsets = np.clip(np.floor(mean / resolution * 256.0), 0, 255).astype(np.uint8)
+    centred = local - np.repeat(centre, counts, axis=0)
+
+    def farthest(direction: FloatArray) -> FloatArray:
+        return np.maximum.reduceat(np.abs(np.sum(centred * np.repeat(direction, counts, axis=0), axis=1)), starts)
+
+    # The farthest return along each in-plane axis, not a multiple of the spread: a square's
+    # eigen-axes may lie along its diagonals.
+    extents = np.column_stack([farthest(along), farthest(across)])
+    extents = np.clip(np.maximum(extents, MIN_EXTENT * resolution), 0.0, resolution)
+    extent_step = 256 // LEVELS["extent"]
+    extent_codes = np.clip(np.ceil(extents / resolution * 255.0 / extent_step) * extent_step, extent_step,
+                           255).astype(np.uint8)
+    depth = np.sum(centred * np.repeat(quantised, counts, axis=0), axis=1)
+    rms = np.sqrt(np.add.reduceat(depth * depth, starts) / n)
+    thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), 2.0 * rms), MIN_THICKNESS)
+    table = np.asarray(THICKNESS_MM)
+    thickness_codes = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
     return PatchCodes(cells.astype(np.int64), offsets, normal_codes, axis_codes, extent_codes, thickness_codes,
                       np.full(cells.size, 255, dtype=np.uint8))
+
+
+def _snap(fraction: FloatArray, levels: int, closed: bool = False) -> NDArray[np.uint8]:
+    """Byte codes of fractions of a range on ``levels`` steps (``closed``: both ends are
+    values, else the range wraps round)."""
+    if closed:
+        return np.round(np.round(np.clip(fraction, 0.0, 1.0) * (levels - 1)) * (255.0 / (levels - 1))).astype(np.uint8)
+    return ((np.round(fraction * levels).astype(np.int64) % levels) * (256 // levels)).astype(np.uint8)
+
+
+def trust_codes(trust: FloatArray) -> NDArray[np.uint8]:
+    """Byte codes of trusts in [0, 1] on :data:`LEVELS` ``["trust"]`` steps, never 0."""
+    step = 255 // (LEVELS["trust"] - 1)
+    return np.clip(np.round(trust * (LEVELS["trust"] - 1)) * step, step, 255).astype(np.uint8)
 
 
 def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
@@ -228,5 +259,5 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     return keys, crossings
 
 
-__all__ = ["PatchCodes", "PatchGeometry", "cell_keys", "fit_patches", "free_cells_and_crossings", "geometry",
-           "key_corners"]
+__all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "fit_patches", "free_cells_and_crossings", "geometry",
+           "key_corners", "trust_codes"]

@@ -32,6 +32,7 @@ from occtool.fuse._patches import (
     fit_patches,
     free_cells_and_crossings,
     geometry,
+    trust_codes,
 )
 
 FloatArray = NDArray[np.float64]
@@ -204,7 +205,7 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         hits_per = np.bincount(np.searchsorted(patches.keys, cell_keys(end[hit], lo, shape3, resolution)),
                                minlength=len(patches))
         trust = hits_per / np.maximum(hits_per + crossings, 1)
-        patches.trust = np.clip(np.round(trust * 255.0), 1, 255).astype(np.uint8)
+        patches.trust = trust_codes(trust)
     return WorldMap3D(float(resolution), lo, shape3, free, patches, falloff, edge_falloff, free_level)
 
 
