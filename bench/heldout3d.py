@@ -633,7 +633,7 @@ def world3d_rows(train: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]], 
         started = time.process_time()
         p = np.asarray(world3d.load_map_3d(scratch / "world3d.occmap").predict(xyz), dtype=np.float64)
         return [{"model": name, "bytes": size, "cpu_s": cpu, "query_cpu_s": time.process_time() - started,
-                 "patches": len(world.patches), **_scores(p, n_occupied, band)}]
+                 "patches": world.patch_count, **_scores(p, n_occupied, band)}]
     except Exception as exc:  # occtool's prototype: any failure is reported, not raised
         return [{"model": name, "note": f"n/a: {type(exc).__name__}: {exc}"}]
 

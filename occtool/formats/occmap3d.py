@@ -11,9 +11,11 @@ Layout (little-endian), the header conventions of :mod:`occtool.formats.occmap`:
     ...       one zlib stream of the arrays' bytes, back to back
     4 bytes   uint32 CRC-32 of everything before it
 
-Arrays: ``free`` and ``surface`` uint8 ``(ceil(C / 8),)`` bitsets over the box's ``C`` cells
-(x slowest, z fastest; numpy's ``packbits`` order): the cells training rays crossed, the cells
-holding a patch; then the patches in the order of their cells, column by column (each column
+Arrays: ``free`` uint8 ``(ceil(C / 8),)``, a bitset over the box's ``C`` cells (x slowest,
+z fastest; numpy's ``packbits`` order): the cells training rays crossed; ``surface0``,
+``surface1``, ... the same over each level's box (level ``l``'s cells ``2 ** l`` times the
+resolution; the header's ``levels`` counts the patches of each): the cells holding a patch;
+then the patches, level by level in the order of their cells, column by column (each column
 compresses on its own terms): ``offsets`` uint8 ``(S, 3)``, ``normals`` uint8 ``(S, 2)``,
 ``axes`` uint8 ``(S,)``, ``extents`` uint8 ``(S, 2)``, ``thickness`` uint8 ``(S,)``,
 ``trust`` uint8 ``(S,)`` (:class:`occtool.fuse._patches.PatchCodes`): 10 bytes a patch
@@ -39,6 +41,8 @@ FORMAT_VERSION = 5
 KIND = "world3d"
 #: Most cells a box may hold (a bitset of 256 MB at most, checked before inflating).
 MAX_CELLS = 1 << 31
+#: Most levels of patches a file may hold.
+MAX_LEVELS = 8
 #: The patch columns: name, bytes a patch.
 COLUMNS = (("offsets", 3), ("normals", 2), ("axes", 1), ("extents", 2), ("thickness", 1), ("trust", 1))
 
@@ -51,15 +55,20 @@ def _bitset(keys: np.ndarray, cells: int) -> np.ndarray:
 
 def encode(world: Any) -> bytes:
     """The file's bytes for a :class:`~occtool.fuse._world3d.WorldMap3D`."""
+    from occtool.fuse._patches import level_box
+
     cells = int(np.prod(world.shape))
-    patches = world.patches
-    arrays = [("free", _bitset(world.free_keys, cells)), ("surface", _bitset(patches.keys, cells))]
-    arrays += [(name, np.ascontiguousarray(getattr(patches, name), dtype=np.uint8).reshape(len(patches), width)
-                .T.reshape(-1)) for name, width in COLUMNS]
+    arrays = [("free", _bitset(world.free_keys, cells))]
+    for level, codes in enumerate(world.patches):
+        arrays.append((f"surface{level}", _bitset(codes.keys, int(np.prod(level_box(world.lo, world.shape, level)[1])))))
+    for name, width in COLUMNS:
+        rows = np.concatenate([np.asarray(getattr(codes, name), dtype=np.uint8).reshape(len(codes), width)
+                               for codes in world.patches])
+        arrays.append((name, np.ascontiguousarray(rows.T).reshape(-1)))
     payload = zlib.compress(b"".join(a.tobytes() for _, a in arrays), 9)
     header = {"format": FORMAT_VERSION, "kind": KIND, "unit": "m", "frame": world.frame,
               "resolution": world.resolution, "lo": [int(v) for v in world.lo], "shape": list(world.shape),
-              "falloff": world.falloff, "edge_falloff": world.edge_falloff, "free_level": world.free_level, "patches": len(patches),
+              "falloff": world.falloff, "edge_falloff": world.edge_falloff, "free_level": world.free_level, "levels": [len(codes) for codes in world.patches],
               "arrays": [[name, "uint8", list(a.shape)] for name, a in arrays], "packed": len(payload)}
     text = json.dumps(header, separators=(",", ":")).encode("utf-8")
     body = MAGIC + struct.pack("<I", len(text)) + text + payload
@@ -100,7 +109,8 @@ def decode(data: bytes, name: str = "occmap") -> Any:
             "resolution", "falloff", "edge_falloff", "free_level"))
         lo = np.array([int(v) for v in header["lo"]], dtype=np.int64)
         shape = tuple(int(v) for v in header["shape"])
-        count, packed = int(header["patches"]), int(header["packed"])
+        counts = [int(v) for v in header["levels"]]
+        packed = int(header["packed"])
         frame = str(header.get("frame", ""))
     except (ValueError, KeyError, TypeError, UnicodeDecodeError):
         raise fail("unreadable header") from None
@@ -111,11 +121,16 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         raise fail("bad box, resolution or falloff")
     if not 0.0 <= free_level <= 1.0:
         raise fail("free level outside [0, 1]")
+    from occtool.fuse._patches import level_box
+
     cells = shape[0] * shape[1] * shape[2]
-    if cells > MAX_CELLS or not 0 <= count <= cells:
-        raise fail(f"{cells} cells and {count} patches is not a map this reads")
-    bitset = (cells + 7) // 8
-    expected = 2 * bitset + count * sum(width for _, width in COLUMNS)
+    count = sum(counts)
+    if cells > MAX_CELLS or not 1 <= len(counts) <= MAX_LEVELS or min(counts) < 0 or count > cells:
+        raise fail(f"{cells} cells and patches {counts} is not a map this reads")
+    level_cells = [int(np.prod(level_box(lo, (shape[0], shape[1], shape[2]), level)[1]))
+                   for level in range(len(counts))]
+    sizes = [(cells + 7) // 8] + [(c + 7) // 8 for c in level_cells]
+    expected = sum(sizes) + count * sum(width for _, width in COLUMNS)
     if packed != len(data) - 4 - start - length:
         raise fail("array bytes do not match the header")
     inflater = zlib.decompressobj()
@@ -127,22 +142,29 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         raise fail("array bytes do not match the header")
     buffer = np.frombuffer(raw, dtype=np.uint8)
 
-    def keys(at: int) -> np.ndarray:
-        return np.flatnonzero(np.unpackbits(buffer[at:at + bitset], count=cells)).astype(np.int64)
+    def keys(at: int, size: int, n: int) -> np.ndarray:
+        return np.flatnonzero(np.unpackbits(buffer[at:at + size], count=n)).astype(np.int64)
 
-    free, surface = keys(0), keys(bitset)
-    if surface.size != count:
-        raise fail("the surface cells do not match the patch count")
+    free = keys(0, sizes[0], cells)
+    at = sizes[0]
+    surfaces = []
+    for level, n in enumerate(level_cells):
+        surfaces.append(keys(at, sizes[level + 1], n))
+        if surfaces[-1].size != counts[level]:
+            raise fail(f"the surface cells of level {level} do not match its patch count")
+        at += sizes[level + 1]
     columns: dict[str, np.ndarray] = {}
-    at = 2 * bitset
     for column, width in COLUMNS:
         columns[column] = buffer[at:at + count * width].reshape(width, count).T.copy()
         at += count * width
-    if count and (columns["normals"][:, 0].max() > 255 or columns["trust"].min() == 0
-                  or columns["extents"].min() == 0 or columns["thickness"].min() == 0):
+    if count and (columns["trust"].min() == 0 or columns["extents"].min() == 0 or columns["thickness"].min() == 0):
         raise fail("patch values out of range")
-    patches = PatchCodes(surface, columns["offsets"], columns["normals"], columns["axes"][:, 0],
-                         columns["extents"], columns["thickness"][:, 0], columns["trust"][:, 0])
+    patches, first = [], 0
+    for level, n in enumerate(counts):
+        part = {name: value[first:first + n] for name, value in columns.items()}
+        first += n
+        patches.append(PatchCodes(surfaces[level], part["offsets"], part["normals"], part["axes"][:, 0],
+                                  part["extents"], part["thickness"][:, 0], part["trust"][:, 0]))
     return WorldMap3D(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff, free_level, frame)
 
 

@@ -29,6 +29,8 @@ CHUNK_SAMPLES = 4_000_000
 MIN_THICKNESS = 0.01
 #: A patch fitted to fewer returns than this takes its normal from the rays that hit it.
 MIN_PLANE_POINTS = 4
+#: A coarse-level patch holds at least this many returns.
+MIN_FLAT_POINTS = 8
 #: Smallest half-extent of a patch along the plane, as a share of the cell.
 MIN_EXTENT = 0.25
 #: Levels each patch number is rounded to before it is stored (zlib then spends about
@@ -126,11 +128,16 @@ def geometry(codes: PatchCodes, lo: NDArray[np.int64], shape: tuple[int, int, in
 
 
 def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int64], shape: tuple[int, int, int],
-                resolution: float) -> PatchCodes:
+                resolution: float, flat: float | None = None, level: int = 0
+                ) -> tuple[PatchCodes, NDArray[np.bool_], NDArray[np.int64]]:
     """One plane per cell holding returns, from their second moments, quantised (trust 1 for now).
 
     ``directions`` ``(H, 3)`` the unit direction of the ray of each return: the normal of a cell
-    with fewer than :data:`MIN_PLANE_POINTS` returns (a surface seen face on).
+    with fewer than :data:`MIN_PLANE_POINTS` returns (a surface seen face on). With ``flat``
+    (metres), only the cells whose returns lie within that RMS distance of their plane, and
+    hold at least :data:`MIN_FLAT_POINTS`, get a patch (a coarse level: the rest is fitted
+    finer; ``level`` l: the centre is kept on ``2 ** l`` times as many steps, the same
+    distance as on level 0). Returns the patches, which returns they took, and how many each took.
     """
     keys = cell_keys(returns, lo, shape, resolution)
     order = np.argsort(keys, kind="stable")
@@ -160,8 +167,9 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     axis = axis - np.sum(axis * quantised, axis=1, keepdims=True) * quantised
     axis_codes = _snap((np.arctan2(np.sum(axis * b, axis=1), np.sum(axis * a, axis=1)) % math.pi) / math.pi,
                        LEVELS["axis"])
-    offset_step = 256 // LEVELS["offset"]
-    offsets = (np.clip(np.floor(mean / resolution * LEVELS["offset"]), 0, LEVELS["offset"] - 1) * offset_step
+    steps = min(LEVELS["offset"] << level, 256)
+    offset_step = 256 // steps
+    offsets = (np.clip(np.floor(mean / resolution * steps), 0, steps - 1) * offset_step
                + offset_step // 2).astype(np.uint8)
     # Extents and thickness are measured from the centre and axes as the file holds them, so
     # that the coarse codes still cover the returns.
@@ -186,8 +194,29 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), 2.0 * rms), MIN_THICKNESS)
     table = np.asarray(THICKNESS_MM)
     thickness_codes = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
-    return PatchCodes(cells.astype(np.int64), offsets, normal_codes, axis_codes, extent_codes, thickness_codes,
-                      np.full(cells.size, 255, dtype=np.uint8))
+    # Flatness is judged about the returns' own plane, before rounding.
+    keep = np.ones(cells.size, dtype=bool) if flat is None else (
+        (np.sqrt(values[:, 0]) <= flat) & (counts >= MIN_FLAT_POINTS))
+    taken = np.zeros(returns.shape[0], dtype=bool)
+    taken[order] = np.repeat(keep, counts)
+    return (PatchCodes(cells[keep].astype(np.int64), offsets[keep], normal_codes[keep], axis_codes[keep],
+                       extent_codes[keep], thickness_codes[keep], np.full(int(keep.sum()), 255, dtype=np.uint8)),
+            taken, counts[keep].astype(np.int64))
+
+
+def level_box(lo: NDArray[np.int64], shape: tuple[int, int, int], level: int) -> tuple[NDArray[np.int64],
+                                                                                         tuple[int, int, int]]:
+    """The box of cells ``2 ** level`` times coarser that covers the box ``lo``, ``shape``."""
+    low = np.floor_divide(lo, 1 << level)
+    high = np.floor_divide(lo + np.asarray(shape) - 1, 1 << level)
+    size = high - low + 1
+    return low.astype(np.int64), (int(size[0]), int(size[1]), int(size[2]))
+
+
+def concatenate(parts: list[PatchGeometry]) -> PatchGeometry:
+    """One :class:`PatchGeometry` of several, in order."""
+    return PatchGeometry(*(np.concatenate([getattr(p, name) for p in parts]) for name in
+                           ("centres", "normals", "u", "v", "extents", "thickness", "trust")))
 
 
 def _snap(fraction: FloatArray, levels: int, closed: bool = False) -> NDArray[np.uint8]:
@@ -226,38 +255,45 @@ def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
         begin = end
 
 
-def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_], patches: PatchCodes,
-                             lo: NDArray[np.int64], shape: tuple[int, int, int], resolution: float,
-                             margin: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_],
+                             levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[int, int, int],
+                             resolution: float, margin: float) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
     """The sorted keys of the cells the rays crossed (a return's ray stops ``margin`` short of
-    it; a free-only ray is free to its end) and, per patch, how many rays went through its slab."""
+    it; a free-only ray is free to its end) and, per level and patch, how many rays went
+    through its slab (level ``l``'s cells are ``2 ** l`` times the resolution)."""
     step = 0.5 * resolution
     length = np.linalg.norm(ends - origins, axis=1)
     free_length = np.where(hits, length - margin, length)
-    shape_geometry = geometry(patches, lo, shape, resolution)
-    crossings = np.zeros(len(patches), dtype=np.int64)
+    boxes = [level_box(lo, shape, level) for level in range(len(levels))]
+    shapes = [geometry(codes, box[0], box[1], resolution * (1 << level))
+              for level, (codes, box) in enumerate(zip(levels, boxes))]
+    crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
     free: list[NDArray[np.int64]] = []
     for ray, t, point, after in _walk(origins, ends, free_length, step):
         keys = cell_keys(point, lo, shape, resolution)
         free.append(np.unique(keys[keys >= 0]))
-        if not len(patches):
-            continue
-        at = np.clip(np.searchsorted(patches.keys, keys), 0, len(patches) - 1)
         # A crossing is counted only where the next point is still short of the ray's return.
-        here = np.flatnonzero((keys >= 0) & (patches.keys[at] == keys) & (t + step <= free_length[ray]))
-        p = at[here]
-        c, n = shape_geometry.centres[p], shape_geometry.normals[p]
-        d0 = np.sum((point[here] - c) * n, axis=1)
-        d1 = np.sum((after[here] - c) * n, axis=1)
-        through = (d0 * d1 < 0.0) & (np.minimum(np.abs(d0), np.abs(d1)) > 0.0)
-        s = d0[through] / (d0[through] - d1[through])
-        x = point[here][through] + s[:, None] * (after[here][through] - point[here][through]) - c[through]
-        inside = ((np.abs(np.sum(x * shape_geometry.u[p][through], axis=1)) <= shape_geometry.extents[p[through], 0])
-                  & (np.abs(np.sum(x * shape_geometry.v[p][through], axis=1)) <= shape_geometry.extents[p[through], 1]))
-        crossings += np.bincount(p[through][inside], minlength=len(patches))
+        short = t + step <= free_length[ray]
+        for level, (codes, box, g) in enumerate(zip(levels, boxes, shapes)):
+            if not len(codes):
+                continue
+            keys = cell_keys(point, box[0], box[1], resolution * (1 << level))
+            at = np.clip(np.searchsorted(codes.keys, keys), 0, len(codes) - 1)
+            here = np.flatnonzero((keys >= 0) & (codes.keys[at] == keys) & short)
+            p = at[here]
+            c, n = g.centres[p], g.normals[p]
+            d0 = np.sum((point[here] - c) * n, axis=1)
+            d1 = np.sum((after[here] - c) * n, axis=1)
+            through = (d0 * d1 < 0.0) & (np.minimum(np.abs(d0), np.abs(d1)) > 0.0)
+            s = d0[through] / (d0[through] - d1[through])
+            x = point[here][through] + s[:, None] * (after[here][through] - point[here][through]) - c[through]
+            q = p[through]
+            inside = ((np.abs(np.sum(x * g.u[q], axis=1)) <= g.extents[q, 0])
+                      & (np.abs(np.sum(x * g.v[q], axis=1)) <= g.extents[q, 1]))
+            crossings[level] += np.bincount(q[inside], minlength=len(codes))
     keys = np.unique(np.concatenate(free)) if free else np.zeros(0, dtype=np.int64)
     return keys, crossings
 
 
-__all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "fit_patches", "free_cells_and_crossings", "geometry",
-           "key_corners", "trust_codes"]
+__all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
+           "free_cells_and_crossings", "geometry", "key_corners", "level_box", "trust_codes"]

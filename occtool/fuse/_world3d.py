@@ -29,9 +29,11 @@ from occtool.fuse._patches import (
     PatchCodes,
     PatchGeometry,
     cell_keys,
+    concatenate,
     fit_patches,
     free_cells_and_crossings,
     geometry,
+    level_box,
     trust_codes,
 )
 
@@ -45,6 +47,13 @@ FREE_LEVEL = 0.1
 UNKNOWN = 0.5
 #: Patches consulted per query point (the nearest centres).
 NEIGHBOURS = 8
+#: Coarser levels of patches tried before the cell of ``resolution``: level ``l`` has cells
+#: ``2 ** l`` times as large, and takes the returns of a cell that are flat (a wall, a floor).
+COARSE_LEVELS = 2
+#: RMS distance of a coarse cell's returns from their plane under which it is one patch,
+#: as a share of the finest cell (and at least :data:`FLAT_MIN` metres).
+FLAT_SHARE = 0.1
+FLAT_MIN = 0.015
 #: Query points evaluated at once (memory of the ``(K, NEIGHBOURS, 3)`` differences).
 QUERY_CHUNK = 100_000
 
@@ -55,7 +64,8 @@ class WorldMap3D:
 
     ``lo`` int64 ``(3,)`` and ``shape`` the box of cells (``resolution`` m) the map covers;
     ``free_keys`` the sorted linear keys of the cells training rays crossed;
-    ``patches`` the surfaces at the file's precision; ``falloff`` the distance over which a
+    ``patches`` the surfaces at the file's precision, one list entry a level (level ``l``'s
+    cells ``2 ** l`` times the resolution, its box :func:`~occtool.fuse._patches.level_box`); ``falloff`` the distance over which a
     patch's ridge falls by 1 beyond its faces and edges.
     """
 
@@ -63,19 +73,28 @@ class WorldMap3D:
     lo: NDArray[np.int64]
     shape: tuple[int, int, int]
     free_keys: NDArray[np.int64]
-    patches: PatchCodes
+    patches: list[PatchCodes]
     falloff: float
     edge_falloff: float
     free_level: float = FREE_LEVEL
     frame: str = "the frame of the log's poses"
     _geometry: PatchGeometry | None = field(default=None, repr=False)
-    _tree: Any = field(default=None, repr=False)
+    _trees: Any = field(default=None, repr=False)
+
+    @property
+    def patch_count(self) -> int:
+        """Patches over every level."""
+        return sum(len(codes) for codes in self.patches)
 
     @property
     def geometry(self) -> PatchGeometry:
         """The patches as floats, derived from their codes."""
         if self._geometry is None:
-            self._geometry = geometry(self.patches, self.lo, self.shape, self.resolution)
+            parts = []
+            for level, codes in enumerate(self.patches):
+                low, shape = level_box(self.lo, self.shape, level)
+                parts.append(geometry(codes, low, shape, self.resolution * (1 << level)))
+            self._geometry = concatenate(parts)
         return self._geometry
 
     @property
@@ -119,29 +138,35 @@ class WorldMap3D:
 
     def predict(self, xyz: ArrayLike) -> FloatArray:
         """Occupancy in [0, 1] at ``(K, 3)`` world points: MAX of the cell's constant and the
-        ridges of the nearest :data:`NEIGHBOURS` patches."""
+        ridges of the nearest :data:`NEIGHBOURS` patches of each level."""
         points = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
         out = self.background(points)
-        n = len(self.patches)
-        if n == 0 or points.shape[0] == 0:
+        if self.patch_count == 0 or points.shape[0] == 0:
             return out
         g = self.geometry
-        if self._tree is None:
+        if self._trees is None:
             from scipy.spatial import cKDTree  # lazy: scipy's import is slow and only predict needs it
 
-            self._tree = cKDTree(g.centres)
-        # No ridge is above 0 farther from its centre than its half-diagonal plus the falloff.
-        reach = float(np.sqrt(np.sum(g.extents.max(axis=0) ** 2) + g.thickness.max() ** 2)) + max(
-            self.falloff, self.edge_falloff)
-        k = min(NEIGHBOURS, n)
-        for begin in range(0, points.shape[0], QUERY_CHUNK):
-            chunk = points[begin:begin + QUERY_CHUNK]
-            _, index = self._tree.query(chunk, k=k, distance_upper_bound=reach)
-            index = np.asarray(index).reshape(chunk.shape[0], k)
-            valid = index < n
-            ridge = self.ridge(chunk[:, None, :], np.where(valid, index, 0))
-            best = np.where(valid, ridge, 0.0).max(axis=1)
-            out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], best)
+            self._trees = []
+            first = 0
+            for codes in self.patches:
+                index = np.arange(first, first + len(codes))
+                first += len(codes)
+                if index.size:
+                    # No ridge is above 0 farther from its centre than its half-diagonal plus a falloff.
+                    reach = float(np.sqrt(np.sum(g.extents[index].max(axis=0) ** 2) + g.thickness[index].max() ** 2)
+                                  ) + max(self.falloff, self.edge_falloff)
+                    self._trees.append((cKDTree(g.centres[index]), index, reach))
+        for tree, members, reach in self._trees:
+            k = min(NEIGHBOURS, members.size)
+            for begin in range(0, points.shape[0], QUERY_CHUNK):
+                chunk = points[begin:begin + QUERY_CHUNK]
+                _, index = tree.query(chunk, k=k, distance_upper_bound=reach)
+                index = np.asarray(index).reshape(chunk.shape[0], k)
+                valid = index < members.size
+                ridge = self.ridge(chunk[:, None, :], members[np.where(valid, index, 0)])
+                best = np.where(valid, ridge, 0.0).max(axis=1)
+                out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], best)
         return out
 
     def __call__(self, xyz: ArrayLike) -> FloatArray:
@@ -156,7 +181,8 @@ class WorldMap3D:
 
 def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | None = None, *,
                        resolution: float = RESOLUTION, falloff: float | None = None,
-                       edge_falloff: float | None = None, margin: float | None = None, free_level: float = FREE_LEVEL) -> WorldMap3D:
+                       edge_falloff: float | None = None, margin: float | None = None, free_level: float = FREE_LEVEL,
+                       coarse_levels: int = COARSE_LEVELS) -> WorldMap3D:
     """A :class:`WorldMap3D` of world-frame rays.
 
     Parameters
@@ -174,6 +200,8 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     edge_falloff
         The same beyond an edge, along the plane (default a cell: a surface goes on past
         where the training returns stopped more often than a slab thickens).
+    coarse_levels
+        How many coarser levels of patches to try (:data:`COARSE_LEVELS`).
     margin
         A return's ray is free up to this short of it (default a quarter of a cell).
     """
@@ -197,16 +225,26 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         hi = np.floor(every.max(axis=0) / resolution).astype(np.int64)
         shape = tuple(int(v) for v in hi - lo + 1)
     shape3: tuple[int, int, int] = (shape[0], shape[1], shape[2])
-    vector = end[hit] - origin[hit]
+    vector = end - origin
     direction = vector / np.maximum(np.linalg.norm(vector, axis=1, keepdims=True), 1e-12)
-    patches = fit_patches(end[hit], direction, lo, shape3, resolution)
-    free, crossings = free_cells_and_crossings(origin, end, hit, patches, lo, shape3, resolution, margin)
-    if len(patches):
-        hits_per = np.bincount(np.searchsorted(patches.keys, cell_keys(end[hit], lo, shape3, resolution)),
-                               minlength=len(patches))
-        trust = hits_per / np.maximum(hits_per + crossings, 1)
-        patches.trust = trust_codes(trust)
-    return WorldMap3D(float(resolution), lo, shape3, free, patches, falloff, edge_falloff, free_level)
+    # Coarse levels first: a flat coarse cell (a stretch of wall or floor) is one patch; what
+    # is left (corners, clutter) goes down a level, and the finest level takes everything.
+    remaining = np.flatnonzero(hit)
+    levels: list[PatchCodes] = []
+    counts: list[NDArray[np.int64]] = []
+    for level in range(coarse_levels, -1, -1):
+        low, box = level_box(lo, shape3, level)
+        codes, taken, taken_counts = fit_patches(
+            end[remaining], direction[remaining], low, box,
+            resolution * (1 << level), None if level == 0 else max(FLAT_SHARE * resolution, FLAT_MIN), level)
+        levels.append(codes)
+        counts.append(taken_counts)
+        remaining = remaining[~taken]
+    levels, counts = levels[::-1], counts[::-1]
+    free, crossings = free_cells_and_crossings(origin, end, hit, levels, lo, shape3, resolution, margin)
+    for codes, hits_per, crossed in zip(levels, counts, crossings):
+        codes.trust = trust_codes(hits_per / np.maximum(hits_per + crossed, 1))
+    return WorldMap3D(float(resolution), lo, shape3, free, levels, falloff, edge_falloff, free_level)
 
 
 def world_rays(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
