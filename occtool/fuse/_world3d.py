@@ -50,10 +50,9 @@ NEIGHBOURS = 8
 #: Coarser levels of patches tried before the cell of ``resolution``: level ``l`` has cells
 #: ``2 ** l`` times as large, and takes the returns of a cell that are flat (a wall, a floor).
 COARSE_LEVELS = 2
-#: RMS distance of a coarse cell's returns from their plane under which it is one patch,
-#: as a share of the finest cell (and at least :data:`FLAT_MIN` metres).
-FLAT_SHARE = 0.1
-FLAT_MIN = 0.015
+#: RMS distance (metres) of a coarse cell's returns from their plane under which it is one
+#: patch: about the range noise of a Kinect at 3-4 m or a lidar's plus its registration.
+FLAT = 0.05
 #: Query points evaluated at once (memory of the ``(K, NEIGHBOURS, 3)`` differences).
 QUERY_CHUNK = 100_000
 
@@ -182,7 +181,7 @@ class WorldMap3D:
 def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | None = None, *,
                        resolution: float = RESOLUTION, falloff: float | None = None,
                        edge_falloff: float | None = None, margin: float | None = None, free_level: float = FREE_LEVEL,
-                       coarse_levels: int = COARSE_LEVELS) -> WorldMap3D:
+                       coarse_levels: int = COARSE_LEVELS, flat: float | None = None) -> WorldMap3D:
     """A :class:`WorldMap3D` of world-frame rays.
 
     Parameters
@@ -202,6 +201,9 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         where the training returns stopped more often than a slab thickens).
     coarse_levels
         How many coarser levels of patches to try (:data:`COARSE_LEVELS`).
+    flat
+        RMS distance from their plane under which a coarse cell's returns are one patch
+        (default :data:`FLAT`).
     margin
         A return's ray is free up to this short of it (default a quarter of a cell).
     """
@@ -217,6 +219,7 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     falloff = 0.5 * resolution if falloff is None else float(falloff)
     edge_falloff = resolution if edge_falloff is None else float(edge_falloff)
     margin = 0.25 * resolution if margin is None else float(margin)
+    flat = FLAT if flat is None else float(flat)
     if end.shape[0] == 0:
         lo, shape = np.zeros(3, dtype=np.int64), (1, 1, 1)
     else:
@@ -236,7 +239,7 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         low, box = level_box(lo, shape3, level)
         codes, taken, taken_counts = fit_patches(
             end[remaining], direction[remaining], low, box,
-            resolution * (1 << level), None if level == 0 else max(FLAT_SHARE * resolution, FLAT_MIN), level)
+            resolution * (1 << level), None if level == 0 else flat, level)
         levels.append(codes)
         counts.append(taken_counts)
         remaining = remaining[~taken]
