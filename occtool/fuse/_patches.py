@@ -96,7 +96,7 @@ def key_corners(keys: NDArray[np.int64], lo: NDArray[np.int64], shape: tuple[int
     """World corner (lowest x, y, z) of each cell key."""
     i, rest = np.divmod(keys, shape[1] * shape[2])
     j, k = np.divmod(rest, shape[2])
-    return (np.column_stack([i, j, k]) + lo) * resolution
+    return np.asarray((np.column_stack([i, j, k]) + lo) * resolution, dtype=np.float64)
 
 
 def _frame(normals: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -104,7 +104,7 @@ def _frame(normals: FloatArray) -> tuple[FloatArray, FloatArray]:
     reference = np.where((np.abs(normals[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
     a = np.cross(normals, reference)
     a /= np.linalg.norm(a, axis=1, keepdims=True)
-    return a, np.cross(normals, a)
+    return a, np.asarray(np.cross(normals, a), dtype=np.float64)
 
 
 def _normal_of(codes: NDArray[np.uint8]) -> FloatArray:

@@ -64,8 +64,9 @@ class WorldMap3D:
     ``lo`` int64 ``(3,)`` and ``shape`` the box of cells (``resolution`` m) the map covers;
     ``free_keys`` the sorted linear keys of the cells training rays crossed;
     ``patches`` the surfaces at the file's precision, one list entry a level (level ``l``'s
-    cells ``2 ** l`` times the resolution, its box :func:`~occtool.fuse._patches.level_box`); ``falloff`` the distance over which a
-    patch's ridge falls by 1 beyond its faces and edges.
+    cells ``2 ** l`` times the resolution, its box :func:`~occtool.fuse._patches.level_box`);
+    ``falloff`` and ``edge_falloff`` the distances over which a patch's ridge falls by 1
+    beyond its faces and beyond its edges.
     """
 
     resolution: float
@@ -149,19 +150,19 @@ class WorldMap3D:
             self._trees = []
             first = 0
             for codes in self.patches:
-                index = np.arange(first, first + len(codes))
+                members = np.arange(first, first + len(codes))
                 first += len(codes)
-                if index.size:
+                if members.size:
                     # No ridge is above 0 farther from its centre than its half-diagonal plus a falloff.
-                    reach = float(np.sqrt(np.sum(g.extents[index].max(axis=0) ** 2) + g.thickness[index].max() ** 2)
-                                  ) + max(self.falloff, self.edge_falloff)
-                    self._trees.append((cKDTree(g.centres[index]), index, reach))
+                    reach = float(np.sqrt(np.sum(g.extents[members].max(axis=0) ** 2)
+                                          + g.thickness[members].max() ** 2)) + max(self.falloff, self.edge_falloff)
+                    self._trees.append((cKDTree(g.centres[members]), members, reach))
         for tree, members, reach in self._trees:
             k = min(NEIGHBOURS, members.size)
             for begin in range(0, points.shape[0], QUERY_CHUNK):
                 chunk = points[begin:begin + QUERY_CHUNK]
-                _, index = tree.query(chunk, k=k, distance_upper_bound=reach)
-                index = np.asarray(index).reshape(chunk.shape[0], k)
+                _, found = tree.query(chunk, k=k, distance_upper_bound=reach)
+                index = np.asarray(found).reshape(chunk.shape[0], k)
                 valid = index < members.size
                 ridge = self.ridge(chunk[:, None, :], members[np.where(valid, index, 0)])
                 best = np.where(valid, ridge, 0.0).max(axis=1)
@@ -221,13 +222,12 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     margin = 0.25 * resolution if margin is None else float(margin)
     flat = FLAT if flat is None else float(flat)
     if end.shape[0] == 0:
-        lo, shape = np.zeros(3, dtype=np.int64), (1, 1, 1)
+        lo, size = np.zeros(3, dtype=np.int64), np.ones(3, dtype=np.int64)
     else:
         every = np.vstack([end, origin])
         lo = np.floor(every.min(axis=0) / resolution).astype(np.int64)
-        hi = np.floor(every.max(axis=0) / resolution).astype(np.int64)
-        shape = tuple(int(v) for v in hi - lo + 1)
-    shape3: tuple[int, int, int] = (shape[0], shape[1], shape[2])
+        size = np.floor(every.max(axis=0) / resolution).astype(np.int64) - lo + 1
+    shape3 = (int(size[0]), int(size[1]), int(size[2]))
     vector = end - origin
     direction = vector / np.maximum(np.linalg.norm(vector, axis=1, keepdims=True), 1e-12)
     # Coarse levels first: a flat coarse cell (a stretch of wall or floor) is one patch; what
@@ -257,7 +257,8 @@ def world_rays(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
     origins, ends, hits = [], [], []
     for position in log.positions:
         if position.pose is None:
-            raise InputError(f"{log.source or 'the log'}: position {position.index} has no pose; a world map needs poses")
+            raise InputError(f"{log.source or 'the log'}: position {position.index} has no pose; "
+                             "a world map needs poses")
         points = np.asarray(position.features.points, dtype=np.float64).reshape(-1, 3)
         pose = position.pose
         ends.append(points @ pose.rotation.T + pose.translation)
