@@ -85,10 +85,14 @@ class PatchGeometry:
 def cell_keys(points: FloatArray, lo: NDArray[np.int64], shape: tuple[int, int, int],
               resolution: float) -> NDArray[np.int64]:
     """Linear cell index (x slowest, z fastest) of ``(K, 3)`` points inside the box; -1 outside."""
-    ijk = np.floor(points / resolution).astype(np.int64) - lo
-    inside = np.all((ijk >= 0) & (ijk < np.asarray(shape)), axis=1)
-    keys = (ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2]
-    return np.where(inside, keys, -1)
+    return index_keys(np.floor(points / resolution).astype(np.int64), lo, shape)
+
+
+def index_keys(ijk: NDArray[np.int64], lo: NDArray[np.int64], shape: tuple[int, int, int]) -> NDArray[np.int64]:
+    """Linear cell index of ``(K, 3)`` integer cell coordinates inside the box; -1 outside."""
+    i, j, k = ijk[:, 0] - lo[0], ijk[:, 1] - lo[1], ijk[:, 2] - lo[2]
+    inside = (i >= 0) & (i < shape[0]) & (j >= 0) & (j < shape[1]) & (k >= 0) & (k < shape[2])
+    return np.where(inside, (i * shape[1] + j) * shape[2] + k, -1)
 
 
 def key_corners(keys: NDArray[np.int64], lo: NDArray[np.int64], shape: tuple[int, int, int],
@@ -270,14 +274,16 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
     free: list[NDArray[np.int64]] = []
     for ray, t, point, after in _walk(origins, ends, free_length, step):
-        keys = cell_keys(point, lo, shape, resolution)
+        # Cell coordinates once; a level's are the same shifted (floor of a floor).
+        ijk = np.floor(point / resolution).astype(np.int64)
+        keys = index_keys(ijk, lo, shape)
         free.append(np.unique(keys[keys >= 0]))
         # A crossing is counted only where the next point is still short of the ray's return.
         short = t + step <= free_length[ray]
         for level, (codes, box, g) in enumerate(zip(levels, boxes, shapes)):
             if not len(codes):
                 continue
-            keys = cell_keys(point, box[0], box[1], resolution * (1 << level))
+            keys = index_keys(ijk >> level, box[0], box[1])
             at = np.clip(np.searchsorted(codes.keys, keys), 0, len(codes) - 1)
             here = np.flatnonzero((keys >= 0) & (codes.keys[at] == keys) & short)
             p = at[here]
@@ -296,4 +302,4 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
 
 
 __all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
-           "free_cells_and_crossings", "geometry", "key_corners", "level_box", "trust_codes"]
+           "free_cells_and_crossings", "geometry", "index_keys", "key_corners", "level_box", "trust_codes"]
