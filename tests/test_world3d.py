@@ -123,3 +123,23 @@ def test_a_range_log_maps_in_the_frame_of_its_poses() -> None:
     probe = np.array([[2.0, 2.0, 0.8], [2.0, 2.0, 1.3], [-0.5, 2.0, 1.0]])
     np.testing.assert_allclose(world.predict(probe), direct.predict(probe), atol=0.02)
     assert world.predict(probe)[0] > 0.8 and world.predict(probe)[2] == 0.5
+
+
+def test_a_stored_frame_transform_is_applied_to_queries(room: WorldMap3D, tmp_path) -> None:
+    """A map built in a levelled frame answers in the poses' frame through ``to_map``."""
+    angle = np.radians(4.0)
+    to_map = np.eye(4)
+    to_map[1:3, 1:3] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    to_map[:3, 3] = [0.1, -0.2, -1.3]
+    moved = build_world_map_3d(*_rays(), resolution=0.2)
+    moved.to_map = to_map
+    in_map = np.array([[2.0, 2.0, 0.8], [0.0, 2.1, 1.0], [2.0, 2.0, 1.3], [-0.6, 2.0, 1.0]])
+    in_poses = (in_map - to_map[:3, 3]) @ to_map[:3, :3]  # the inverse transform
+    np.testing.assert_allclose(moved.predict(in_poses), room.predict(in_map), atol=1e-9)
+    moved.save(tmp_path / "moved.occmap")
+    back = load_map_3d(tmp_path / "moved.occmap")
+    np.testing.assert_array_equal(back.predict(in_poses), moved.predict(in_poses))
+    with pytest.raises(InputError, match="rotation"):
+        bad = WorldMap3D(room.resolution, room.lo, room.shape, room.free_keys, room.patches, room.falloff,
+                         room.edge_falloff, to_map=np.diag([2.0, 1.0, 1.0, 1.0]))
+        occmap3d.decode(occmap3d.encode(bad))

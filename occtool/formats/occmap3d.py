@@ -5,9 +5,11 @@ Layout (little-endian), the header conventions of :mod:`occtool.formats.occmap`:
     8 bytes   magic  b"\\x89OCCMAP\\n"
     4 bytes   uint32 header length H
     H bytes   UTF-8 JSON header: format 5, kind "world3d", unit, frame, resolution, box
-              (``lo`` cell indices and ``shape``), falloff, free level, patch count and the
-              arrays' names, dtypes and shapes in the order they follow, and ``packed``,
-              the length of the zlib stream
+              (``lo`` cell indices and ``shape``), falloffs, free level, ``levels`` (the
+              patches of each level), the arrays' names, dtypes and shapes in the order they
+              follow, ``packed`` (the length of the zlib stream) and, where the map's frame
+              is not the poses', ``to_map``: 12 numbers, a row-major 3x4 rigid transform from
+              the poses' frame to the map's, applied to every query
     ...       one zlib stream of the arrays' bytes, back to back
     4 bytes   uint32 CRC-32 of everything before it
 
@@ -70,6 +72,8 @@ def encode(world: Any) -> bytes:
               "resolution": world.resolution, "lo": [int(v) for v in world.lo], "shape": list(world.shape),
               "falloff": world.falloff, "edge_falloff": world.edge_falloff, "free_level": world.free_level, "levels": [len(codes) for codes in world.patches],
               "arrays": [[name, "uint8", list(a.shape)] for name, a in arrays], "packed": len(payload)}
+    if world.to_map is not None:
+        header["to_map"] = [float(v) for v in np.asarray(world.to_map)[:3].reshape(-1)]
     text = json.dumps(header, separators=(",", ":")).encode("utf-8")
     body = MAGIC + struct.pack("<I", len(text)) + text + payload
     return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
@@ -112,6 +116,10 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         counts = [int(v) for v in header["levels"]]
         packed = int(header["packed"])
         frame = str(header.get("frame", ""))
+        to_map = header.get("to_map")
+        if to_map is not None:
+            to_map = np.vstack([np.array([float(v) for v in to_map], dtype=np.float64).reshape(3, 4),
+                                [0.0, 0.0, 0.0, 1.0]])
     except (ValueError, KeyError, TypeError, UnicodeDecodeError):
         raise fail("unreadable header") from None
     if version != FORMAT_VERSION or kind != KIND:
@@ -122,7 +130,13 @@ def decode(data: bytes, name: str = "occmap") -> Any:
     if not 0.0 <= free_level <= 1.0:
         raise fail("free level outside [0, 1]")
     from occtool.fuse._patches import level_box
+    from occtool.fuse._world3d import rigid
 
+    if to_map is not None:
+        try:
+            to_map = rigid(to_map)
+        except InputError:
+            raise fail("the frame transform is not a rotation and translation") from None
     cells = shape[0] * shape[1] * shape[2]
     count = sum(counts)
     if cells > MAX_CELLS or not 1 <= len(counts) <= MAX_LEVELS or min(counts) < 0 or count > cells:
@@ -165,7 +179,8 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         first += n
         patches.append(PatchCodes(surfaces[level], part["offsets"], part["normals"], part["axes"][:, 0],
                                   part["extents"], part["thickness"][:, 0], part["trust"][:, 0]))
-    return WorldMap3D(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff, free_level, frame)
+    return WorldMap3D(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff,
+                      free_level, frame, to_map)
 
 
 def read_map3d(path: str | os.PathLike[str]) -> Any:

@@ -78,6 +78,10 @@ class WorldMap3D:
     edge_falloff: float
     free_level: float = FREE_LEVEL
     frame: str = "the frame of the log's poses"
+    #: ``(4, 4)`` rigid transform from the frame queries are given in (the log's poses) to the
+    #: frame the map was built in (e.g. a depth folder's world levelled on its floor); None:
+    #: the same frame.
+    to_map: FloatArray | None = None
     _geometry: PatchGeometry | None = field(default=None, repr=False)
     _trees: Any = field(default=None, repr=False)
 
@@ -137,9 +141,12 @@ class WorldMap3D:
         return np.where(free, self.free_level, UNKNOWN)
 
     def predict(self, xyz: ArrayLike) -> FloatArray:
-        """Occupancy in [0, 1] at ``(K, 3)`` world points: MAX of the cell's constant and the
-        ridges of the nearest :data:`NEIGHBOURS` patches of each level."""
+        """Occupancy in [0, 1] at ``(K, 3)`` points of the poses' frame (moved by ``to_map``
+        first): MAX of the cell's constant and the ridges of the nearest :data:`NEIGHBOURS`
+        patches of each level."""
         points = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+        if self.to_map is not None:
+            points = points @ self.to_map[:3, :3].T + self.to_map[:3, 3]
         out = self.background(points)
         if self.patch_count == 0 or points.shape[0] == 0:
             return out
@@ -269,9 +276,27 @@ def world_rays(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
     return np.concatenate(origins), np.concatenate(ends), np.concatenate(hits)
 
 
-def map_log_3d(log: Any, resolution: float = RESOLUTION, **options: Any) -> WorldMap3D:
-    """The :class:`WorldMap3D` of a :class:`~occtool.features.RangeLog`, in the frame of its poses."""
-    return build_world_map_3d(*world_rays(log), resolution=resolution, **options)
+def map_log_3d(log: Any, resolution: float = RESOLUTION, *, to_map: ArrayLike | None = None,
+               **options: Any) -> WorldMap3D:
+    """The :class:`WorldMap3D` of a :class:`~occtool.features.RangeLog`, in the frame of its poses.
+
+    ``to_map`` ``(4, 4)``: where a reader moved the poses (a depth folder levels its world on
+    the floor it finds), the rigid transform from the frame the user's poses are in to the
+    log's; it is stored in the map and applied to every query.
+    """
+    world = build_world_map_3d(*world_rays(log), resolution=resolution, **options)
+    if to_map is not None:
+        world.to_map = rigid(to_map)
+    return world
+
+
+def rigid(matrix: ArrayLike) -> FloatArray:
+    """``matrix`` as a 4x4 rigid transform (a rotation and a translation), or an InputError."""
+    out = np.asarray(matrix, dtype=np.float64)
+    if out.shape != (4, 4) or not np.isfinite(out).all() or not np.allclose(out[3], [0.0, 0.0, 0.0, 1.0]) or not (
+            np.allclose(out[:3, :3] @ out[:3, :3].T, np.eye(3), atol=1e-6) and np.linalg.det(out[:3, :3]) > 0.0):
+        raise InputError("a map's frame transform must be a 4x4 rotation and translation")
+    return out
 
 
 def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
@@ -281,4 +306,4 @@ def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
     return occmap3d.read_map3d(path)
 
 
-__all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "load_map_3d", "map_log_3d", "world_rays"]
+__all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "load_map_3d", "map_log_3d", "rigid", "world_rays"]
