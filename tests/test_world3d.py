@@ -143,3 +143,31 @@ def test_a_stored_frame_transform_is_applied_to_queries(room: WorldMap3D, tmp_pa
         bad = WorldMap3D(room.resolution, room.lo, room.shape, room.free_keys, room.patches, room.falloff,
                          room.edge_falloff, to_map=np.diag([2.0, 1.0, 1.0, 1.0]))
         occmap3d.decode(occmap3d.encode(bad))
+
+
+def _with_header(data: bytes, change: dict) -> bytes:
+    """``data`` with its JSON header changed and the checksum made right again (so the
+    checks behind the checksum are what a damaged file meets)."""
+    import json
+    import struct
+    import zlib
+
+    start = len(occmap3d.MAGIC) + 4
+    (length,) = struct.unpack("<I", data[len(occmap3d.MAGIC):start])
+    header = json.loads(data[start:start + length])
+    header.update(change)
+    text = json.dumps(header).encode()
+    body = occmap3d.MAGIC + struct.pack("<I", len(text)) + text + data[start + length:-4]
+    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+
+
+@pytest.mark.parametrize("change", [
+    {"shape": [100000, 100000, 100000]}, {"shape": [0, 1, 1]}, {"lo": [1, 2]}, {"levels": [1, 2, 3]},
+    {"levels": []}, {"levels": [-1, 0, 0]}, {"resolution": -0.2}, {"resolution": "x"}, {"falloff": 0},
+    {"free_level": 2.0}, {"format": 4}, {"kind": "world2d"}, {"packed": 7}, {"to_map": [1, 0, 0]},
+    {"to_map": [2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]}, {"levels": None},
+])
+def test_a_damaged_header_behind_a_good_checksum_is_one_line(room: WorldMap3D, change: dict) -> None:
+    with pytest.raises(InputError) as caught:
+        occmap3d.decode(_with_header(occmap3d.encode(room), change), "bad.occmap")
+    assert "\n" not in str(caught.value) and str(caught.value).startswith("bad.occmap: ")
