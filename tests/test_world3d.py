@@ -164,7 +164,7 @@ def _with_header(data: bytes, change: dict) -> bytes:
 @pytest.mark.parametrize("change", [
     {"shape": [100000, 100000, 100000]}, {"shape": [0, 1, 1]}, {"lo": [1, 2]}, {"levels": [1, 2, 3]},
     {"levels": []}, {"levels": [-1, 0, 0]}, {"resolution": -0.2}, {"resolution": "x"}, {"falloff": 0},
-    {"free_level": 2.0}, {"format": 4}, {"kind": "world2d"}, {"packed": 7}, {"to_map": [1, 0, 0]},
+    {"free_level": 2.0}, {"version": 4}, {"format": "other"}, {"kind": "world2d"}, {"packed": 7}, {"to_map": [1, 0, 0]},
     {"to_map": [2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0]}, {"levels": None},
 ])
 def test_a_damaged_header_behind_a_good_checksum_is_one_line(room: WorldMap3D, change: dict) -> None:

@@ -4,7 +4,7 @@ Layout (little-endian), the header conventions of :mod:`occtool.formats.occmap`:
 
     8 bytes   magic  b"\\x89OCCMAP\\n"
     4 bytes   uint32 header length H
-    H bytes   UTF-8 JSON header: format 5, kind "world3d", unit, frame, resolution, box
+    H bytes   UTF-8 JSON header: format "occtool.occmap", version 5, kind "world3d", unit, frame, resolution, box
               (``lo`` cell indices and ``shape``), falloffs, free level, ``levels`` (the
               patches of each level), the arrays' names, dtypes and shapes in the order they
               follow, ``packed`` (the length of the zlib stream) and, where the map's frame
@@ -39,6 +39,9 @@ import numpy as np
 from occtool.errors import InputError
 from occtool.formats.occmap import MAGIC, MAX_HEADER
 
+#: The header's ``format`` and ``version``, as :mod:`occtool.formats.occmap` writes them
+#: (versions 1-4 are the 2D map's).
+FORMAT = "occtool.occmap"
 FORMAT_VERSION = 5
 KIND = "world3d"
 #: Most cells a box may hold (a bitset of 256 MB at most, checked before inflating).
@@ -68,7 +71,7 @@ def encode(world: Any) -> bytes:
                                for codes in world.patches])
         arrays.append((name, np.ascontiguousarray(rows.T).reshape(-1)))
     payload = zlib.compress(b"".join(a.tobytes() for _, a in arrays), 9)
-    header = {"format": FORMAT_VERSION, "kind": KIND, "unit": "m", "frame": world.frame,
+    header = {"format": FORMAT, "version": FORMAT_VERSION, "kind": KIND, "unit": "m", "frame": world.frame,
               "resolution": world.resolution, "lo": [int(v) for v in world.lo], "shape": list(world.shape),
               "falloff": world.falloff, "edge_falloff": world.edge_falloff, "free_level": world.free_level, "levels": [len(codes) for codes in world.patches],
               "arrays": [[name, "uint8", list(a.shape)] for name, a in arrays], "packed": len(payload)}
@@ -108,7 +111,9 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         raise fail("header length beyond the file")
     try:
         header = json.loads(data[start:start + length].decode("utf-8"))
-        version, kind = header["format"], header["kind"]
+        version, kind = header["version"], header["kind"]
+        if header["format"] != FORMAT:
+            raise fail("not an occtool.occmap header")
         resolution, falloff, edge_falloff, free_level = (float(header[k]) for k in (
             "resolution", "falloff", "edge_falloff", "free_level"))
         lo = np.array([int(v) for v in header["lo"]], dtype=np.int64)
@@ -123,7 +128,7 @@ def decode(data: bytes, name: str = "occmap") -> Any:
     except (ValueError, KeyError, TypeError, UnicodeDecodeError):
         raise fail("unreadable header") from None
     if version != FORMAT_VERSION or kind != KIND:
-        raise fail(f"format {version!r} {kind!r}, this reads {FORMAT_VERSION} {KIND!r}")
+        raise fail(f"version {version!r} {kind!r}, this reads {FORMAT_VERSION} {KIND!r}")
     if lo.shape != (3,) or len(shape) != 3 or min(shape) < 1 or not all(
             math.isfinite(v) and v > 0 for v in (resolution, falloff, edge_falloff)):
         raise fail("bad box, resolution or falloff")
@@ -193,4 +198,4 @@ def read_map3d(path: str | os.PathLike[str]) -> Any:
     return decode(data, str(path))
 
 
-__all__ = ["FORMAT_VERSION", "KIND", "decode", "encode", "read_map3d", "save_map3d"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "KIND", "decode", "encode", "read_map3d", "save_map3d"]
