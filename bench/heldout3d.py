@@ -6,7 +6,10 @@ with its own readers (TUM RGB-D depth folders, PCD, KITTI poses), split, ray sam
 voxel traversal, log-odds grids, PGM reader and AUC. occtool is run as a user runs it,
 ``python -m occtool -q map TRAIN -o DIR ...`` in a subprocess, and its outputs are read
 from disk. The only occtool names imported are ``occtool.errors.InputError`` (one-line
-errors) and ``occtool.fuse.load_map`` (to read ``DIR/world.occmap``).
+errors) and ``occtool.fuse.load_map`` (to read ``DIR/world.occmap``), and, for the row of
+issue 35's 3D world map prototype, ``occtool.fuse._world3d`` (built through the library from
+the grids' training rays, saved, read back and queried at world x, y, z, until ``occtool map``
+writes it).
 
 Protocol:
 
