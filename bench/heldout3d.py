@@ -6,7 +6,10 @@ with its own readers (TUM RGB-D depth folders, PCD, KITTI poses), split, ray sam
 voxel traversal, log-odds grids, PGM reader and AUC. occtool is run as a user runs it,
 ``python -m occtool -q map TRAIN -o DIR ...`` in a subprocess, and its outputs are read
 from disk. The only occtool names imported are ``occtool.errors.InputError`` (one-line
-errors) and ``occtool.fuse.load_map`` (to read ``DIR/world.occmap``).
+errors) and ``occtool.fuse.load_map`` (to read ``DIR/world.occmap``), and, for the row of
+issue 35's 3D world map prototype, ``occtool.fuse._world3d`` (built through the library from
+the grids' training rays, saved, read back and queried at world x, y, z, until ``occtool map``
+writes it).
 
 Protocol:
 
@@ -613,6 +616,31 @@ def nav2_lookup(nav2: tuple[FloatArray, float, tuple[float, float, float]], xy: 
     return out
 
 
+#: Cell edge of the 3D world map's patches and free space, per sequence kind.
+WORLD3D_RESOLUTION = {"depth": 0.2, "lidar": 0.4}
+
+
+def world3d_rows(train: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]], resolution: float, xyz: FloatArray,
+                 n_occupied: int, band: NDArray[np.bool_], scratch: Path) -> list[dict[str, Any]]:
+    """(a') occtool's 3D world map (issue 35 prototype), built through the library from the same
+    training rays as the grids, saved, read back and queried at the world x, y, z."""
+    name = f"occtool 3D world map {resolution:g} m (library)"
+    try:
+        world3d = importlib.import_module("occtool.fuse._world3d")
+        started = time.process_time()
+        origins = np.concatenate([np.broadcast_to(o, e.shape) for o, e, _ in train])
+        world = world3d.build_world_map_3d(origins, np.concatenate([e for _, e, _ in train]),
+                                           np.concatenate([h for _, _, h in train]), resolution=resolution)
+        cpu = time.process_time() - started
+        size = world.save(scratch / "world3d.occmap")
+        started = time.process_time()
+        p = np.asarray(world3d.load_map_3d(scratch / "world3d.occmap").predict(xyz), dtype=np.float64)
+        return [{"model": name, "bytes": size, "cpu_s": cpu, "query_cpu_s": time.process_time() - started,
+                 "patches": world.patch_count, **_scores(p, n_occupied, band)}]
+    except Exception as exc:  # occtool's prototype: any failure is reported, not raised
+        return [{"model": name, "note": f"n/a: {type(exc).__name__}: {exc}"}]
+
+
 def occtool_rows(out: Path, command: dict[str, Any], xyz_floor: FloatArray, n_occupied: int,
                  band: NDArray[np.bool_]) -> list[dict[str, Any]]:
     """(a) and (b): ``world.occmap`` and the Nav2 map of ``occtool map``'s run."""
@@ -697,6 +725,7 @@ def score_sequence(name: str, seed: int = 0, data_dir: str | os.PathLike[str] = 
                                      scratch / "train.csv")
         command = run_map(source, scratch / "map", options)
         rows = occtool_rows(scratch / "map", command, xyz_floor, n_occupied, band)
+        rows += world3d_rows(train, WORLD3D_RESOLUTION[spec["kind"]], xyz, n_occupied, band, scratch)
         rows += grid_rows(train, inner_test, inner, xyz, n_occupied, band)
         rows += octomap_rows(train, spec["max_range"], xyz, n_occupied, band, scratch)
     finally:
@@ -737,6 +766,9 @@ def markdown(result: dict[str, Any]) -> str:
                     f"{row['clamp'][1]:g}], inner AUC {_f(row['inner_auc'], '.3f')}; bytes: a byte a known voxel")
         elif row["model"].startswith("OctoMap"):
             note = "default sensor model; bytes: its .bt file"
+        elif "3D world map" in row["model"]:
+            note = (f"{row['patches']:,} patches; world x, y, z; CPU: the build (query "
+                    f"{row['query_cpu_s']:.1f} s); bytes: its version-5 .occmap")
         elif "world.occmap" in row["model"]:
             note = "queried at height above the floor; 0.5 outside its 2D band; CPU: the whole `occtool map`"
         else:

@@ -1,0 +1,201 @@
+"""Version 5 of the ``.occmap`` file: a 3D world map (:class:`occtool.fuse._world3d.WorldMap3D`).
+
+Layout (little-endian), the header conventions of :mod:`occtool.formats.occmap`::
+
+    8 bytes   magic  b"\\x89OCCMAP\\n"
+    4 bytes   uint32 header length H
+    H bytes   UTF-8 JSON header: format "occtool.occmap", version 5, kind "world3d", unit, frame, resolution, box
+              (``lo`` cell indices and ``shape``), falloffs, free level, ``levels`` (the
+              patches of each level), the arrays' names, dtypes and shapes in the order they
+              follow, ``packed`` (the length of the zlib stream) and, where the map's frame
+              is not the poses', ``to_map``: 12 numbers, a row-major 3x4 rigid transform from
+              the poses' frame to the map's, applied to every query
+    ...       one zlib stream of the arrays' bytes, back to back
+    4 bytes   uint32 CRC-32 of everything before it
+
+Arrays: ``free`` uint8 ``(ceil(C / 8),)``, a bitset over the box's ``C`` cells (x slowest,
+z fastest; numpy's ``packbits`` order): the cells training rays crossed; ``surface0``,
+``surface1``, ... the same over each level's box (level ``l``'s cells ``2 ** l`` times the
+resolution; the header's ``levels`` counts the patches of each): the cells holding a patch;
+then the patches, level by level in the order of their cells, column by column (each column
+compresses on its own terms): ``offsets`` uint8 ``(S, 3)``, ``normals`` uint8 ``(S, 2)``,
+``axes`` uint8 ``(S,)``, ``extents`` uint8 ``(S, 2)``, ``thickness`` uint8 ``(S,)``,
+``trust`` uint8 ``(S,)`` (:class:`occtool.fuse._patches.PatchCodes`): 10 bytes a patch
+before compression. :func:`decode` checks the magic, version, sizes (before allocating),
+checksum and values: a damaged file is one :class:`~occtool.errors.InputError`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import zlib
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import InputError
+from occtool.formats.occmap import MAGIC, MAX_HEADER
+
+#: The header's ``format`` and ``version``, as :mod:`occtool.formats.occmap` writes them
+#: (versions 1-4 are the 2D map's).
+FORMAT = "occtool.occmap"
+FORMAT_VERSION = 5
+KIND = "world3d"
+#: Most cells a box may hold (a bitset of 256 MB at most, checked before inflating).
+MAX_CELLS = 1 << 31
+#: Most levels of patches a file may hold.
+MAX_LEVELS = 8
+#: The patch columns: name, bytes a patch.
+COLUMNS = (("offsets", 3), ("normals", 2), ("axes", 1), ("extents", 2), ("thickness", 1), ("trust", 1))
+
+
+def _bitset(keys: np.ndarray, cells: int) -> np.ndarray:
+    bits = np.zeros(cells, dtype=bool)
+    bits[keys] = True
+    return np.packbits(bits)
+
+
+def encode(world: Any) -> bytes:
+    """The file's bytes for a :class:`~occtool.fuse._world3d.WorldMap3D`."""
+    from occtool.fuse._patches import level_box
+
+    cells = int(np.prod(world.shape))
+    arrays = [("free", _bitset(world.free_keys, cells))]
+    for level, codes in enumerate(world.patches):
+        arrays.append((f"surface{level}", _bitset(codes.keys, int(np.prod(level_box(world.lo, world.shape, level)[1])))))
+    for name, width in COLUMNS:
+        rows = np.concatenate([np.asarray(getattr(codes, name), dtype=np.uint8).reshape(len(codes), width)
+                               for codes in world.patches])
+        arrays.append((name, np.ascontiguousarray(rows.T).reshape(-1)))
+    payload = zlib.compress(b"".join(a.tobytes() for _, a in arrays), 9)
+    header = {"format": FORMAT, "version": FORMAT_VERSION, "kind": KIND, "unit": "m", "frame": world.frame,
+              "resolution": world.resolution, "lo": [int(v) for v in world.lo], "shape": list(world.shape),
+              "falloff": world.falloff, "edge_falloff": world.edge_falloff, "free_level": world.free_level, "levels": [len(codes) for codes in world.patches],
+              "arrays": [[name, "uint8", list(a.shape)] for name, a in arrays], "packed": len(payload)}
+    if world.to_map is not None:
+        header["to_map"] = [float(v) for v in np.asarray(world.to_map)[:3].reshape(-1)]
+    text = json.dumps(header, separators=(",", ":")).encode("utf-8")
+    body = MAGIC + struct.pack("<I", len(text)) + text + payload
+    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+
+
+def save_map3d(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
+    """Write ``world`` to ``path`` atomically; returns the bytes written."""
+    from occtool._files import atomic_write
+
+    data = encode(world)
+    with atomic_write(path, "wb", overwrite=overwrite) as handle:
+        handle.write(data)
+    return len(data)
+
+
+def decode(data: bytes, name: str = "occmap") -> Any:
+    """A :class:`~occtool.fuse._world3d.WorldMap3D` from a version-5 file's bytes."""
+    from occtool.fuse._patches import PatchCodes
+    from occtool.fuse._world3d import WorldMap3D
+
+    def fail(why: str) -> InputError:
+        return InputError(f"{name}: not a readable 3D world map ({why})")
+
+    if len(data) < len(MAGIC) + 8 or not data.startswith(MAGIC):
+        raise fail("no occmap magic")
+    (stored,) = struct.unpack("<I", data[-4:])
+    if zlib.crc32(data[:-4]) & 0xFFFFFFFF != stored:
+        raise fail("checksum mismatch: the file is damaged or truncated")
+    (length,) = struct.unpack("<I", data[len(MAGIC):len(MAGIC) + 4])
+    start = len(MAGIC) + 4
+    if length > MAX_HEADER or start + length > len(data) - 4:
+        raise fail("header length beyond the file")
+    try:
+        header = json.loads(data[start:start + length].decode("utf-8"))
+        version, kind = header["version"], header["kind"]
+        if header["format"] != FORMAT:
+            raise fail("not an occtool.occmap header")
+        resolution, falloff, edge_falloff, free_level = (float(header[k]) for k in (
+            "resolution", "falloff", "edge_falloff", "free_level"))
+        lo = np.array([int(v) for v in header["lo"]], dtype=np.int64)
+        shape = tuple(int(v) for v in header["shape"])
+        counts = [int(v) for v in header["levels"]]
+        packed = int(header["packed"])
+        frame = str(header.get("frame", ""))
+        to_map = header.get("to_map")
+        if to_map is not None:
+            to_map = np.vstack([np.array([float(v) for v in to_map], dtype=np.float64).reshape(3, 4),
+                                [0.0, 0.0, 0.0, 1.0]])
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+        raise fail("unreadable header") from None
+    if version != FORMAT_VERSION or kind != KIND:
+        raise fail(f"version {version!r} {kind!r}, this reads {FORMAT_VERSION} {KIND!r}")
+    if lo.shape != (3,) or len(shape) != 3 or min(shape) < 1 or not all(
+            math.isfinite(v) and v > 0 for v in (resolution, falloff, edge_falloff)):
+        raise fail("bad box, resolution or falloff")
+    if not 0.0 <= free_level <= 1.0:
+        raise fail("free level outside [0, 1]")
+    from occtool.fuse._patches import level_box
+    from occtool.fuse._world3d import rigid
+
+    if to_map is not None:
+        try:
+            to_map = rigid(to_map)
+        except InputError:
+            raise fail("the frame transform is not a rotation and translation") from None
+    cells = shape[0] * shape[1] * shape[2]
+    count = sum(counts)
+    if cells > MAX_CELLS or not 1 <= len(counts) <= MAX_LEVELS or min(counts) < 0 or count > cells:
+        raise fail(f"{cells} cells and patches {counts} is not a map this reads")
+    level_cells = [int(np.prod(level_box(lo, (shape[0], shape[1], shape[2]), level)[1]))
+                   for level in range(len(counts))]
+    sizes = [(cells + 7) // 8] + [(c + 7) // 8 for c in level_cells]
+    expected = sum(sizes) + count * sum(width for _, width in COLUMNS)
+    if packed != len(data) - 4 - start - length:
+        raise fail("array bytes do not match the header")
+    inflater = zlib.decompressobj()
+    try:
+        raw = inflater.decompress(data[start + length:-4], expected + 1)
+    except zlib.error:
+        raise fail("corrupt array stream") from None
+    if len(raw) != expected or inflater.unconsumed_tail or not inflater.eof:
+        raise fail("array bytes do not match the header")
+    buffer = np.frombuffer(raw, dtype=np.uint8)
+
+    def keys(at: int, size: int, n: int) -> np.ndarray:
+        return np.flatnonzero(np.unpackbits(buffer[at:at + size], count=n)).astype(np.int64)
+
+    free = keys(0, sizes[0], cells)
+    at = sizes[0]
+    surfaces = []
+    for level, n in enumerate(level_cells):
+        surfaces.append(keys(at, sizes[level + 1], n))
+        if surfaces[-1].size != counts[level]:
+            raise fail(f"the surface cells of level {level} do not match its patch count")
+        at += sizes[level + 1]
+    columns: dict[str, np.ndarray] = {}
+    for column, width in COLUMNS:
+        columns[column] = buffer[at:at + count * width].reshape(width, count).T.copy()
+        at += count * width
+    if count and (columns["trust"].min() == 0 or columns["extents"].min() == 0 or columns["thickness"].min() == 0):
+        raise fail("patch values out of range")
+    patches, first = [], 0
+    for level, n in enumerate(counts):
+        part = {name: value[first:first + n] for name, value in columns.items()}
+        first += n
+        patches.append(PatchCodes(surfaces[level], part["offsets"], part["normals"], part["axes"][:, 0],
+                                  part["extents"], part["thickness"][:, 0], part["trust"][:, 0]))
+    return WorldMap3D(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff,
+                      free_level, frame, to_map)
+
+
+def read_map3d(path: str | os.PathLike[str]) -> Any:
+    """Read a version-5 ``.occmap`` file."""
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return decode(data, str(path))
+
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "KIND", "decode", "encode", "read_map3d", "save_map3d"]

@@ -1,0 +1,307 @@
+"""Planar patches and the crossed free space of a 3D run: the numbers of :class:`~occtool.fuse._world3d.WorldMap3D`.
+
+The 3D counterpart of :mod:`occtool.fuse._walls`: where the 2D map fits a wall segment to the
+second moments of a cell's returns, this fits a plane to the returns in each cubic cell of
+``resolution`` metres (centre, normal from the smallest eigenvector, extent along the plane
+from the two largest eigenvalues, thickness from the smallest). Every training ray, not only
+each position's nearest return, is walked in steps of half a cell: the cells it crosses before
+its return are free, and a ray that goes through a patch's slab counts against the patch's
+trust (``hits / (hits + crossings)``).
+
+Everything is quantised here (:class:`PatchCodes`), so that a map read back from its file
+answers bit for bit as the one built.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Rays are walked in chunks of at most this many samples (memory, not speed).
+CHUNK_SAMPLES = 4_000_000
+#: A patch is never thinner than this (metres): range noise of the sensors read.
+MIN_THICKNESS = 0.01
+#: A patch fitted to fewer returns than this takes its normal from the rays that hit it.
+MIN_PLANE_POINTS = 4
+#: A coarse-level patch holds at least this many returns.
+MIN_FLAT_POINTS = 8
+#: Smallest half-extent of a patch along the plane, as a share of the cell.
+MIN_EXTENT = 0.25
+#: Levels each patch number is rounded to before it is stored (zlib then spends about
+#: log2(levels) bits on it): the centre's offset in its cell per axis, the normal's polar
+#: angle and azimuth, the in-plane axis, the two extents and the trust. A ridge falls over
+#: half a cell, so a centre a 32nd of a cell off costs little.
+LEVELS = {"offset": 16, "polar": 33, "azimuth": 64, "axis": 16, "extent": 16, "trust": 16}
+#: Half-thicknesses a patch may take (mm): rounded up to the next.
+THICKNESS_MM = (10, 14, 20, 28, 40, 56, 80, 113, 160, 226, 255)
+#: Normal angle steps: polar over [0, pi/2] (a normal is kept in the upper half-sphere),
+#: azimuth over [0, 2 pi); the in-plane axis over [0, pi).
+ANGLE_STEPS = 256
+
+
+@dataclass
+class PatchCodes:
+    """The patches at the file's precision, in the order of their cells' keys.
+
+    ``keys`` int64 ``(S,)`` each patch's cell as a linear index into the map's box (x slowest,
+    z fastest), sorted; ``offsets`` uint8 ``(S, 3)`` the centre within its cell in 1/256ths;
+    ``normals`` uint8 ``(S, 2)`` polar and azimuth codes; ``axes`` uint8 ``(S,)`` the in-plane
+    direction of the largest extent; ``extents`` uint8 ``(S, 2)`` half-extents along it and
+    across it in 1/255ths of the cell; ``thickness`` uint8 ``(S,)`` the half-thickness in mm;
+    ``trust`` uint8 ``(S,)`` in 1/255ths (never 0).
+    """
+
+    keys: NDArray[np.int64]
+    offsets: NDArray[np.uint8]
+    normals: NDArray[np.uint8]
+    axes: NDArray[np.uint8]
+    extents: NDArray[np.uint8]
+    thickness: NDArray[np.uint8]
+    trust: NDArray[np.uint8]
+
+    def __len__(self) -> int:
+        return int(self.keys.size)
+
+
+@dataclass
+class PatchGeometry:
+    """The patches as floats (what :func:`geometry` derives from :class:`PatchCodes`)."""
+
+    centres: FloatArray  # (S, 3) world
+    normals: FloatArray  # (S, 3) unit
+    u: FloatArray  # (S, 3) unit, in-plane, along the larger extent
+    v: FloatArray  # (S, 3) unit, in-plane
+    extents: FloatArray  # (S, 2) half-extents along u and v (m)
+    thickness: FloatArray  # (S,) half-thickness (m)
+    trust: FloatArray  # (S,) in (0, 1]
+
+
+def cell_keys(points: FloatArray, lo: NDArray[np.int64], shape: tuple[int, int, int],
+              resolution: float) -> NDArray[np.int64]:
+    """Linear cell index (x slowest, z fastest) of ``(K, 3)`` points inside the box; -1 outside."""
+    return index_keys(np.floor(points / resolution).astype(np.int64), lo, shape)
+
+
+def index_keys(ijk: NDArray[np.int64], lo: NDArray[np.int64], shape: tuple[int, int, int]) -> NDArray[np.int64]:
+    """Linear cell index of ``(K, 3)`` integer cell coordinates inside the box; -1 outside."""
+    i, j, k = ijk[:, 0] - lo[0], ijk[:, 1] - lo[1], ijk[:, 2] - lo[2]
+    inside = (i >= 0) & (i < shape[0]) & (j >= 0) & (j < shape[1]) & (k >= 0) & (k < shape[2])
+    return np.where(inside, (i * shape[1] + j) * shape[2] + k, -1)
+
+
+def key_corners(keys: NDArray[np.int64], lo: NDArray[np.int64], shape: tuple[int, int, int],
+                resolution: float) -> FloatArray:
+    """World corner (lowest x, y, z) of each cell key."""
+    i, rest = np.divmod(keys, shape[1] * shape[2])
+    j, k = np.divmod(rest, shape[2])
+    return np.asarray((np.column_stack([i, j, k]) + lo) * resolution, dtype=np.float64)
+
+
+def _frame(normals: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """A fixed in-plane pair ``(a, b)`` for each unit normal (so one byte can name an axis)."""
+    reference = np.where((np.abs(normals[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    a = np.cross(normals, reference)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    return a, np.asarray(np.cross(normals, a), dtype=np.float64)
+
+
+def _normal_of(codes: NDArray[np.uint8]) -> FloatArray:
+    polar = codes[:, 0].astype(np.float64) * (0.5 * math.pi / (ANGLE_STEPS - 1))
+    azimuth = codes[:, 1].astype(np.float64) * (2.0 * math.pi / ANGLE_STEPS)
+    return np.column_stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)])
+
+
+def geometry(codes: PatchCodes, lo: NDArray[np.int64], shape: tuple[int, int, int],
+             resolution: float) -> PatchGeometry:
+    """The floats a map answers with, from its codes alone (so a file read back answers the same)."""
+    centres = key_corners(codes.keys, lo, shape, resolution) + (codes.offsets.astype(np.float64) + 0.5) * (
+        resolution / 256.0)
+    normals = _normal_of(codes.normals)
+    a, b = _frame(normals)
+    angle = codes.axes.astype(np.float64) * (math.pi / ANGLE_STEPS)
+    u = np.cos(angle)[:, None] * a + np.sin(angle)[:, None] * b
+    v = np.cross(normals, u)
+    return PatchGeometry(centres, normals, u, v, codes.extents.astype(np.float64) * (resolution / 255.0),
+                         codes.thickness.astype(np.float64) * 0.001, codes.trust.astype(np.float64) / 255.0)
+
+
+def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int64], shape: tuple[int, int, int],
+                resolution: float, flat: float | None = None, level: int = 0
+                ) -> tuple[PatchCodes, NDArray[np.bool_], NDArray[np.int64]]:
+    """One plane per cell holding returns, from their second moments, quantised (trust 1 for now).
+
+    ``directions`` ``(H, 3)`` the unit direction of the ray of each return: the normal of a cell
+    with fewer than :data:`MIN_PLANE_POINTS` returns (a surface seen face on). With ``flat``
+    (metres), only the cells whose returns lie within that RMS distance of their plane, and
+    hold at least :data:`MIN_FLAT_POINTS`, get a patch (a coarse level: the rest is fitted
+    finer; ``level`` l: the centre is kept on ``2 ** l`` times as many steps, the same
+    distance as on level 0). Returns the patches, which returns they took, and how many each took.
+    """
+    keys = cell_keys(returns, lo, shape, resolution)
+    order = np.argsort(keys, kind="stable")
+    keys, points, directions = keys[order], returns[order], directions[order]
+    cells, starts, counts = np.unique(keys, return_index=True, return_counts=True)
+    n = counts.astype(np.float64)
+    corner = key_corners(cells, lo, shape, resolution)
+    local = points - np.repeat(corner, counts, axis=0)  # cell-relative: no cancellation in the moments
+    mean = np.add.reduceat(local, starts, axis=0) / n[:, None]
+    outer = np.add.reduceat(local[:, :, None] * local[:, None, :], starts, axis=0) / n[:, None, None]
+    covariance = outer - mean[:, :, None] * mean[:, None, :]
+    values, vectors = np.linalg.eigh(covariance)  # ascending
+    values = np.maximum(values, 0.0)
+    normals = vectors[:, :, 0]
+    axis = vectors[:, :, 2]
+    few = counts < MIN_PLANE_POINTS
+    if few.any():
+        seen = np.add.reduceat(directions, starts, axis=0)[few]
+        seen /= np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-12)
+        normals[few] = seen
+    normals = np.where((normals[:, 2] < 0.0)[:, None], -normals, normals)
+    normal_codes = np.column_stack([
+        _snap(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)) / (0.5 * math.pi), LEVELS["polar"], closed=True),
+        _snap((np.arctan2(normals[:, 1], normals[:, 0]) % (2.0 * math.pi)) / (2.0 * math.pi), LEVELS["azimuth"])])
+    quantised = _normal_of(normal_codes)
+    a, b = _frame(quantised)
+    axis = axis - np.sum(axis * quantised, axis=1, keepdims=True) * quantised
+    axis_codes = _snap((np.arctan2(np.sum(axis * b, axis=1), np.sum(axis * a, axis=1)) % math.pi) / math.pi,
+                       LEVELS["axis"])
+    steps = min(LEVELS["offset"] << level, 256)
+    offset_step = 256 // steps
+    offsets = (np.clip(np.floor(mean / resolution * steps), 0, steps - 1) * offset_step
+               + offset_step // 2).astype(np.uint8)
+    # Extents and thickness are measured from the centre and axes as the file holds them, so
+    # that the coarse codes still cover the returns.
+    centre = (offsets.astype(np.float64) + 0.5) * (resolution / 256.0)
+    along = np.cos(axis_codes * (math.pi / ANGLE_STEPS))[:, None] * a + np.sin(
+        axis_codes * (math.pi / ANGLE_STEPS))[:, None] * b
+    across = np.cross(quantised, along)
+    centred = local - np.repeat(centre, counts, axis=0)
+
+    def farthest(direction: FloatArray) -> FloatArray:
+        return np.maximum.reduceat(np.abs(np.sum(centred * np.repeat(direction, counts, axis=0), axis=1)), starts)
+
+    # The farthest return along each in-plane axis, not a multiple of the spread: a square's
+    # eigen-axes may lie along its diagonals.
+    extents = np.column_stack([farthest(along), farthest(across)])
+    extents = np.clip(np.maximum(extents, MIN_EXTENT * resolution), 0.0, resolution)
+    extent_step = 256 // LEVELS["extent"]
+    extent_codes = np.clip(np.ceil(extents / resolution * 255.0 / extent_step) * extent_step, extent_step,
+                           255).astype(np.uint8)
+    # Half-thickness: the RMS distance of the returns from the stored plane (one sigma, not
+    # two: on seed 0's split of the bench, free points just before a return then rank lower).
+    depth = np.sum(centred * np.repeat(quantised, counts, axis=0), axis=1)
+    rms = np.sqrt(np.add.reduceat(depth * depth, starts) / n)
+    thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), rms), MIN_THICKNESS)
+    table = np.asarray(THICKNESS_MM)
+    thickness_codes = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
+    # Flatness is judged about the returns' own plane, before rounding.
+    keep = np.ones(cells.size, dtype=bool) if flat is None else (
+        (np.sqrt(values[:, 0]) <= flat) & (counts >= MIN_FLAT_POINTS))
+    taken = np.zeros(returns.shape[0], dtype=bool)
+    taken[order] = np.repeat(keep, counts)
+    return (PatchCodes(cells[keep].astype(np.int64), offsets[keep], normal_codes[keep], axis_codes[keep],
+                       extent_codes[keep], thickness_codes[keep], np.full(int(keep.sum()), 255, dtype=np.uint8)),
+            taken, counts[keep].astype(np.int64))
+
+
+def level_box(lo: NDArray[np.int64], shape: tuple[int, int, int], level: int) -> tuple[NDArray[np.int64],
+                                                                                         tuple[int, int, int]]:
+    """The box of cells ``2 ** level`` times coarser that covers the box ``lo``, ``shape``."""
+    low = np.floor_divide(lo, 1 << level)
+    high = np.floor_divide(lo + np.asarray(shape) - 1, 1 << level)
+    size = high - low + 1
+    return low.astype(np.int64), (int(size[0]), int(size[1]), int(size[2]))
+
+
+def concatenate(parts: list[PatchGeometry]) -> PatchGeometry:
+    """One :class:`PatchGeometry` of several, in order."""
+    return PatchGeometry(*(np.concatenate([getattr(p, name) for p in parts]) for name in
+                           ("centres", "normals", "u", "v", "extents", "thickness", "trust")))
+
+
+def _snap(fraction: FloatArray, levels: int, closed: bool = False) -> NDArray[np.uint8]:
+    """Byte codes of fractions of a range on ``levels`` steps (``closed``: both ends are
+    values, else the range wraps round)."""
+    if closed:
+        return np.round(np.round(np.clip(fraction, 0.0, 1.0) * (levels - 1)) * (255.0 / (levels - 1))).astype(np.uint8)
+    return ((np.round(fraction * levels).astype(np.int64) % levels) * (256 // levels)).astype(np.uint8)
+
+
+def trust_codes(trust: FloatArray) -> NDArray[np.uint8]:
+    """Byte codes of trusts in [0, 1] on :data:`LEVELS` ``["trust"]`` steps, never 0."""
+    step = 255 // (LEVELS["trust"] - 1)
+    return np.clip(np.round(trust * (LEVELS["trust"] - 1)) * step, step, 255).astype(np.uint8)
+
+
+def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
+          step: float) -> Iterator[tuple[NDArray[np.int64], FloatArray, FloatArray, FloatArray]]:
+    """Chunks of ``(ray, distance, point, next point)``: points every ``step`` along each ray's
+    free part (the last within half a step of its end), the next point a step further."""
+    vector = ends - origins
+    length = np.maximum(np.linalg.norm(vector, axis=1), 1e-12)
+    direction = vector / length[:, None]
+    count = np.maximum(np.floor(free_length / step + 0.5).astype(np.int64), 0)
+    total = np.cumsum(count)
+    begin = 0
+    while begin < count.size:
+        reach = int(np.searchsorted(total, (total[begin - 1] if begin else 0) + CHUNK_SAMPLES, side="right"))
+        end = max(reach, begin + 1)
+        c = count[begin:end]
+        ray = np.repeat(np.arange(begin, end), c)
+        k = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
+        t = (k + 0.5) * step
+        point = origins[ray] + t[:, None] * direction[ray]
+        yield ray, t, point, point + step * direction[ray]
+        begin = end
+
+
+def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_],
+                             levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[int, int, int],
+                             resolution: float, margin: float) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
+    """The sorted keys of the cells the rays crossed (a return's ray stops ``margin`` short of
+    it; a free-only ray is free to its end) and, per level and patch, how many rays went
+    through its slab (level ``l``'s cells are ``2 ** l`` times the resolution)."""
+    step = 0.5 * resolution
+    length = np.linalg.norm(ends - origins, axis=1)
+    free_length = np.where(hits, length - margin, length)
+    boxes = [level_box(lo, shape, level) for level in range(len(levels))]
+    shapes = [geometry(codes, box[0], box[1], resolution * (1 << level))
+              for level, (codes, box) in enumerate(zip(levels, boxes))]
+    crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
+    free: list[NDArray[np.int64]] = []
+    for ray, t, point, after in _walk(origins, ends, free_length, step):
+        # Cell coordinates once; a level's are the same shifted (floor of a floor).
+        ijk = np.floor(point / resolution).astype(np.int64)
+        keys = index_keys(ijk, lo, shape)
+        free.append(np.unique(keys[keys >= 0]))
+        # A crossing is counted only where the next point is still short of the ray's return.
+        short = t + step <= free_length[ray]
+        for level, (codes, box, g) in enumerate(zip(levels, boxes, shapes)):
+            if not len(codes):
+                continue
+            keys = index_keys(ijk >> level, box[0], box[1])
+            at = np.clip(np.searchsorted(codes.keys, keys), 0, len(codes) - 1)
+            here = np.flatnonzero((keys >= 0) & (codes.keys[at] == keys) & short)
+            p = at[here]
+            c, n = g.centres[p], g.normals[p]
+            d0 = np.sum((point[here] - c) * n, axis=1)
+            d1 = np.sum((after[here] - c) * n, axis=1)
+            through = (d0 * d1 < 0.0) & (np.minimum(np.abs(d0), np.abs(d1)) > 0.0)
+            s = d0[through] / (d0[through] - d1[through])
+            x = point[here][through] + s[:, None] * (after[here][through] - point[here][through]) - c[through]
+            q = p[through]
+            inside = ((np.abs(np.sum(x * g.u[q], axis=1)) <= g.extents[q, 0])
+                      & (np.abs(np.sum(x * g.v[q], axis=1)) <= g.extents[q, 1]))
+            crossings[level] += np.bincount(q[inside], minlength=len(codes))
+    keys = np.unique(np.concatenate(free)) if free else np.zeros(0, dtype=np.int64)
+    return keys, crossings
+
+
+__all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
+           "free_cells_and_crossings", "geometry", "index_keys", "key_corners", "level_box", "trust_codes"]

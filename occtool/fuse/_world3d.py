@@ -1,0 +1,309 @@
+"""The world map of a run in 3D (issue 35): planar patches as slabs under one MAX, over the crossed free space.
+
+:class:`WorldMap3D` is the paper's occupancy function ``m = F(x, y, z)`` of the world frame:
+
+* each surface patch (:mod:`occtool.fuse._patches`) is a slab: a MIN over seven linear pieces,
+  its peak (the patch's trust) and, for its two faces and its four edges, the peak falling
+  ``1 / falloff`` a metre beyond the half-thickness (faces) or the half-extent (edges);
+* the map is the MAX over the patches and a constant for the cell the point lies in: the
+  ``free_level`` where a training ray crossed the cell before its return, 0.5 (unknown) where
+  none did.
+
+So the free space reaches every return, not only each position's nearest, and a point near a
+surface ranks above the free space around it and by how near it is. The map answers in the
+frame of the rays it was built from (:func:`world_rays` uses the log's poses as they are).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import InputError
+from occtool.fuse._patches import (
+    PatchCodes,
+    PatchGeometry,
+    cell_keys,
+    concatenate,
+    fit_patches,
+    free_cells_and_crossings,
+    geometry,
+    level_box,
+    trust_codes,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Default cell edge of the patches and of the free space (metres).
+RESOLUTION = 0.2
+#: Occupancy of crossed free space (below every patch's ridge near its surface).
+FREE_LEVEL = 0.1
+#: Occupancy where no training ray passed.
+UNKNOWN = 0.5
+#: Patches consulted per query point (the nearest centres).
+NEIGHBOURS = 8
+#: Coarser levels of patches tried before the cell of ``resolution``: level ``l`` has cells
+#: ``2 ** l`` times as large, and takes the returns of a cell that are flat (a wall, a floor).
+COARSE_LEVELS = 2
+#: RMS distance (metres) of a coarse cell's returns from their plane under which it is one
+#: patch: about the range noise of a Kinect at 3-4 m or a lidar's plus its registration.
+FLAT = 0.05
+#: Query points evaluated at once (memory of the ``(K, NEIGHBOURS, 3)`` differences).
+QUERY_CHUNK = 100_000
+
+
+@dataclass(eq=False)
+class WorldMap3D:
+    """A 3D occupancy function of the world frame: patches under one MAX over the free space.
+
+    ``lo`` int64 ``(3,)`` and ``shape`` the box of cells (``resolution`` m) the map covers;
+    ``free_keys`` the sorted linear keys of the cells training rays crossed;
+    ``patches`` the surfaces at the file's precision, one list entry a level (level ``l``'s
+    cells ``2 ** l`` times the resolution, its box :func:`~occtool.fuse._patches.level_box`);
+    ``falloff`` and ``edge_falloff`` the distances over which a patch's ridge falls by 1
+    beyond its faces and beyond its edges.
+    """
+
+    resolution: float
+    lo: NDArray[np.int64]
+    shape: tuple[int, int, int]
+    free_keys: NDArray[np.int64]
+    patches: list[PatchCodes]
+    falloff: float
+    edge_falloff: float
+    free_level: float = FREE_LEVEL
+    frame: str = "the frame of the log's poses"
+    #: ``(4, 4)`` rigid transform from the frame queries are given in (the log's poses) to the
+    #: frame the map was built in (e.g. a depth folder's world levelled on its floor); None:
+    #: the same frame.
+    to_map: FloatArray | None = None
+    _geometry: PatchGeometry | None = field(default=None, repr=False)
+    _trees: Any = field(default=None, repr=False)
+
+    @property
+    def patch_count(self) -> int:
+        """Patches over every level."""
+        return sum(len(codes) for codes in self.patches)
+
+    @property
+    def geometry(self) -> PatchGeometry:
+        """The patches as floats, derived from their codes."""
+        if self._geometry is None:
+            parts = []
+            for level, codes in enumerate(self.patches):
+                low, shape = level_box(self.lo, self.shape, level)
+                parts.append(geometry(codes, low, shape, self.resolution * (1 << level)))
+            self._geometry = concatenate(parts)
+        return self._geometry
+
+    @property
+    def bounds(self) -> FloatArray:
+        """``(2, 3)`` lowest and highest world corner of the box."""
+        low = self.lo * self.resolution
+        return np.vstack([low, low + np.asarray(self.shape) * self.resolution])
+
+    def linear_pieces(self, index: int) -> FloatArray:
+        """``(7, 4)`` rows ``(a, b, c, d)``: patch ``index``'s ridge is the MIN of ``a x + b y + c z + d``."""
+        g = self.geometry
+        peak = g.trust[index]
+        rows = [np.array([0.0, 0.0, 0.0, peak])]
+        for axis, half, slope in ((g.normals[index], g.thickness[index], 1.0 / self.falloff),
+                                  (g.u[index], g.extents[index, 0], 1.0 / self.edge_falloff),
+                                  (g.v[index], g.extents[index, 1], 1.0 / self.edge_falloff)):
+            for sign in (1.0, -1.0):
+                # peak - slope (sign * axis . (x - c) - half)
+                w = -slope * sign * axis
+                rows.append(np.append(w, peak + slope * (sign * float(axis @ g.centres[index]) + half)))
+        return np.array(rows)
+
+    def ridge(self, xyz: FloatArray, index: NDArray[np.intp]) -> FloatArray:
+        """The ridges of patches ``index`` (any shape) at points ``xyz`` (that shape + (3,)), floored at 0."""
+        g = self.geometry
+        diff = xyz - g.centres[index]
+        over = np.maximum.reduce([
+            (np.abs(np.einsum("...k,...k->...", diff, g.normals[index])) - g.thickness[index]) / self.falloff,
+            (np.abs(np.einsum("...k,...k->...", diff, g.u[index])) - g.extents[index, 0]) / self.edge_falloff,
+            (np.abs(np.einsum("...k,...k->...", diff, g.v[index])) - g.extents[index, 1]) / self.edge_falloff,
+        ])
+        return np.maximum(g.trust[index] - np.maximum(over, 0.0), 0.0)
+
+    def background(self, xyz: FloatArray) -> FloatArray:
+        """The constant of each point's cell: the free level where rays crossed it, else 0.5."""
+        keys = cell_keys(xyz, self.lo, self.shape, self.resolution)
+        at = np.clip(np.searchsorted(self.free_keys, keys), 0, max(self.free_keys.size - 1, 0))
+        free = (keys >= 0) & (self.free_keys.size > 0) & (self.free_keys[at] == keys) if self.free_keys.size else (
+            np.zeros(keys.shape, dtype=bool))
+        return np.where(free, self.free_level, UNKNOWN)
+
+    def predict(self, xyz: ArrayLike) -> FloatArray:
+        """Occupancy in [0, 1] at ``(K, 3)`` points of the poses' frame (moved by ``to_map``
+        first): MAX of the cell's constant and the ridges of the nearest :data:`NEIGHBOURS`
+        patches of each level."""
+        points = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+        if self.to_map is not None:
+            points = points @ self.to_map[:3, :3].T + self.to_map[:3, 3]
+        out = self.background(points)
+        if self.patch_count == 0 or points.shape[0] == 0:
+            return out
+        g = self.geometry
+        if self._trees is None:
+            from scipy.spatial import cKDTree  # lazy: scipy's import is slow and only predict needs it
+
+            self._trees = []
+            first = 0
+            for codes in self.patches:
+                members = np.arange(first, first + len(codes))
+                first += len(codes)
+                if members.size:
+                    # No ridge is above 0 farther from its centre than its half-diagonal plus a falloff.
+                    reach = float(np.sqrt(np.sum(g.extents[members].max(axis=0) ** 2)
+                                          + g.thickness[members].max() ** 2)) + max(self.falloff, self.edge_falloff)
+                    self._trees.append((cKDTree(g.centres[members]), members, reach))
+        for tree, members, reach in self._trees:
+            k = min(NEIGHBOURS, members.size)
+            for begin in range(0, points.shape[0], QUERY_CHUNK):
+                chunk = points[begin:begin + QUERY_CHUNK]
+                _, found = tree.query(chunk, k=k, distance_upper_bound=reach)
+                index = np.asarray(found).reshape(chunk.shape[0], k)
+                valid = index < members.size
+                ridge = self.ridge(chunk[:, None, :], members[np.where(valid, index, 0)])
+                best = np.where(valid, ridge, 0.0).max(axis=1)
+                out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], best)
+        return out
+
+    def __call__(self, xyz: ArrayLike) -> FloatArray:
+        return self.predict(xyz)
+
+    def save(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
+        """Write the map (``.occmap``, version 5); returns the bytes written."""
+        from occtool.formats import occmap3d
+
+        return occmap3d.save_map3d(self, path, overwrite=overwrite)
+
+
+def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | None = None, *,
+                       resolution: float = RESOLUTION, falloff: float | None = None,
+                       edge_falloff: float | None = None, margin: float | None = None, free_level: float = FREE_LEVEL,
+                       coarse_levels: int = COARSE_LEVELS, flat: float | None = None) -> WorldMap3D:
+    """A :class:`WorldMap3D` of world-frame rays.
+
+    Parameters
+    ----------
+    origins, ends
+        ``(N, 3)`` each ray's sensor position and end point (or ``(3,)`` origins: one sensor).
+    hits
+        ``(N,)`` whether a ray ends on a return (False: a free-only ray, cut at the sensor's
+        range); all True if omitted.
+    resolution
+        Cell edge of the patches and of the free space (metres).
+    falloff
+        Distance over which a ridge falls from its peak to 0 beyond a face or an edge
+        (default half a cell).
+    edge_falloff
+        The same beyond an edge, along the plane (default a cell: a surface goes on past
+        where the training returns stopped more often than a slab thickens).
+    coarse_levels
+        How many coarser levels of patches to try (:data:`COARSE_LEVELS`).
+    flat
+        RMS distance from their plane under which a coarse cell's returns are one patch
+        (default :data:`FLAT`).
+    margin
+        A return's ray is free up to this short of it (default a quarter of a cell).
+    """
+    end = np.asarray(ends, dtype=np.float64).reshape(-1, 3)
+    origin = np.broadcast_to(np.asarray(origins, dtype=np.float64), end.shape).astype(np.float64)
+    hit = np.ones(end.shape[0], dtype=bool) if hits is None else np.asarray(hits, dtype=bool).reshape(-1)
+    if hit.shape[0] != end.shape[0] or origin.shape != end.shape:
+        raise InputError("origins, ends and hits must describe the same rays")
+    finite = np.isfinite(end).all(axis=1) & np.isfinite(origin).all(axis=1)
+    end, origin, hit = end[finite], origin[finite], hit[finite]
+    if not (resolution > 0.0 and math.isfinite(resolution)):
+        raise InputError(f"the resolution must be a positive number of metres, not {resolution}")
+    falloff = 0.5 * resolution if falloff is None else float(falloff)
+    edge_falloff = resolution if edge_falloff is None else float(edge_falloff)
+    margin = 0.25 * resolution if margin is None else float(margin)
+    flat = FLAT if flat is None else float(flat)
+    if end.shape[0] == 0:
+        lo, size = np.zeros(3, dtype=np.int64), np.ones(3, dtype=np.int64)
+    else:
+        every = np.vstack([end, origin])
+        lo = np.floor(every.min(axis=0) / resolution).astype(np.int64)
+        size = np.floor(every.max(axis=0) / resolution).astype(np.int64) - lo + 1
+    shape3 = (int(size[0]), int(size[1]), int(size[2]))
+    vector = end - origin
+    direction = vector / np.maximum(np.linalg.norm(vector, axis=1, keepdims=True), 1e-12)
+    # Coarse levels first: a flat coarse cell (a stretch of wall or floor) is one patch; what
+    # is left (corners, clutter) goes down a level, and the finest level takes everything.
+    remaining = np.flatnonzero(hit)
+    levels: list[PatchCodes] = []
+    counts: list[NDArray[np.int64]] = []
+    for level in range(coarse_levels, -1, -1):
+        low, box = level_box(lo, shape3, level)
+        codes, taken, taken_counts = fit_patches(
+            end[remaining], direction[remaining], low, box,
+            resolution * (1 << level), None if level == 0 else flat, level)
+        levels.append(codes)
+        counts.append(taken_counts)
+        remaining = remaining[~taken]
+    levels, counts = levels[::-1], counts[::-1]
+    free, crossings = free_cells_and_crossings(origin, end, hit, levels, lo, shape3, resolution, margin)
+    for codes, hits_per, crossed in zip(levels, counts, crossings):
+        codes.trust = trust_codes(hits_per / np.maximum(hits_per + crossed, 1))
+    return WorldMap3D(float(resolution), lo, shape3, free, levels, falloff, edge_falloff, free_level)
+
+
+def world_rays(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Each feature of a :class:`~occtool.features.RangeLog` as a world-frame ray: origins (the
+    position's pose), end points (its sensor-centred robot-frame point turned by the yaw and
+    moved by the pose) and hits (evidence above 0; 0 is a free-only ray)."""
+    origins, ends, hits = [], [], []
+    for position in log.positions:
+        if position.pose is None:
+            raise InputError(f"{log.source or 'the log'}: position {position.index} has no pose; "
+                             "a world map needs poses")
+        points = np.asarray(position.features.points, dtype=np.float64).reshape(-1, 3)
+        pose = position.pose
+        ends.append(points @ pose.rotation.T + pose.translation)
+        origins.append(np.broadcast_to(pose.translation, points.shape))
+        hits.append(np.asarray(position.features.evidence, dtype=np.float64).reshape(-1) > 0.0)
+    if not ends:
+        raise InputError(f"{log.source or 'the log'}: no positions to map")
+    return np.concatenate(origins), np.concatenate(ends), np.concatenate(hits)
+
+
+def map_log_3d(log: Any, resolution: float = RESOLUTION, *, to_map: ArrayLike | None = None,
+               **options: Any) -> WorldMap3D:
+    """The :class:`WorldMap3D` of a :class:`~occtool.features.RangeLog`, in the frame of its poses.
+
+    ``to_map`` ``(4, 4)``: where a reader moved the poses (a depth folder levels its world on
+    the floor it finds), the rigid transform from the frame the user's poses are in to the
+    log's; it is stored in the map and applied to every query.
+    """
+    world = build_world_map_3d(*world_rays(log), resolution=resolution, **options)
+    if to_map is not None:
+        world.to_map = rigid(to_map)
+    return world
+
+
+def rigid(matrix: ArrayLike) -> FloatArray:
+    """``matrix`` as a 4x4 rigid transform (a rotation and a translation), or an InputError."""
+    out = np.asarray(matrix, dtype=np.float64)
+    if out.shape != (4, 4) or not np.isfinite(out).all() or not np.allclose(out[3], [0.0, 0.0, 0.0, 1.0]) or not (
+            np.allclose(out[:3, :3] @ out[:3, :3].T, np.eye(3), atol=1e-6) and np.linalg.det(out[:3, :3]) > 0.0):
+        raise InputError("a map's frame transform must be a 4x4 rotation and translation")
+    return out
+
+
+def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
+    """Read a version-5 ``.occmap`` (:mod:`occtool.formats.occmap3d`)."""
+    from occtool.formats import occmap3d
+
+    return occmap3d.read_map3d(path)
+
+
+__all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "load_map_3d", "map_log_3d", "rigid", "world_rays"]
