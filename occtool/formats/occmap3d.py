@@ -30,14 +30,19 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
 import struct
 import zlib
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.formats.occmap import MAGIC, MAX_HEADER
+
+FloatArray = NDArray[np.float64]
 
 #: The header's ``format`` and ``version``, as :mod:`occtool.formats.occmap` writes them
 #: (versions 1-4 are the 2D map's).
@@ -52,6 +57,65 @@ MAX_LEVELS = 8
 COLUMNS = (("offsets", 3), ("normals", 2), ("axes", 1), ("extents", 2), ("thickness", 1), ("trust", 1))
 
 
+@dataclass
+class PatchCodes:
+    """The patches at the file's precision, in the order of their cells' keys.
+
+    ``keys`` int64 ``(S,)`` each patch's cell as a linear index into the map's box (x slowest,
+    z fastest), sorted; ``offsets`` uint8 ``(S, 3)`` the centre within its cell in 1/256ths;
+    ``normals`` uint8 ``(S, 2)`` polar and azimuth codes; ``axes`` uint8 ``(S,)`` the in-plane
+    direction of the largest extent; ``extents`` uint8 ``(S, 2)`` half-extents along it and
+    across it in 1/255ths of the cell; ``thickness`` uint8 ``(S,)`` the half-thickness in mm;
+    ``trust`` uint8 ``(S,)`` in 1/255ths (never 0).
+    """
+
+    keys: NDArray[np.int64]
+    offsets: NDArray[np.uint8]
+    normals: NDArray[np.uint8]
+    axes: NDArray[np.uint8]
+    extents: NDArray[np.uint8]
+    thickness: NDArray[np.uint8]
+    trust: NDArray[np.uint8]
+
+    def __len__(self) -> int:
+        return int(self.keys.size)
+
+
+def level_box(lo: NDArray[np.int64], shape: tuple[int, int, int], level: int) -> tuple[NDArray[np.int64],
+                                                                                         tuple[int, int, int]]:
+    """The box of cells ``2 ** level`` times coarser that covers the box ``lo``, ``shape``."""
+    low = np.floor_divide(lo, 1 << level)
+    high = np.floor_divide(lo + np.asarray(shape) - 1, 1 << level)
+    size = high - low + 1
+    return low.astype(np.int64), (int(size[0]), int(size[1]), int(size[2]))
+
+
+def rigid(matrix: ArrayLike) -> FloatArray:
+    """``matrix`` as a 4x4 rigid transform (a rotation and a translation), or an InputError."""
+    out = np.asarray(matrix, dtype=np.float64)
+    if out.shape != (4, 4) or not np.isfinite(out).all() or not np.allclose(out[3], [0.0, 0.0, 0.0, 1.0]) or not (
+            np.allclose(out[:3, :3] @ out[:3, :3].T, np.eye(3), atol=1e-6) and np.linalg.det(out[:3, :3]) > 0.0):
+        raise InputError("a map's frame transform must be a 4x4 rotation and translation")
+    return out
+
+
+@dataclass
+class Map3DArrays:
+    """A 3D world map's numbers as the file holds them: the keywords of
+    :class:`occtool.fuse.WorldMap3D` (which :func:`occtool.fuse.load_map_3d` makes of them)."""
+
+    resolution: float
+    lo: np.ndarray
+    shape: tuple[int, int, int]
+    free_keys: np.ndarray
+    patches: list[PatchCodes]
+    falloff: float
+    edge_falloff: float
+    free_level: float
+    frame: str
+    to_map: np.ndarray | None
+
+
 def _bitset(keys: np.ndarray, cells: int) -> np.ndarray:
     bits = np.zeros(cells, dtype=bool)
     bits[keys] = True
@@ -60,8 +124,6 @@ def _bitset(keys: np.ndarray, cells: int) -> np.ndarray:
 
 def encode(world: Any) -> bytes:
     """The file's bytes for a :class:`~occtool.fuse._world3d.WorldMap3D`."""
-    from occtool.fuse._patches import level_box
-
     cells = int(np.prod(world.shape))
     arrays = [("free", _bitset(world.free_keys, cells))]
     for level, codes in enumerate(world.patches):
@@ -92,10 +154,9 @@ def save_map3d(world: Any, path: str | os.PathLike[str], *, overwrite: bool = Tr
     return len(data)
 
 
-def decode(data: bytes, name: str = "occmap") -> Any:
-    """A :class:`~occtool.fuse._world3d.WorldMap3D` from a version-5 file's bytes."""
-    from occtool.fuse._patches import PatchCodes
-    from occtool.fuse._world3d import WorldMap3D
+def decode(data: bytes, name: str = "occmap") -> Map3DArrays:
+    """A version-5 file's numbers (:class:`Map3DArrays`), checked; :func:`occtool.fuse.load_map_3d`
+    makes the map of them."""
 
     def fail(why: str) -> InputError:
         return InputError(f"{name}: not a readable 3D world map ({why})")
@@ -134,9 +195,6 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         raise fail("bad box, resolution or falloff")
     if not 0.0 <= free_level <= 1.0:
         raise fail("free level outside [0, 1]")
-    from occtool.fuse._patches import level_box
-    from occtool.fuse._world3d import rigid
-
     if to_map is not None:
         try:
             to_map = rigid(to_map)
@@ -184,18 +242,28 @@ def decode(data: bytes, name: str = "occmap") -> Any:
         first += n
         patches.append(PatchCodes(surfaces[level], part["offsets"], part["normals"], part["axes"][:, 0],
                                   part["extents"], part["thickness"][:, 0], part["trust"][:, 0]))
-    return WorldMap3D(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff,
-                      free_level, frame, to_map)
+    return Map3DArrays(resolution, lo, (shape[0], shape[1], shape[2]), free, patches, falloff, edge_falloff,
+                       free_level, frame, to_map)
 
 
-def read_map3d(path: str | os.PathLike[str]) -> Any:
-    """Read a version-5 ``.occmap`` file."""
+def read_map3d(path: str | os.PathLike[str]) -> Map3DArrays:
+    """Read a version-5 ``.occmap`` file: a regular file of at most
+    :data:`occtool.limits.MAX_MAP_BYTES`, checked before it is read whole."""
+    from occtool.limits import MAX_MAP_BYTES
+
     try:
         with open(path, "rb") as handle:
-            data = handle.read()
+            info = os.fstat(handle.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise InputError(f"{path}: not a readable 3D world map (not a regular file)")
+            if info.st_size > MAX_MAP_BYTES:
+                raise InputError(f"{path}: not a readable 3D world map ({info.st_size} bytes, more than the "
+                                 f"{MAX_MAP_BYTES >> 20} MB a map may have)")
+            data = handle.read(MAX_MAP_BYTES + 1)
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
     return decode(data, str(path))
 
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "KIND", "decode", "encode", "read_map3d", "save_map3d"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "KIND", "Map3DArrays", "PatchCodes", "decode", "encode", "level_box",
+           "read_map3d", "rigid", "save_map3d"]

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool.formats.occmap3d import PatchCodes, level_box
+
 FloatArray = NDArray[np.float64]
 
 #: Rays are walked in chunks of at most this many samples (memory, not speed).
@@ -43,30 +45,6 @@ THICKNESS_MM = (10, 14, 20, 28, 40, 56, 80, 113, 160, 226, 255)
 #: Normal angle steps: polar over [0, pi/2] (a normal is kept in the upper half-sphere),
 #: azimuth over [0, 2 pi); the in-plane axis over [0, pi).
 ANGLE_STEPS = 256
-
-
-@dataclass
-class PatchCodes:
-    """The patches at the file's precision, in the order of their cells' keys.
-
-    ``keys`` int64 ``(S,)`` each patch's cell as a linear index into the map's box (x slowest,
-    z fastest), sorted; ``offsets`` uint8 ``(S, 3)`` the centre within its cell in 1/256ths;
-    ``normals`` uint8 ``(S, 2)`` polar and azimuth codes; ``axes`` uint8 ``(S,)`` the in-plane
-    direction of the largest extent; ``extents`` uint8 ``(S, 2)`` half-extents along it and
-    across it in 1/255ths of the cell; ``thickness`` uint8 ``(S,)`` the half-thickness in mm;
-    ``trust`` uint8 ``(S,)`` in 1/255ths (never 0).
-    """
-
-    keys: NDArray[np.int64]
-    offsets: NDArray[np.uint8]
-    normals: NDArray[np.uint8]
-    axes: NDArray[np.uint8]
-    extents: NDArray[np.uint8]
-    thickness: NDArray[np.uint8]
-    trust: NDArray[np.uint8]
-
-    def __len__(self) -> int:
-        return int(self.keys.size)
 
 
 @dataclass
@@ -208,15 +186,6 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     return (PatchCodes(cells[keep].astype(np.int64), offsets[keep], normal_codes[keep], axis_codes[keep],
                        extent_codes[keep], thickness_codes[keep], np.full(int(keep.sum()), 255, dtype=np.uint8)),
             taken, counts[keep].astype(np.int64))
-
-
-def level_box(lo: NDArray[np.int64], shape: tuple[int, int, int], level: int) -> tuple[NDArray[np.int64],
-                                                                                         tuple[int, int, int]]:
-    """The box of cells ``2 ** level`` times coarser that covers the box ``lo``, ``shape``."""
-    low = np.floor_divide(lo, 1 << level)
-    high = np.floor_divide(lo + np.asarray(shape) - 1, 1 << level)
-    size = high - low + 1
-    return low.astype(np.int64), (int(size[0]), int(size[1]), int(size[2]))
 
 
 def concatenate(parts: list[PatchGeometry]) -> PatchGeometry:

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
+from occtool.formats.occmap3d import rigid
 from occtool.fuse._patches import (
     PatchCodes,
     PatchGeometry,
@@ -290,20 +291,14 @@ def map_log_3d(log: Any, resolution: float = RESOLUTION, *, to_map: ArrayLike | 
     return world
 
 
-def rigid(matrix: ArrayLike) -> FloatArray:
-    """``matrix`` as a 4x4 rigid transform (a rotation and a translation), or an InputError."""
-    out = np.asarray(matrix, dtype=np.float64)
-    if out.shape != (4, 4) or not np.isfinite(out).all() or not np.allclose(out[3], [0.0, 0.0, 0.0, 1.0]) or not (
-            np.allclose(out[:3, :3] @ out[:3, :3].T, np.eye(3), atol=1e-6) and np.linalg.det(out[:3, :3]) > 0.0):
-        raise InputError("a map's frame transform must be a 4x4 rotation and translation")
-    return out
-
-
 def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
     """Read a version-5 ``.occmap`` (:mod:`occtool.formats.occmap3d`)."""
+    from dataclasses import fields
+
     from occtool.formats import occmap3d
 
-    return occmap3d.read_map3d(path)
+    arrays = occmap3d.read_map3d(path)
+    return WorldMap3D(**{item.name: getattr(arrays, item.name) for item in fields(arrays)})
 
 
 __all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "load_map_3d", "map_log_3d", "rigid", "world_rays"]
