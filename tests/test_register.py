@@ -173,16 +173,16 @@ def test_register_on_a_model_set_is_one_line(tmp_path):
     assert len(result.output.strip().splitlines()) == 1 and "model set" in result.output
 
 
-@pytest.mark.parametrize("retry_below, bound", [(0.6, 0.25), (0.0, None)])
-def test_odometry_jumps_are_registered_back(intel_slice, retry_below, bound):
+def test_odometry_jumps_are_registered_back(intel_slice):
     # Issue 38: a noise model registration was not tuned on, six jumps of 0.3-1 m and 5-20
-    # degrees in 80 scans (~45 m); no loop closure here, so only the scan matching's retry
-    # from other seeds undoes them.
+    # degrees in 80 scans (~45 m), without loop closure: only the scan matching (from the
+    # odometry seed, or from other seeds where that fits poorly) undoes them.
     scans_log = RangeLog(intel_slice.positions[:80], source="intel")
     truth = [p.pose for p in scans_log.positions]
     jumping = degrade_odometry(truth, "jumps", seed=0, stamps=[p.stamp for p in scans_log.positions])
     _, report = register_log(positions_with_poses(scans_log, jumping),
-                             settings=RegistrationSettings(loop_closure=False, retry_below=retry_below))
-    after = trajectory_error(report.poses, truth)
-    print(retry_below, trajectory_error(jumping, truth), after)
-    assert bound is None or after < bound
+                             settings=RegistrationSettings(loop_closure=False))
+    # Measured: 3.17 m RMS of the jumping odometry, 0.176 m registered.
+    assert trajectory_error(jumping, truth) > 2.0
+    assert trajectory_error(report.poses, truth) < 0.25
+    assert segment_errors(report.poses, truth, 10.0).max() < 0.6

@@ -80,7 +80,10 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         target = np.concatenate([_in_world(prepared[i], poses[i]) for i in submap])
         matrix = aligner.align(target, source, _matrix(guess))
         info = aligner.information
-        if settings.retry_below > 0.0:
+        # Only an odometry seed is retried: a jump is the odometry's; the constant-velocity
+        # guess of a log without odometry (CCNY's 10 Hz scans) fits poorly at 0.1 m far more
+        # often, and retrying it cost minutes there for nothing.
+        if settings.retry_below > 0.0 and odometry[k] is not None and odometry[k - 1] is not None:
             others = [compose(poses[k - 1], relative(poses[k - 2], poses[k - 1])) if k >= 2 else guess, poses[k - 1]]
             others += [compose(guess, Pose(0.0, 0.0, 0.0, turn)) for turn in settings.retry_turns]
             matrix, info, weak[k] = _retried(aligner, target, source, matrix, info, others, settings)
