@@ -23,7 +23,13 @@ from occtool.register._core import (
     relative,
     scan_points,
 )
-from occtool.register._evaluate import degrade_poses, segment_errors, trajectory_error
+from occtool.register._evaluate import (
+    NOISE_MODELS,
+    degrade_odometry,
+    degrade_poses,
+    segment_errors,
+    trajectory_error,
+)
 from occtool.register._graph import close_loops, optimise_graph, solve_graph
 from occtool.register._poses import read_map_log, trajectory, write_map_poses, write_poses_csv
 from occtool.register._scans import (
@@ -35,7 +41,8 @@ from occtool.register._scans import (
     register_scans,
 )
 
-__all__ = ["RegistrationReport", "RegistrationSettings", "close_loops", "compose", "degrade_poses",
+__all__ = ["NOISE_MODELS", "RegistrationReport", "RegistrationSettings", "close_loops", "compose", "degrade_odometry",
+           "degrade_poses",
            "matched_share", "needs_registration", "optimise_graph", "pose_kind", "positions_with_poses",
            "read_map_log", "read_registered_log", "register_log", "register_scans", "relative", "scan_points",
            "segment_errors", "solve_graph", "trajectory", "trajectory_error", "write_map_poses", "write_poses_csv"]

@@ -40,6 +40,15 @@ class RegistrationSettings:
     ``loop_match / 2`` joins the graph, for ``loop_rounds`` rounds of search and solve.
     The graph weighs steps by ``odometry_sigma`` and loops by ``loop_sigma`` (metres,
     radians) and drops loops left more than ``loop_chi`` standard deviations off.
+    A scan whose result brings fewer than ``retry_below`` of its points within
+    ``retry_radius`` of the map (a seed too far off: an odometry jump) is registered again
+    from other seeds (the previous step repeated, no motion, the odometry seed turned by each
+    of ``retry_turns`` radians), each first with correspondences within ``retry_search``, and
+    the result that brings most points within ``retry_radius`` kept if it brings
+    ``retry_margin`` more of them than the first. A step whose result still fits poorly (or
+    was refused) is ``weak_step_scale`` times less certain in the pose graph, so loops can
+    overrule a jump it kept. ``step_information``: the graph weighs each step by GICP's own
+    information (its Hessian), scaled so that the median step keeps ``odometry_sigma``.
     ``backend``: ``"small_gicp"`` (the default, the ``register`` extra) or ``"kiss_icp"``
     (KISS-ICP's point-to-point ICP, kept for the comparison in docs/register.md).
     """
@@ -65,6 +74,13 @@ class RegistrationSettings:
     loop_sigma: tuple[float, float] = (0.05, 0.02)
     backend: str = "small_gicp"
     loop_chi: float = 5.0
+    retry_below: float = 0.6
+    retry_radius: float = 0.1
+    retry_search: float = 1.5
+    retry_turns: tuple[float, ...] = (-0.35, -0.17, 0.17, 0.35)
+    retry_margin: float = 0.1
+    weak_step_scale: float = 10.0
+    step_information: bool = True
 
 
 @dataclass
@@ -143,6 +159,10 @@ def _extruded(points: FloatArray) -> FloatArray:
 class _Aligner:
     """One registration call of the chosen library: source points onto target points."""
 
+    #: The last small_gicp result's 6x6 information (rotation x, y, z, translation x, y, z,
+    #: in the source's frame), ``None`` for kiss_icp.
+    information: FloatArray | None = None
+
     def __init__(self, settings: RegistrationSettings) -> None:
         self.settings = settings
         if settings.backend == "small_gicp":
@@ -174,7 +194,9 @@ class _Aligner:
             src, _ = lib.preprocess_points(source, downsampling_resolution=s.downsample, num_neighbors=10)
             result = lib.align(tgt, src, tgt_tree, init_T_target_source=guess, registration_type="GICP",
                                max_correspondence_distance=reach, max_iterations=s.max_iterations)
+            self.information = np.asarray(result.H)
             return np.asarray(result.T_target_source)
+        self.information = None
         grid = lib._VoxelHashMap(voxel_size=s.downsample, max_distance=1e6, max_points_per_voxel=20)
         grid._add_points(lib._Vector3dVector(target))
         return np.asarray(self._registration._align_points_to_map(

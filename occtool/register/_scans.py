@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose, Position, RangeLog
@@ -58,6 +59,8 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
     started = time.process_time()
     prepared = [_extruded(p) if planar else p for p in scans]
     poses: list[Pose] = [odometry[0] if odometry[0] is not None else Pose()]
+    information: list[FloatArray | None] = [None]
+    weak = np.zeros(count, dtype=bool)
     submap: list[int] = [0]
     refused = 0
     for k in range(1, count):
@@ -71,14 +74,27 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         source = prepared[k]
         if len(scans[k]) < 10:
             poses.append(guess)
+            information.append(None)
+            weak[k] = True
             refused += 1
             continue
         target = np.concatenate([_in_world(prepared[i], poses[i]) for i in submap])
         matrix = aligner.align(target, source, _matrix(guess))
+        info = aligner.information
+        # Only an odometry seed is retried: a jump is the odometry's; the constant-velocity
+        # guess of a log without odometry (CCNY's 10 Hz scans) fits poorly at 0.1 m far more
+        # often, and retrying it cost minutes there for nothing.
+        if settings.retry_below > 0.0 and odometry[k] is not None and odometry[k - 1] is not None:
+            others = [compose(poses[k - 1], relative(poses[k - 2], poses[k - 1])) if k >= 2 else guess, poses[k - 1]]
+            others += [compose(guess, Pose(0.0, 0.0, 0.0, turn)) for turn in settings.retry_turns]
+            matrix, info, weak[k] = _retried(aligner, target, source, matrix, info, others, settings)
         if matched_share(target, source, matrix, settings.max_correspondence) >= settings.min_inliers:
             poses.append(_pose(matrix, planar))
+            information.append(info)
         else:
             poses.append(guess)
+            information.append(None)
+            weak[k] = True
             refused += 1
         last = poses[submap[-1]]
         moved = relative(last, poses[k])
@@ -90,8 +106,70 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         report.refused += refused
         report.seconds["registration"] = time.process_time() - started
     if settings.loop_closure and count > 2:
-        poses = close_loops(prepared, poses, planar, aligner, settings, report)
+        weights = step_weights(poses, information, weak, settings)
+        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights)
     return poses
+
+
+def _retried(aligner: _Aligner, target: FloatArray, source: FloatArray, matrix: FloatArray,
+             info: FloatArray | None, seeds: Sequence[Pose], settings: RegistrationSettings
+             ) -> tuple[FloatArray, FloatArray | None, bool]:
+    """``matrix`` (and its information), or when it fits poorly (fewer than
+    ``settings.retry_below`` of the points within ``settings.retry_radius``) the best fit
+    from the other ``seeds`` if it fits clearly better: a scan seeded by an odometry jump of
+    a metre or 20 degrees converges to the wrong wall otherwise. The flag: the fit kept is
+    still poor (a weak step for the pose graph)."""
+    first = best = matched_share(target, source, matrix, settings.retry_radius)
+    if best >= settings.retry_below:
+        return matrix, info, False
+    chosen = (matrix, info)
+    for seed in seeds:
+        found = aligner.align(target, source, _matrix(seed), settings.retry_search)
+        found = aligner.align(target, source, found)
+        share = matched_share(target, source, found, settings.retry_radius)
+        if share > best and share >= first + settings.retry_margin:
+            best, chosen = share, (found, aligner.information)
+    return chosen[0], chosen[1], best < settings.retry_below
+
+
+def step_weights(poses: list[Pose], information: Sequence[FloatArray | None], weak: NDArray[np.bool_],
+                 settings: RegistrationSettings) -> FloatArray | None:
+    """Square roots of each step's information for the pose graph, ``(len(poses) - 1, 3, 3)``,
+    or ``None`` for the plain sigmas of ``settings``. With ``settings.step_information``,
+    GICP's own (x, y, yaw block turned into the previous pose's frame, scaled so that the
+    median step has the translation information of ``settings.odometry_sigma``; a step
+    without it gets the plain sigmas, three times wider); a weak step (refused, or a poor
+    fit) ``settings.weak_step_scale`` times wider still."""
+    st, sr = settings.odometry_sigma
+    plain = np.diag([1 / st, 1 / st, 1 / sr])
+    if not settings.step_information and (settings.weak_step_scale == 1.0 or not weak.any()):
+        return None
+    out = np.repeat(plain[None], len(poses) - 1, axis=0)
+    if settings.step_information:
+        blocks: list[FloatArray | None] = []
+        for k in range(1, len(poses)):
+            h = information[k]
+            if h is None or not np.isfinite(h).all():
+                blocks.append(None)
+                continue
+            sub = h[np.ix_([3, 4, 2], [3, 4, 2])]
+            turn = poses[k].yaw - poses[k - 1].yaw
+            g = np.eye(3)
+            g[:2, :2] = [[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]]
+            blocks.append(g @ sub @ g.T)
+        scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
+        factor = (1 / st**2) / float(np.median(scales)) if scales else 1.0
+        floor = np.diag([1e-6 / st**2, 1e-6 / st**2, 1e-6 / sr**2])
+        for n, block in enumerate(blocks):
+            if block is None:
+                out[n] = plain / 3.0
+                continue
+            try:
+                out[n] = np.linalg.cholesky(factor * 0.5 * (block + block.T) + floor).T
+            except np.linalg.LinAlgError:
+                out[n] = plain / 3.0
+    out[weak[1:]] /= settings.weak_step_scale
+    return out
 
 
 # ---------------------------------------------------------------------- whole logs
