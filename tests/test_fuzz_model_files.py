@@ -136,6 +136,7 @@ def test_any_number_replaced_by_a_wrong_value_loads_or_fails_cleanly(files, tmp_
     assert replacement != "@BIG@", f"{kind} with a 400-digit {'/'.join(map(str, path_in_file))} loaded"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["model", "inverse", "observed"])
 @pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
 def test_nan_or_infinity_anywhere_is_a_format_error(files, tmp_path, kind, value):

@@ -274,6 +274,7 @@ def test_a_region_offset_out_of_range_exits_1_not_139(intel, tmp_path):
     assert not (tmp_path / "out.csv").exists()
 
 
+@pytest.mark.slow
 def test_files_that_are_no_regular_file_or_too_large_are_refused_before_reading(tmp_path, monkeypatch):
     (tmp_path / "zero.occmap").symlink_to("/dev/zero")
     os.mkfifo(tmp_path / "fifo.occmap")

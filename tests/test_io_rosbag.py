@@ -75,6 +75,7 @@ def test_a_db3_without_its_metadata_is_a_one_line_error(tmp_path):
         read_log(lone)
 
 
+@pytest.mark.slow
 @settings(max_examples=25)
 @given(st.data())
 def test_a_damaged_ros1_bag_is_read_or_refused_with_an_input_error(shared_data_path, data):

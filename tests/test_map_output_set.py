@@ -143,6 +143,7 @@ def test_without_overwrite_an_existing_output_is_refused_before_any_work(runs, t
     assert contents(folder) == before and not leftovers(folder)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform == "win32", reason="SIGTERM")
 def test_sigterm_during_occtool_map_leaves_the_previous_set(runs, tmp_path):
     """A real process terminated while it fits: the folder holds the previous set, whole."""

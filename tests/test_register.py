@@ -108,6 +108,7 @@ def test_scans_that_cannot_be_registered_are_an_error():
         register_log(RangeLog(tiny, source="tiny"))
 
 
+@pytest.mark.slow
 def test_map_of_a_urg_log_registers_it_and_writes_the_poses(shared_data, tmp_path):
     lines = (shared_data / MINES).read_text().splitlines()[:60]
     log = tmp_path / "exp1.dat"
@@ -150,6 +151,7 @@ def test_map_without_the_extra_is_one_line_naming_it(shared_data, tmp_path, monk
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_a_3d_velodyne_pair_is_registered_in_3d(shared_data):
     from occtool.register import register_scans, scan_points
 
