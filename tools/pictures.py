@@ -11,8 +11,8 @@ occtool's outputs are in ``NOT_OURS`` with the reason.
     python tools/pictures.py --list          # each picture and its commands, nothing run
 
 Paths in the table are written with three placeholders: ``{fixtures}`` (the repo's
-bundled data), ``{data}`` (the shared data sets, ``../shared/data`` beside the repo) and
-``{images}`` (docs/images/). Every other relative path lands in the temporary folder.
+bundled data), ``{data}`` (the shared data sets, ``../shared/data`` beside the repo, or
+``--data DIR``) and ``{images}`` (docs/images/). Every other relative path lands in the temporary folder.
 """
 
 from __future__ import annotations
@@ -120,10 +120,14 @@ def main(args: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", action="append", metavar="NAME", choices=sorted(PICTURES),
                         help="redraw this picture only (repeatable)")
+    parser.add_argument("--data", type=Path, metavar="DIR",
+                        help="the shared data sets (default: ../shared/data beside the repo)")
     parser.add_argument("--list", action="store_true",
                         help="print each picture and its commands; run nothing")
     opts = parser.parse_args(args)
     names = opts.only or list(PICTURES)
+    if opts.data is not None:
+        PLACES["data"] = opts.data.resolve()
     if opts.list:
         for name in names:
             print(f"{name}.png")
