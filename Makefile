@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.occtool-installed
 DEMO   ?= demo-output
 
-.PHONY: install demo test test-slow test-all bench lint clean
+.PHONY: install demo test test-slow test-all bench lint pictures clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,11 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/run.py --output bench/results.md
+
+# Redraw docs/images/ from occtool's current outputs by the docs' own commands
+# (tools/pictures.py; needs ../shared/data for the Intel, CCNY and MINES maps).
+pictures: $(STAMP)
+	$(BIN)/python tools/pictures.py
 
 clean:
 	rm -rf $(VENV) $(DEMO) .pytest_cache .hypothesis
