@@ -205,23 +205,32 @@ def array_bytes(world: Any) -> int:
     return int(sum(a.nbytes for _, a in _arrays(world)[1]))
 
 
+def framed(header: bytes, payload: bytes) -> bytes:
+    """A file of any version: the magic, the header's length and text, the payload, and the
+    CRC-32 of all that (the framing :func:`decode` and the version-5 reader check)."""
+    body = MAGIC + struct.pack("<I", len(header)) + header + payload
+    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+
+
+def write_file(data: bytes, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
+    """Write a map's bytes to ``path`` through a temporary file; returns the bytes written."""
+    from occtool._files import atomic_write
+
+    with atomic_write(path, "wb", overwrite=overwrite) as stream:
+        stream.write(data)
+    return len(data)
+
+
 def encode(world: Any) -> bytes:
     """The file's bytes for ``world``."""
     header, arrays = _arrays(world)
     text = json.dumps(header, sort_keys=True, separators=(",", ":")).encode("utf-8")
-    body = MAGIC + struct.pack("<I", len(text)) + text + b"".join(a.astype(a.dtype.newbyteorder("<")).tobytes()
-                                                                   for _, a in arrays)
-    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+    return framed(text, b"".join(a.astype(a.dtype.newbyteorder("<")).tobytes() for _, a in arrays))
 
 
 def save_map(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
     """Write ``world`` to ``path`` through a temporary file; returns the bytes written."""
-    from occtool._files import atomic_write
-
-    data = encode(world)
-    with atomic_write(path, "wb", overwrite=overwrite) as stream:
-        stream.write(data)
-    return len(data)
+    return write_file(encode(world), path, overwrite=overwrite)
 
 
 #: Smallest unit (metres) of a file's grid and of its half-lengths: a micrometre, far finer
@@ -513,5 +522,5 @@ def read_map(path: str | os.PathLike[str]) -> MapArrays:
     return decode(data, name)
 
 
-__all__ = ["FORMAT_VERSION", "MAGIC", "UNIT", "MapArrays", "array_bytes", "decode", "encode", "quantise", "read_map",
+__all__ = ["FORMAT_VERSION", "MAGIC", "UNIT", "MapArrays", "array_bytes", "decode", "encode", "framed", "quantise", "read_map",
            "save_map", "unreadable"]

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.formats.occmap import MAGIC, MAX_HEADER
+from occtool.formats.occmap import MAGIC, MAX_HEADER, framed, write_file
 
 FloatArray = NDArray[np.float64]
 
@@ -139,19 +139,12 @@ def encode(world: Any) -> bytes:
               "arrays": [[name, "uint8", list(a.shape)] for name, a in arrays], "packed": len(payload)}
     if world.to_map is not None:
         header["to_map"] = [float(v) for v in np.asarray(world.to_map)[:3].reshape(-1)]
-    text = json.dumps(header, separators=(",", ":")).encode("utf-8")
-    body = MAGIC + struct.pack("<I", len(text)) + text + payload
-    return body + struct.pack("<I", zlib.crc32(body) & 0xFFFFFFFF)
+    return framed(json.dumps(header, separators=(",", ":")).encode("utf-8"), payload)
 
 
 def save_map3d(world: Any, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
     """Write ``world`` to ``path`` atomically; returns the bytes written."""
-    from occtool._files import atomic_write
-
-    data = encode(world)
-    with atomic_write(path, "wb", overwrite=overwrite) as handle:
-        handle.write(data)
-    return len(data)
+    return write_file(encode(world), path, overwrite=overwrite)
 
 
 def decode(data: bytes, name: str = "occmap") -> Map3DArrays:
