@@ -6,10 +6,7 @@ with its own readers (TUM RGB-D depth folders, PCD, KITTI poses), split, ray sam
 voxel traversal, log-odds grids, PGM reader and AUC. occtool is run as a user runs it,
 ``python -m occtool -q map TRAIN -o DIR ...`` in a subprocess, and its outputs are read
 from disk. The only occtool names imported are ``occtool.errors.InputError`` (one-line
-errors) and ``occtool.fuse.load_map`` (to read ``DIR/world.occmap``), and, for the row of
-issue 35's 3D world map prototype, ``occtool.fuse._world3d`` (built through the library from
-the grids' training rays, saved, read back and queried at world x, y, z, until ``occtool map``
-writes it).
+errors) and ``occtool.fuse.load_map`` (to read ``DIR/world.occmap``).
 
 Protocol:
 
@@ -53,12 +50,13 @@ Protocol:
   ranks with ties averaged, so a point a method does not know, 0.5, counts half) over all
   test points (3D) and over the body band; and the share of held-out returns on unknown
   (0.5 or unseen) space of each map.
-* Rows: (a) ``world.occmap`` through ``occtool.fuse.load_map(path).predict(xyz)``, queried
-  at (x, y, height above the floor above): occtool's datum is its floor (a depth folder's
-  z is shifted to the floor it finds; the lidar CSV's ``pose_z`` is H, the sensor's height
-  above the floor estimated here). Today's map answers only in its 2D body band (0.5 elsewhere): scored as
-  it answers. (b) ``map.yaml`` + PGM (own reader; occupied 1, free 0, unknown 0.5) looked
-  up at every point's x, y. (c) textbook 3D log-odds grids at 0.05 and 0.1 m (sparse voxel
+* Rows: (a) ``world.occmap`` through ``occtool.fuse.load_map(path).predict(xyz)``: a 3D
+  map (version 5 in the file's own header, read here) at the world x, y, z of the test
+  points (it stores and applies the transform to the frame it levelled); a 2D map (version
+  4) at (x, y, height above the floor above), the datum it answers in, 0.5 outside its band.
+  (b) ``map.yaml`` + PGM (own reader; occupied 1, free 0, unknown 0.5) looked
+  up at every point's x, y (moved into a 3D map's frame by the ``to_map`` of its header).
+  (c) textbook 3D log-odds grids at 0.05 and 0.1 m (sparse voxel
   keys; each voxel updated at most once a frame: a hit where a return lands, else a miss
   where a ray crosses; clamped; unseen 0.5), ``l_occ``/``l_free``/clamp chosen over
   :data:`SETTINGS` by the AUC on an inner split of the training frames (the same block
@@ -67,11 +65,12 @@ Protocol:
   with the frame's origin and the max range; bytes: the size of its own ``.bt`` file.
 * occtool's input: the depth folder with a ``depth.txt`` listing the training frames only
   (the images and poses copied), ``--depth-features`` as above, ``--no-return-range 8``; lidar
-  (occtool reads no scans folder with poses yet): the kept training rays as occtool's CSV
-  (``x,y,z,m,pose_x,pose_y,pose_z,pose_yaw``: points in the sensor-centred frame turned by
-  the scan's yaw, so that the pose's yaw and position put them back exactly; ``m`` 0.9 for a
-  return and 0 for a ray cut at the max range, occtool's free-only ray); both with
-  ``--sensor-height H --body-height H``.
+  (``occtool map Scans/ --poses`` would read every point; the baselines get the kept rays
+  only): the kept training rays as occtool's CSV (``x,y,z,m,pose_x,pose_y,pose_z,pose_yaw``:
+  points in the sensor-centred frame turned by the scan's yaw, the pose the scan's world
+  position and yaw, so that they put the points back exactly; ``m`` 0.9 for a return and 0
+  for a ray cut at the max range, occtool's free-only ray); both with ``--sensor-height H
+  --body-height H``, the map's kind and cell size left to occtool's defaults.
 * Time: CPU seconds of each build (``time.process_time``; occtool the child's user+system
   CPU). Libraries run with one thread.
 
@@ -546,16 +545,16 @@ def write_depth_input(spec: dict[str, Any], train: NDArray[np.bool_], scratch: P
 
 
 def write_lidar_csv(train: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]], rotations: list[FloatArray],
-                    sensor_height: float, path: Path) -> Path:
+                    path: Path) -> Path:
     """The training rays as occtool's CSV: sensor-centred points turned by the scan's yaw,
-    ``pose_z`` the sensor's height above the floor under it."""
+    the pose the scan's position (its world z) and yaw."""
     blocks = []
     for (origin, end, hit), rotation in zip(train, rotations):
         yaw = math.atan2(rotation[1, 0], rotation[0, 0])
         c, s = math.cos(yaw), math.sin(yaw)
         d = end - origin
         local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
-        pose = np.tile([origin[0], origin[1], sensor_height, yaw], (len(d), 1))
+        pose = np.tile([origin[0], origin[1], origin[2], yaw], (len(d), 1))
         blocks.append(np.column_stack([local, np.where(hit, 0.9, 0.0), pose]))
     np.savetxt(path, np.concatenate(blocks), fmt="%.6f", delimiter=",",
                header="x,y,z,m,pose_x,pose_y,pose_z,pose_yaw", comments="")
@@ -616,34 +615,29 @@ def nav2_lookup(nav2: tuple[FloatArray, float, tuple[float, float, float]], xy: 
     return out
 
 
-#: Cell edge of the 3D world map's patches and free space, per sequence kind.
-WORLD3D_RESOLUTION = {"depth": 0.2, "lidar": 0.4}
+def occmap_header(path: Path) -> dict[str, Any]:
+    """The JSON header of an ``.occmap`` file (8 bytes of magic, a little-endian uint32
+    length, the header), read here rather than through occtool."""
+    data = path.read_bytes()
+    (length,) = np.frombuffer(data[8:12], dtype="<u4")
+    header = json.loads(data[12:12 + int(length)].decode("utf-8"))
+    return header if isinstance(header, dict) else {}
 
 
-def world3d_rows(train: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]], resolution: float, xyz: FloatArray,
-                 n_occupied: int, band: NDArray[np.bool_], scratch: Path) -> list[dict[str, Any]]:
-    """(a') occtool's 3D world map (issue 35 prototype), built through the library from the same
-    training rays as the grids, saved, read back and queried at the world x, y, z."""
-    name = f"occtool 3D world map {resolution:g} m (library)"
-    try:
-        world3d = importlib.import_module("occtool.fuse._world3d")
-        started = time.process_time()
-        origins = np.concatenate([np.broadcast_to(o, e.shape) for o, e, _ in train])
-        world = world3d.build_world_map_3d(origins, np.concatenate([e for _, e, _ in train]),
-                                           np.concatenate([h for _, _, h in train]), resolution=resolution)
-        cpu = time.process_time() - started
-        size = world.save(scratch / "world3d.occmap")
-        started = time.process_time()
-        p = np.asarray(world3d.load_map_3d(scratch / "world3d.occmap").predict(xyz), dtype=np.float64)
-        return [{"model": name, "bytes": size, "cpu_s": cpu, "query_cpu_s": time.process_time() - started,
-                 "patches": world.patch_count, **_scores(p, n_occupied, band)}]
-    except Exception as exc:  # occtool's prototype: any failure is reported, not raised
-        return [{"model": name, "note": f"n/a: {type(exc).__name__}: {exc}"}]
+def map_frame(header: dict[str, Any], xyz: FloatArray) -> FloatArray:
+    """World points moved into a 3D map's own frame by the 3x4 ``to_map`` its header stores
+    (where occtool levelled the world), for the Nav2 map drawn in that frame."""
+    if header.get("to_map") is None:
+        return xyz
+    m = np.asarray(header["to_map"], dtype=np.float64).reshape(3, 4)
+    return xyz @ m[:, :3].T + m[:, 3]
 
 
-def occtool_rows(out: Path, command: dict[str, Any], xyz_floor: FloatArray, n_occupied: int,
+def occtool_rows(out: Path, command: dict[str, Any], xyz: FloatArray, xyz_floor: FloatArray, n_occupied: int,
                  band: NDArray[np.bool_]) -> list[dict[str, Any]]:
-    """(a) and (b): ``world.occmap`` and the Nav2 map of ``occtool map``'s run."""
+    """(a) and (b): ``world.occmap`` and the Nav2 map of ``occtool map``'s run. A 3D map
+    (version 5) is queried at the world x, y, z; a 2D one at x, y and the height above the
+    floor (its datum)."""
     names = ("occtool world.occmap (load_map().predict)", "occtool Nav2 map (map.yaml + PGM, trinary)")
     if command["exit_status"]:
         return [{"model": name, "note": f"n/a: occtool map failed: {command.get('error')}"} for name in names]
@@ -652,13 +646,17 @@ def occtool_rows(out: Path, command: dict[str, Any], xyz_floor: FloatArray, n_oc
     try:
         load_map = importlib.import_module("occtool.fuse").load_map
         started = time.process_time()
-        p = np.asarray(load_map(path).predict(xyz_floor), dtype=np.float64)
+        header = occmap_header(path)
+        three_d = header.get("version") == 5
+        p = np.asarray(load_map(path).predict(xyz if three_d else xyz_floor), dtype=np.float64)
         rows.append({"model": names[0], "bytes": path.stat().st_size, "cpu_s": command["cpu_s"],
-                     "query_cpu_s": time.process_time() - started, **_scores(p, n_occupied, band)})
+                     "query_cpu_s": time.process_time() - started, "version": header.get("version"),
+                     "resolution": header.get("resolution"), **_scores(p, n_occupied, band)})
     except Exception as exc:  # occtool's reader: any failure is reported, not raised
         rows.append({"model": names[0], "note": f"n/a: {type(exc).__name__}: {exc}"})
     if (out / "map.yaml").is_file():
-        v = nav2_lookup(read_nav2(out / "map.yaml"), xyz_floor[:, :2])
+        at = map_frame(occmap_header(path), xyz) if path.is_file() else xyz
+        v = nav2_lookup(read_nav2(out / "map.yaml"), at[:, :2])
         image = out / [line.split(":", 1)[1].strip() for line in (out / "map.yaml").read_text().splitlines()
                        if line.startswith("image:")][0]
         rows.append({"model": names[1], "bytes": image.stat().st_size, "cpu_s": command["cpu_s"],
@@ -721,11 +719,9 @@ def score_sequence(name: str, seed: int = 0, data_dir: str | os.PathLike[str] = 
             options += ["--depth-features", str(spec["train_rays"]), "--no-return-range", f"{spec['max_range']:g}"]
         else:
             poses = read_kitti_poses(spec["folder"] / "optimized_poses.txt")
-            source = write_lidar_csv(train, [poses[i][:3, :3] for i in train_index], sensor_height,
-                                     scratch / "train.csv")
+            source = write_lidar_csv(train, [poses[i][:3, :3] for i in train_index], scratch / "train.csv")
         command = run_map(source, scratch / "map", options)
-        rows = occtool_rows(scratch / "map", command, xyz_floor, n_occupied, band)
-        rows += world3d_rows(train, WORLD3D_RESOLUTION[spec["kind"]], xyz, n_occupied, band, scratch)
+        rows = occtool_rows(scratch / "map", command, xyz, xyz_floor, n_occupied, band)
         rows += grid_rows(train, inner_test, inner, xyz, n_occupied, band)
         rows += octomap_rows(train, spec["max_range"], xyz, n_occupied, band, scratch)
     finally:
@@ -766,9 +762,9 @@ def markdown(result: dict[str, Any]) -> str:
                     f"{row['clamp'][1]:g}], inner AUC {_f(row['inner_auc'], '.3f')}; bytes: a byte a known voxel")
         elif row["model"].startswith("OctoMap"):
             note = "default sensor model; bytes: its .bt file"
-        elif "3D world map" in row["model"]:
-            note = (f"{row['patches']:,} patches; world x, y, z; CPU: the build (query "
-                    f"{row['query_cpu_s']:.1f} s); bytes: its version-5 .occmap")
+        elif "world.occmap" in row["model"] and row.get("version") == 5:
+            note = (f"3D (version 5, {row['resolution']:g} m cells, chosen by occtool); queried at world x, y, z; "
+                    "CPU: the whole `occtool map`")
         elif "world.occmap" in row["model"]:
             note = "queried at height above the floor; 0.5 outside its 2D band; CPU: the whole `occtool map`"
         else:

@@ -357,6 +357,11 @@ class RangeLog:
     #: ``"tf"``, ``"log"`` (the log's own pose fields, e.g. CARMEN's), ``"registered"``
     #: (:mod:`occtool.register`); ``None`` when unknown or the log has none.
     pose_kind: str | None = None
+    #: ``(4, 4)`` rigid transform from the frame of the file's own poses to the frame of
+    #: :attr:`positions`' poses, where a reader moved them (a depth folder levels its world
+    #: on the floor it finds); ``None``: the same frame. A 3D world map stores it, so that it
+    #: answers in the frame of the user's poses.
+    to_log_frame: Any = None
 
     @property
     def has_poses(self) -> bool:

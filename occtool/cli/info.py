@@ -150,10 +150,13 @@ def _is_world_map(path) -> bool:
 
 def _world_map_summary(path):
     """A world map: what it holds, where, at what precision and in how many bytes."""
-    from occtool.formats.occmap import read_map
+    from occtool.formats.occmap import decode, header_version, read_map_bytes
     from occtool.fuse import WorldMap
 
-    arrays = read_map(path)  # the file's numbers (one read), then the map built of them
+    data = read_map_bytes(path)  # the file's bytes (one read), then the map built of them
+    if header_version(data) == 5:
+        return _world_map_3d_summary(path, data)
+    arrays = decode(data, str(path))
     world = WorldMap.from_arrays(arrays)
     lower, upper = world.bounds
     size = path.stat().st_size
@@ -175,6 +178,39 @@ def _world_map_summary(path):
     table.add_row("a byte grid at 0.1 m", f"{world.grid_bytes(0.1):,} bytes over the same extent")
     table.add_row("settings", ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
                                         for k, v in world.params().items() if k != "band"))
+    return table
+
+
+def _world_map_3d_summary(path, data):
+    """A 3D world map (version 5): its frame, box, cells, patches per level and bytes."""
+    import numpy as np
+
+    from occtool.formats.occmap3d import decode
+    from occtool.fuse._world3d import from_arrays
+
+    world = from_arrays(decode(bytes(data), str(path)))
+    lower, upper = world.bounds
+    table = _key_value_table(f"occtool world map (3D): {path}")
+    table.add_row("format", f"occmap version 5 (3D: this occtool writes it for depth cameras and 3D lidars), "
+                            f"{len(data):,} bytes")
+    if world.to_map is None:
+        frame = "map: the frame of the log's poses (x, y, z in metres)"
+    else:
+        angle = float(np.degrees(np.arccos(np.clip((np.trace(world.to_map[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))))
+        frame = (f"queries in the frame of the log's poses, moved into the map's frame (levelled on its floor) by "
+                 f"the stored transform: {angle:.1f} degrees, shift {np.round(world.to_map[:3, 3], 3).tolist()} m")
+    table.add_row("frame", frame)
+    extent = upper - lower
+    table.add_row("extent", f"x {lower[0]:.2f} to {upper[0]:.2f} m, y {lower[1]:.2f} to {upper[1]:.2f} m, "
+                            f"z {lower[2]:.2f} to {upper[2]:.2f} m "
+                            f"({extent[0]:.1f} x {extent[1]:.1f} x {extent[2]:.1f} m)")
+    levels = ", ".join(f"{len(codes):,} in {world.resolution * (1 << level):g} m cells"
+                       for level, codes in enumerate(world.patches) if len(codes))
+    table.add_row("surfaces", f"{world.patch_count:,} planar patches (each a MIN over 7 linear pieces, under one "
+                              f"MAX): {levels or 'none'}")
+    table.add_row("free space", f"{world.free_cells:,} cells of {world.resolution:g} m that training rays crossed "
+                                f"(occupancy {world.free_level:g}; 0.5 where no ray passed)")
+    table.add_row("a byte grid at 0.1 m", f"{world.grid_bytes(0.1):,} bytes for the same known space")
     return table
 
 

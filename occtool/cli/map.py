@@ -34,6 +34,14 @@ ROBOT_FIELDS = {"robot_radius": "radius", "sensor_height": "sensor_height", "bod
                 "ground_clearance": "ground_clearance"}
 
 
+def _choice(choice: dict[str, Any] | None) -> str:
+    """How a 3D map's cell size was chosen, for the log."""
+    if not choice or "inner_auc" not in choice:
+        return (choice or {}).get("why", "given")
+    scores = ", ".join(f"{size} m {auc:.3f}" for size, auc in choice["inner_auc"].items())
+    return f"held-out AUC on {choice['held_out_positions']} of its {choice['positions']} positions: {scores}"
+
+
 def _given(ctx: click.Context) -> dict[str, click.Parameter]:
     """The parameters set on the command line or in a --config file (not left at their defaults)."""
     from click.core import ParameterSource
@@ -88,6 +96,15 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
                    "and the compass bearing of the map's +x axis, degrees (default 90: x east). Needs the geo extra.")
 @click.option("--mcap/--no-mcap", default=True, show_default=True,
               help="Write map.mcap for Foxglove (needs the protobuf extra).")
+@click.option("--world", "world", type=click.Choice(["auto", "2d", "3d"]), default="auto", show_default=True,
+              help="The world map's kind. 3d: surfaces (planar patches) and the space the rays crossed, in x, y, z "
+                   "(world.occmap version 5; occtool query answers at x, y, z in the frame of the log's poses) and "
+                   "map.pgm its body band over the ground found per tile (a ramp is ground, a table top an "
+                   "obstacle). 2d: the body band's walls (version 4). auto: 3d for a depth camera or a 3D lidar "
+                   "(returns above and below the sensor), 2d for a 2D laser.")
+@click.option("--world-resolution", type=click.FloatRange(min=0.01, max=10.0), default=None, metavar="METRES",
+              help="Cell size of a 3D world map [default: chosen among 0.1, 0.2 and 0.4 m by holding out "
+                   "blocks of the log's own positions and scoring each on them; summary.json says which].")
 @fit_options
 @log_options
 @register_options
@@ -97,8 +114,8 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
 def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_mode: str, threshold: float,
                 keyframe_share: float,
                 combination: str, max_range: float,
-                simplify: float | None, precision: int | None, origin: str | None, mcap: bool, seed: int,
-                overwrite: bool,
+                simplify: float | None, precision: int | None, origin: str | None, mcap: bool, world: str,
+                world_resolution: float | None, seed: int, overwrite: bool,
                 **kwargs: Any) -> None:
     """Fuse every robot position of LOG (fitted here with the fit options) or of MODELS (a
     folder written by `occtool fit LOG -o MODELS/`) into one world-frame map and write, in
@@ -107,6 +124,9 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
     foxglove.Grid on /map, foxglove.SceneUpdate per position on /positions), the GeoJSON
     layers navigation.geojson (polygons), obstacles.geojson and frontiers.geojson (points),
     and summary.json.
+
+    A depth camera or a 3D lidar gets a 3D world map (--world): the surfaces and the space
+    every ray crossed, in x, y, z; map.pgm is its body band over the ground under it.
 
     Each local model speaks only where its position observed (in front of its first
     obstacle, within its reach); places no position observed stay unknown (205 in the
@@ -173,7 +193,8 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
             source if len(sources) == 1 else list(sources)
         result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
                               registration=registration, keyframe_share=keyframe_share, **written,
-                              heights_from_data=not {"sensor_height", "body_height"} & set(_given(ctx)))
+                              heights_from_data=not {"sensor_height", "body_height"} & set(_given(ctx)),
+                              world=world, world_resolution=world_resolution, seed=seed)
         report = result.report
         assert report is not None
         log_notes(logger, Path(source).name, report.notes)
@@ -182,9 +203,13 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
         logger.info("%d positions fitted in %.1f s (%d covered by earlier keyframes, not fitted)", report.positions,
                     report.fit_seconds, len(report.not_keyframes))
     summary = result.summary
-    logger.info("fused map: %d positions, %.1f KB; world map %s: %d wall segments, %.1f KB; raster %dx%d: %s",
+    world_map = summary["world_map"]
+    parts = (f"{world_map['segments']} wall segments" if world_map["kind"] == "2d" else
+             f"3D, {world_map['patches']} surface patches in {world_map['resolution']:g} m cells "
+             f"({_choice(world_map.get('resolution_choice'))})")
+    logger.info("fused map: %d positions, %.1f KB; world map %s: %s, %.1f KB; raster %dx%d: %s",
                 summary["positions"], summary["fused_map_bytes"] / 1e3, Path(output) / "world.occmap",
-                summary["world_map"]["segments"], summary["world_map"]["bytes"] / 1e3, summary["raster"]["columns"],
+                parts, world_map["bytes"] / 1e3, summary["raster"]["columns"],
                 summary["raster"]["rows"], summary["raster"]["cells"])
     for path in result.written:
         logger.debug("wrote %s", path)

@@ -17,9 +17,11 @@ from occtool.cli.options import config_option, overwrite_option, refuse_existing
 @overwrite_option
 @config_option
 def query(world_map: str, points: str, output: str, precision: int, overwrite: bool) -> None:
-    """Occupancy at the x, y, z rows of POINTS.csv (world frame, metres) in MAP.occmap, the
-    world map `occtool map` writes: each row is written back with an `occupancy` column in
-    [0, 1], 0.5 where no position observed or outside the robot's body band."""
+    """Occupancy at the x, y, z rows of POINTS.csv (the frame of the log's poses, metres) in
+    MAP.occmap, the world map `occtool map` writes: each row is written back with an
+    `occupancy` column in [0, 1], 0.5 where nothing was observed. A 3D map (from a depth
+    camera or a 3D lidar) answers in all of x, y, z; a 2D map (a 2D laser) answers in the
+    robot's body band, z the height above the floor, and 0.5 outside it."""
     import logging
 
     from occtool.formats.query_csv import query_csv
@@ -28,4 +30,5 @@ def query(world_map: str, points: str, output: str, precision: int, overwrite: b
     refuse_existing(overwrite, output)
     world = load_map(world_map)
     rows = query_csv(world, points, output, overwrite=overwrite, precision=precision)
-    logging.getLogger("occtool.query").info("%d points queried in %s (%d wall segments)", rows, world_map, len(world))
+    parts = "surface patches" if hasattr(world, "patch_count") else "wall segments"
+    logging.getLogger("occtool.query").info("%d points queried in %s (%d %s)", rows, world_map, len(world), parts)

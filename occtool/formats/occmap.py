@@ -480,7 +480,25 @@ def _segments(arrays: dict[str, np.ndarray], version: int, origin: np.ndarray, u
 
 def read_map(path: str | os.PathLike[str]) -> MapArrays:
     """:func:`decode` of a ``.occmap`` file (``occtool map`` writes ``DIR/world.occmap``);
-    a file that cannot be read or is damaged is an :class:`InputError`.
+    a file that cannot be read or is damaged is an :class:`InputError`
+    (:func:`read_map_bytes` reads it)."""
+    return decode(read_map_bytes(path), str(path))
+
+
+def header_version(data: bytes | bytearray) -> Any:
+    """The ``version`` a ``.occmap`` file's header names (``None`` where it names none or
+    cannot be read: :func:`decode` then says what is wrong), to pick the reader of a file
+    that passed :func:`read_map_bytes`."""
+    (length,) = struct.unpack("<I", bytes(data[len(MAGIC):len(MAGIC) + 4]))
+    try:
+        header = json.loads(bytes(data[len(MAGIC) + 4:len(MAGIC) + 4 + length]).decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        return None
+    return header.get("version") if isinstance(header, dict) else None
+
+
+def read_map_bytes(path: str | os.PathLike[str]) -> bytearray:
+    """The bytes of a ``.occmap`` file of any version, or an :class:`InputError`.
 
     The file is checked before its body is read: a regular file (not a FIFO or a device
     such as ``/dev/zero``, which never end) of at most :data:`occtool.limits.MAX_MAP_BYTES`,
@@ -519,8 +537,8 @@ def read_map(path: str | os.PathLike[str]) -> MapArrays:
         raise unreadable(name, f"not enough memory to read its {info.st_size} bytes") from None
     if got != size:
         raise unreadable(name, "the file changed while it was read")
-    return decode(data, name)
+    return data
 
 
-__all__ = ["FORMAT_VERSION", "MAGIC", "UNIT", "MapArrays", "array_bytes", "decode", "encode", "framed", "quantise", "read_map",
-           "save_map", "unreadable"]
+__all__ = ["FORMAT_VERSION", "MAGIC", "UNIT", "MapArrays", "array_bytes", "decode", "encode", "framed", "header_version",
+           "quantise", "read_map", "read_map_bytes", "save_map", "unreadable"]

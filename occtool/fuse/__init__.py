@@ -42,13 +42,18 @@ The parts, one concept a module (private; everything public is imported from her
 ``_run``        :func:`map_of_run`: the map of a run (world map, raster, navigation region, frontiers)
 ``_outputs``    :func:`write_run_map`: its files (world map, Nav2, MCAP, GeoJSON, summary)
 ``_mapping``    :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
+``_patches``    planar patches and crossed free space: the numbers of a 3D map
+``_world3d``    :class:`WorldMap3D`: the run in x, y, z (a 3D log's ``world.occmap``)
+``_inner_split``  :func:`choose_resolution`: the 3D map's cell size, on the run's own positions
+``_projection`` :func:`project_band`: a 3D map's body band over the ground per tile, for Nav2
+``_load``       :func:`load_map`: a saved map of either kind
 ==============  =======================================================================
 
 Below it, and below :mod:`occtool.formats` which writes its files: :mod:`occtool.observation`
 (what a position observed: reach and first obstacle per pan bin, returns; the
 :class:`Observation` a model file keeps) and :mod:`occtool.raster` (:class:`Raster` and the
 Nav2 pixel values). :mod:`occtool.formats.occmap` reads and writes the ``.occmap`` file's
-numbers; :func:`load_map` makes a :class:`WorldMap` of them.
+numbers; :func:`load_map` makes a :class:`WorldMap` of them (a :class:`WorldMap3D` of a version-5 file).
 
 A :class:`FusedMap` is the run as its local models saw it (a megabyte and more for a
 building); :func:`build_world_map` refits it into a :class:`WorldMap` (walls as MIN nodes
@@ -70,11 +75,15 @@ from occtool.fuse._combine import (
     RETURN_KERNEL,
     Evidence,
 )
+from occtool.fuse._inner_split import choose_resolution
 from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
+from occtool.fuse._load import load_map
 from occtool.fuse._map import FRONT_MARGIN, FusedMap
+from occtool.fuse._projection import project_band
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns, returns_of_positions
-from occtool.fuse._world import WorldMap, decode_map, load_map
+from occtool.fuse._world import WorldMap, decode_map
+from occtool.fuse._world3d import WorldMap3D, build_world_map_3d, is_3d_log, map_log_3d
 from occtool.observation import (
     LASER_RETURNS_PER_DEGREE,
     NO_OBSTACLE,
@@ -158,16 +167,22 @@ __all__ = [
     "Raster",
     "RunReturns",
     "WorldMap",
+    "WorldMap3D",
     "build_world_map",
+    "build_world_map_3d",
+    "choose_resolution",
     "decode_map",
     "fuse_log",
     "fuse_model_set",
     "fuse_models",
+    "is_3d_log",
     "is_scanning_laser",
     "load_map",
+    "map_log_3d",
     "nearest_returns",
     "observe",
     "observed_reach",
+    "project_band",
     "reach_from_guard",
     "returns_from_guard",
     "returns_of_positions",

@@ -22,6 +22,10 @@ from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE
 from occtool.fuse._outputs import _write_run_map, check_outputs
 from occtool.fuse._run import RunMap, map_of_run
+from occtool.fuse._world3d import is_3d_log
+
+#: The kinds of world map :func:`map_log` writes.
+WORLD_KINDS = ("auto", "2d", "3d")
 
 
 @dataclass
@@ -68,7 +72,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             keyframe_share: float = KEYFRAME_NEW_SHARE, resolution: float = 0.05, max_range: float = 1.5,
             nav2_mode: str = "trinary", simplify: float | None = None, precision: int | None = None,
             georeference: Any | None = None, mcap: bool = True, overwrite: bool = True,
-            progress: Callable[[int, int], None] | None = None, heights_from_data: bool = False) -> MapResult:
+            progress: Callable[[int, int], None] | None = None, heights_from_data: bool = False,
+            world: str = "auto", world_resolution: float | None = None, seed: int = 0) -> MapResult:
     """Map a log: what ``occtool map LOG -o OUTPUT`` does.
 
     Parameters
@@ -101,6 +106,15 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         Called with ``(done, total)`` as the keyframes are fitted.
     heights_from_data
         No sensor or body height was given: the data's sets them (:func:`occtool.fuse.fuse_log`).
+    world
+        The world map's kind: ``"2d"`` (:class:`occtool.fuse.WorldMap`, the body band's
+        walls, ``world.occmap`` version 4), ``"3d"`` (:class:`occtool.fuse.WorldMap3D`:
+        surfaces and crossed free space in x, y, z, version 5; the Nav2 map its body band
+        over the ground per tile) or ``"auto"``: 3D when the log's returns spread above and
+        below the sensor (:func:`occtool.fuse.is_3d_log`: a depth camera, a 3D lidar).
+    world_resolution
+        The 3D map's cell size, metres; ``None``: chosen on an inner split of the log's own
+        positions (:func:`occtool.fuse.choose_resolution`, seeded by ``seed``).
 
     Raises
     ------
@@ -111,6 +125,10 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     """
     from occtool.errors import InputError
 
+    if world not in WORLD_KINDS:
+        raise InputError(f"world must be one of {', '.join(WORLD_KINDS)}, got {world!r}")
+    if world_resolution is not None and not (0.01 <= world_resolution <= 10.0):
+        raise InputError(f"world_resolution must lie in [0.01, 10] metres, got {world_resolution}")
     check_outputs(output, nav2_mode=nav2_mode, overwrite=overwrite)
     if estimator is None:
         from occtool.fit import OccupancyRegressor
@@ -131,8 +149,17 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
                                      keyframe_share=keyframe_share, progress=progress,
                                      heights_from_data=heights_from_data)
     positions = list(zip(report.fitted, fused.poses, fused.stamps))
+    world3d, sensors = None, None
+    if world == "3d" or (world == "auto" and is_3d_log(log)):
+        import numpy as np
+
+        from occtool.fuse._world3d import map_log_3d
+
+        world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
+        sensors = np.array([p.pose.translation for p in log.positions if p.pose is not None]).reshape(-1, 3)
     run = map_of_run(fused, models, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings)
+                     navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
+                     world3d=world3d, sensor_positions=sensors)
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
              "skipped_positions": [index for index, _ in report.skipped],
              "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
@@ -169,4 +196,4 @@ def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str]
     return MapResult(run, written, summary, fitted)
 
 
-__all__ = ["MapResult", "map_log", "map_model_set"]
+__all__ = ["WORLD_KINDS", "MapResult", "map_log", "map_model_set"]

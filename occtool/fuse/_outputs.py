@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from occtool._files import atomic_write
 from occtool.errors import InputError
 from occtool.fuse._run import RunMap
+from occtool.fuse._world import WorldMap
 
 FloatArray = NDArray[np.float64]
 
@@ -118,7 +119,7 @@ def _write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bo
     folder = Path(folder)
     layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, simplify=simplify, precision=precision,
                             georeference=georeference)
-    world_bytes = encode(run.world)
+    world_bytes = encode(run.world) if isinstance(run.world, WorldMap) else run.world.to_bytes()  # 2D or 3D
     summary = {**run.summary(), **(extra_summary or {})}
     summary["world_map"]["file_bytes"] = len(world_bytes)
     mcap_bytes = None

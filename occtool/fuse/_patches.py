@@ -26,7 +26,7 @@ from occtool.formats.occmap3d import PatchCodes, level_box
 FloatArray = NDArray[np.float64]
 
 #: Rays are walked in chunks of at most this many samples (memory, not speed).
-CHUNK_SAMPLES = 4_000_000
+CHUNK_SAMPLES = 1_000_000
 #: A patch is never thinner than this (metres): range noise of the sensors read.
 MIN_THICKNESS = 0.01
 #: A patch fitted to fewer returns than this takes its normal from the rays that hit it.

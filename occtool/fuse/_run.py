@@ -48,7 +48,8 @@ class RunMap:
     """Everything ``occtool map`` writes, in the world (``map``) frame."""
 
     fused: FusedMap
-    world: WorldMap
+    #: The world map: 2D (:class:`WorldMap`) or, for a 3D log, :class:`~occtool.fuse.WorldMap3D`.
+    world: WorldMap | Any
     raster: Raster
     placed: list[PlacedMap]
     navigation: Any
@@ -58,6 +59,14 @@ class RunMap:
     #: ``(stamp, pose)`` of every scan when the poses were registered (occtool.register): ``/tf`` in map.mcap.
     trajectory: list[tuple[float | None, Pose]] = field(default_factory=list)
 
+    def _world_summary(self) -> dict[str, Any]:
+        if isinstance(self.world, WorldMap):
+            return {"kind": "2d", "bytes": self.world.nbytes, "segments": len(self.world),
+                    "one_byte_grid_bytes_0.1m": self.world.grid_bytes(0.1)}
+        return {"kind": "3d", "bytes": self.world.nbytes, "patches": len(self.world),
+                "resolution": self.world.resolution, "free_cells": self.world.free_cells,
+                "one_byte_grid_bytes_0.1m": self.world.grid_bytes(0.1), "resolution_choice": self.world.choice}
+
     def summary(self) -> dict[str, Any]:
         counts = self.raster.counts()
         grid_bytes = 4 * self.raster.cells.size
@@ -66,8 +75,7 @@ class RunMap:
             "combination": self.fused.combination,
             "threshold": self.fused.threshold,
             "fused_map_bytes": self.fused.nbytes,
-            "world_map": {"bytes": self.world.nbytes, "segments": len(self.world),
-                          "one_byte_grid_bytes_0.1m": self.world.grid_bytes(0.1)},
+            "world_map": self._world_summary(),
             "grid_float32_bytes_same_extent": grid_bytes,
             "raster": {"resolution": self.raster.resolution, "origin": list(self.raster.origin),
                        "rows": self.raster.shape[0], "columns": self.raster.shape[1], "cells": counts},
@@ -119,7 +127,8 @@ def frontiers_of(raster: Raster, min_length: float = FRONTIER_MIN_LENGTH) -> Flo
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
                frontier_min_length: float = FRONTIER_MIN_LENGTH, sightings: RunReturns | None = None,
-               robot_overrides: Mapping[str, float] | None = None) -> RunMap:
+               robot_overrides: Mapping[str, float] | None = None, world3d: Any | None = None,
+               sensor_positions: Any | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -143,6 +152,12 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     robot_overrides
         :class:`~occtool.robot.Robot` fields (``radius``, ``sensor_height``, ...) that
         replace those of each model's own robot (or ``navigation``'s) in its navigation map.
+    world3d, sensor_positions
+        A :class:`~occtool.fuse.WorldMap3D` of the run: the world map instead of one refitted
+        from ``fused``, and the raster its body band over the ground per tile
+        (:func:`occtool.fuse._projection.project_band`, for the first model's robot), the
+        ground implied by ``sensor_positions`` ``(N, 3)``, every position's sensor in the
+        3D map's frame.
     """
     from occtool.navigation import NavigationWarning
 
@@ -153,10 +168,20 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         raise InputError(f"robot_overrides: no robot field {', '.join(unknown)}")
     seconds = {}
     started = time.perf_counter()
-    world = build_world_map(fused, sightings=sightings)
-    seconds["world_map"] = time.perf_counter() - started
-    started = time.perf_counter()
-    raster = world.rasterise(resolution)
+    if world3d is None:
+        world: WorldMap | Any = build_world_map(fused, sightings=sightings)
+        seconds["world_map"] = time.perf_counter() - started
+        started = time.perf_counter()
+        raster = world.rasterise(resolution)
+    else:
+        from occtool.fuse._projection import project_band
+
+        world = world3d
+        robot = (navigation or {}).get("robot") or (models[0].robot_ if models else Robot())
+        robot = replace(robot, **(robot_overrides or {}))
+        raster = project_band(world3d, sensor_positions if sensor_positions is not None else np.zeros((0, 3)),
+                              sensor_height=robot.sensor_height, body_height=robot.body_height,
+                              ground_clearance=robot.ground_clearance, radius=robot.radius, resolution=resolution)
     seconds["raster"] = time.perf_counter() - started
     started = time.perf_counter()
     placed = []

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.formats.occmap import UNIT, MapArrays, quantise, read_map, unreadable
+from occtool.formats.occmap import UNIT, MapArrays, quantise, unreadable
 from occtool.formats.occmap import decode as occmap_decode
 from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
 
@@ -438,12 +438,6 @@ def decode_map(data: bytes, name: str = "occmap") -> WorldMap:
     return _from_file(occmap_decode(data, name), name)
 
 
-def load_map(path: Any) -> WorldMap:
-    """Read a ``.occmap`` file written by :meth:`WorldMap.save` (``occtool map`` writes
-    ``DIR/world.occmap``); a damaged file is an :class:`InputError`."""
-    return _from_file(read_map(path), str(path))
-
-
 def _from_file(arrays: MapArrays, name: str) -> WorldMap:
     import inspect
 
@@ -460,4 +454,4 @@ def _from_file(arrays: MapArrays, name: str) -> WorldMap:
         raise unreadable(name, str(exc)) from None
 
 
-__all__ = ["UNIT", "WorldMap", "decode_map", "load_map"]
+__all__ = ["UNIT", "WorldMap", "decode_map"]

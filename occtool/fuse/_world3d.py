@@ -83,6 +83,8 @@ class WorldMap3D:
     #: frame the map was built in (e.g. a depth folder's world levelled on its floor); None:
     #: the same frame.
     to_map: FloatArray | None = None
+    #: How the resolution was chosen (:func:`map_log_3d`; not stored in the file).
+    choice: dict[str, Any] | None = field(default=None, repr=False, compare=False)
     _geometry: PatchGeometry | None = field(default=None, repr=False)
     _trees: Any = field(default=None, repr=False)
 
@@ -180,6 +182,32 @@ class WorldMap3D:
     def __call__(self, xyz: ArrayLike) -> FloatArray:
         return self.predict(xyz)
 
+    def __len__(self) -> int:
+        return self.patch_count
+
+    def to_bytes(self) -> bytes:
+        """The map's ``.occmap`` file (version 5)."""
+        from occtool.formats import occmap3d
+
+        return occmap3d.encode(self)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of its file."""
+        return len(self.to_bytes())
+
+    @property
+    def free_cells(self) -> int:
+        """Cells training rays crossed."""
+        return int(self.free_keys.size)
+
+    def grid_bytes(self, resolution: float = 0.1) -> int:
+        """Bytes of a byte-a-voxel grid of ``resolution`` holding what this map knows: its
+        crossed cells and its patches' cells, each ``(self.resolution / resolution) ** 3``
+        voxels (the figure the 3D grids of bench/heldout3d.py are charged)."""
+        known = self.free_cells + sum(len(codes) * 8 ** level for level, codes in enumerate(self.patches))
+        return int(round(known * (self.resolution / resolution) ** 3))
+
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
         """Write the map (``.occmap``, version 5); returns the bytes written."""
         from occtool.formats import occmap3d
@@ -258,11 +286,30 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     return WorldMap3D(float(resolution), lo, shape3, free, levels, falloff, edge_falloff, free_level)
 
 
-def world_rays(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+#: Share of a log's returns that must lie off the sensor's plane for it to be 3D.
+OFF_PLANE_SHARE = 0.1
+#: How far off the plane (metres): farther than a 2D laser's mounting tilt puts its returns.
+OFF_PLANE = 0.05
+
+
+def is_3d_log(log: Any, sample: int = 200_000) -> bool:
+    """Whether a log's returns spread above and below its sensor (a depth camera, a 3D lidar)
+    rather than lying in its plane (a 2D laser): :data:`OFF_PLANE_SHARE` of them more than
+    :data:`OFF_PLANE` from it (every position's returns, up to ``sample`` in all)."""
+    heights = [np.asarray(p.features.points, dtype=np.float64).reshape(-1, 3)[:, 2][
+        np.asarray(p.features.evidence, dtype=np.float64).reshape(-1) > 0.0] for p in log.positions]
+    every = np.concatenate(heights) if heights else np.zeros(0)
+    if every.size > sample:
+        every = every[np.linspace(0, every.size - 1, sample).astype(np.int64)]
+    return bool(every.size) and float(np.mean(np.abs(every) > OFF_PLANE)) >= OFF_PLANE_SHARE
+
+
+def rays_of_log(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.intp]]:
     """Each feature of a :class:`~occtool.features.RangeLog` as a world-frame ray: origins (the
     position's pose), end points (its sensor-centred robot-frame point turned by the yaw and
-    moved by the pose) and hits (evidence above 0; 0 is a free-only ray)."""
-    origins, ends, hits = [], [], []
+    moved by the pose), hits (evidence above 0; 0 is a free-only ray) and the number of its
+    position in the log (0, 1, ...)."""
+    origins, ends, hits, counts = [], [], [], []
     for position in log.positions:
         if position.pose is None:
             raise InputError(f"{log.source or 'the log'}: position {position.index} has no pose; "
@@ -272,20 +319,33 @@ def world_rays(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
         ends.append(points @ pose.rotation.T + pose.translation)
         origins.append(np.broadcast_to(pose.translation, points.shape))
         hits.append(np.asarray(position.features.evidence, dtype=np.float64).reshape(-1) > 0.0)
+        counts.append(points.shape[0])
     if not ends:
         raise InputError(f"{log.source or 'the log'}: no positions to map")
-    return np.concatenate(origins), np.concatenate(ends), np.concatenate(hits)
+    groups = np.repeat(np.arange(len(counts)), counts)
+    return np.concatenate(origins), np.concatenate(ends), np.concatenate(hits), groups
 
 
-def map_log_3d(log: Any, resolution: float = RESOLUTION, *, to_map: ArrayLike | None = None,
+def map_log_3d(log: Any, resolution: float | None = None, *, to_map: ArrayLike | None = None, seed: int = 0,
                **options: Any) -> WorldMap3D:
     """The :class:`WorldMap3D` of a :class:`~occtool.features.RangeLog`, in the frame of its poses.
 
-    ``to_map`` ``(4, 4)``: where a reader moved the poses (a depth folder levels its world on
-    the floor it finds), the rigid transform from the frame the user's poses are in to the
-    log's; it is stored in the map and applied to every query.
+    ``resolution`` ``None``: chosen on an inner split of the log's own positions
+    (:func:`occtool.fuse._inner_split.choose_resolution`, seeded by ``seed``; the choice and
+    its scores in the map's :attr:`WorldMap3D.choice`). ``to_map`` ``(4, 4)``: where a
+    reader moved the poses (a depth folder levels its world on the floor it finds,
+    :attr:`occtool.features.RangeLog.to_log_frame`), the rigid transform from the frame the
+    user's poses are in to the log's; it is stored in the map and applied to every query.
+    ``options`` are :func:`build_world_map_3d`'s.
     """
-    world = build_world_map_3d(*world_rays(log), resolution=resolution, **options)
+    origins, ends, hits, groups = rays_of_log(log)
+    choice: dict[str, Any] = {"chosen": resolution, "why": "given"}
+    if resolution is None:
+        from occtool.fuse._inner_split import choose_resolution
+
+        resolution, choice = choose_resolution(origins, ends, hits, groups, seed=seed, **options)
+    world = build_world_map_3d(origins, ends, hits, resolution=resolution, **options)
+    world.choice = choice
     if to_map is not None:
         world.to_map = rigid(to_map)
     return world
@@ -293,12 +353,17 @@ def map_log_3d(log: Any, resolution: float = RESOLUTION, *, to_map: ArrayLike | 
 
 def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
     """Read a version-5 ``.occmap`` (:mod:`occtool.formats.occmap3d`)."""
-    from dataclasses import fields
-
     from occtool.formats import occmap3d
 
-    arrays = occmap3d.read_map3d(path)
+    return from_arrays(occmap3d.read_map3d(path))
+
+
+def from_arrays(arrays: Any) -> WorldMap3D:
+    """The map of a version-5 file's numbers (:class:`occtool.formats.occmap3d.Map3DArrays`)."""
+    from dataclasses import fields
+
     return WorldMap3D(**{item.name: getattr(arrays, item.name) for item in fields(arrays)})
 
 
-__all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "load_map_3d", "map_log_3d", "rigid", "world_rays"]
+__all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "from_arrays", "is_3d_log", "load_map_3d", "map_log_3d",
+           "rays_of_log", "rigid"]

@@ -443,6 +443,15 @@ class DepthFolderScans:
         self._notes = notes
         self._prepared = True
 
+    @property
+    def to_log_frame(self) -> FloatArray:
+        """``(4, 4)``: the rigid transform from the folder's own poses' frame to the levelled
+        frame its scans are placed in (the floor at z = 0)."""
+        self.prepare()
+        moved = np.array(self.level, dtype=np.float64)
+        moved[2, 3] -= self.floor_offset
+        return moved
+
     def __iter__(self) -> Iterator[Scan]:
         self.prepare()
         self.notes.clear()
@@ -487,8 +496,11 @@ def read_depth_folder(path: str | os.PathLike[str], options: ReadOptions | None 
     """
     scans = DepthFolderScans(path, options, **keywords)
     listed = list(scans)
-    return build_log(listed, source=scans.name, tolerance=scans.settings.position_tolerance,
-                     group_by=scans.settings.group_by, notes=scans.notes)
+    log = build_log(listed, source=scans.name, tolerance=scans.settings.position_tolerance,
+                    group_by=scans.settings.group_by, notes=scans.notes)
+    if any(scan.pose is not None for scan in listed):
+        log.to_log_frame = scans.to_log_frame
+    return log
 
 
 options_as_keywords(read_depth_folder)

@@ -181,11 +181,14 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
     if walls:
         from matplotlib.collections import LineCollection
 
-        from occtool.fuse import load_map
+        from occtool.fuse import WorldMap, load_map
 
         if not (Path(folder) / "world.occmap").is_file():
             raise InputError(f"{folder}: no world.occmap to draw walls from (written by `occtool map`)")
         world = load_map(Path(folder) / "world.occmap")
+        if not isinstance(world, WorldMap):
+            raise InputError(f"{folder}: --walls draws a 2D map's walls; this world.occmap is 3D (its surfaces are "
+                             "patches, described by `occtool info`)")
         lines = list(np.stack([world.start, world.end], axis=1))
         colours = np.column_stack([np.ones(len(world)), 1.0 - world.trust, 1.0 - world.trust, np.ones(len(world))])
         axes.add_collection(LineCollection(lines, colors=colours * _WALL_SHADE, linewidths=0.6,

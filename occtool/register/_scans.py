@@ -253,7 +253,7 @@ def read_registered_log(path: str | Sequence[str | os.PathLike[str]], read_optio
         regrouped = build_log([Scan(p.features.points, p.features.evidence, p.pose, p.stamp, p.source)
                                for p in scans.positions], source=scans.source, tolerance=tolerance,
                               group_by=group_by, notes=scans.notes)
-        regrouped.pose_kind = scans.pose_kind
+        regrouped.pose_kind, regrouped.to_log_frame = scans.pose_kind, scans.to_log_frame
         return regrouped, None
     registered, report = register_log(scans, settings=settings, position_tolerance=tolerance)
     if group_by == "message":

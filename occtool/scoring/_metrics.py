@@ -11,24 +11,9 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from occtool._stats import roc_auc
+
 FloatArray = NDArray[np.float64]
-
-
-def roc_auc(occupied: FloatArray, free: FloatArray) -> float:
-    """Area under the ROC curve of scores for "occupied" against "free" points.
-
-    The Mann-Whitney statistic: the probability that a random occupied point scores above
-    a random free one, ties counting half. NaN when either set is empty.
-    """
-    from scipy.stats import rankdata
-
-    occupied = np.asarray(occupied, dtype=np.float64)
-    free = np.asarray(free, dtype=np.float64)
-    n_occ, n_free = occupied.size, free.size
-    if n_occ == 0 or n_free == 0:
-        return float("nan")
-    ranks = rankdata(np.concatenate([occupied, free]))
-    return float((ranks[:n_occ].sum() - n_occ * (n_occ + 1) / 2.0) / (n_occ * n_free))
 
 
 def grouped_auc(values: NDArray[np.floating[Any]], occupied: FloatArray, free: FloatArray) -> float:

@@ -1,0 +1,107 @@
+"""The 3D world map's cell size, chosen on the run's own positions (an inner held-out split).
+
+The best cell for a run depends on its sensor and scene: a depth camera a metre or two from
+the furniture wants small cells, a lidar whose returns lie 15 m away larger ones (a finer cell
+is crossed by fewer rays and stays unknown). :func:`choose_resolution` asks the data, as a
+reviewer tunes a baseline: it holds out blocks of consecutive positions, builds the map of
+the rest at each candidate cell size, scores it on the held-out rays (their returns occupied,
+points every :data:`FREE_STEP` along them free; ROC AUC) and keeps the best, the coarser on a
+tie. Rays are subsampled by a seeded generator, so the choice is deterministic and cheap.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool._stats import roc_auc
+
+FloatArray = NDArray[np.float64]
+
+#: Cell sizes tried (metres).
+CANDIDATES = (0.1, 0.2, 0.4)
+#: Share of the positions held out, in blocks of about a twelfth of the run.
+HOLD_OUT = 0.15
+BLOCKS_PER_RUN = 12
+#: Rays each inner map is built from, and held-out rays it is scored on (subsampled above).
+MAX_TRAIN_RAYS = 100_000
+MAX_TEST_RAYS = 3_000
+#: Spacing of the free test points along a held-out ray (metres), as bench/heldout3d.py.
+FREE_STEP = 0.1
+#: Most half-cell steps a candidate may walk on the inner training rays: finer cells that
+#: would take longer are not tried.
+MAX_STEPS = 30_000_000
+#: Fewest positions an inner split needs (fewer: the default cell is kept).
+MIN_POSITIONS = 4
+
+
+def held_out_blocks(count: int, seed: int = 0) -> NDArray[np.bool_]:
+    """Which of ``count`` positions an inner split holds out: blocks of ``count / 12``
+    consecutive positions, 15 % of them, picked by the seed."""
+    block = max(1, round(count / BLOCKS_PER_RUN))
+    blocks = math.ceil(count / block)
+    chosen = np.random.default_rng(seed).choice(blocks, size=max(1, round(HOLD_OUT * count / block)), replace=False)
+    out = np.zeros(count, dtype=bool)
+    for b in chosen:
+        out[b * block:(b + 1) * block] = True
+    return out
+
+
+def _test_points(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+    """Held-out returns and points every :data:`FREE_STEP` along the rays before them."""
+    vector = ends - origins
+    length = np.linalg.norm(vector, axis=1)
+    last = np.where(hits, length - FREE_STEP, length)
+    count = np.maximum(np.floor(last / FREE_STEP).astype(np.int64), 0)
+    ray = np.repeat(np.arange(len(length)), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count) + 1
+    free = origins[ray] + (k * FREE_STEP / np.maximum(length[ray], 1e-12))[:, None] * vector[ray]
+    return ends[hits], free
+
+
+def choose_resolution(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_], groups: NDArray[np.intp], *,
+                      candidates: tuple[float, ...] = CANDIDATES, default: float = 0.2, seed: int = 0,
+                      **options: Any) -> tuple[float, dict[str, Any]]:
+    """The cell size of :data:`CANDIDATES` whose map of the kept positions best predicts the
+    held-out ones (module docstring), and a report (the inner AUC of each size tried).
+
+    ``groups`` ``(N,)`` numbers each ray's position (0, 1, ... in the run's order);
+    ``options`` are :func:`occtool.fuse.build_world_map_3d`'s. Fewer than
+    :data:`MIN_POSITIONS` positions keep ``default``.
+    """
+    from occtool.fuse._world3d import build_world_map_3d
+
+    count = int(groups.max()) + 1 if groups.size else 0
+    if count < MIN_POSITIONS:
+        return default, {"chosen": default, "why": f"{count} positions: too few to hold some out"}
+    rng = np.random.default_rng(seed)
+    test = held_out_blocks(count, seed)[groups]
+    train_rays, test_rays = np.flatnonzero(~test), np.flatnonzero(test)
+    if train_rays.size > MAX_TRAIN_RAYS:
+        train_rays = np.sort(rng.choice(train_rays, MAX_TRAIN_RAYS, replace=False))
+    if test_rays.size > MAX_TEST_RAYS:
+        test_rays = np.sort(rng.choice(test_rays, MAX_TEST_RAYS, replace=False))
+    occupied, free = _test_points(origins[test_rays], ends[test_rays], hits[test_rays])
+    if occupied.shape[0] == 0 or free.shape[0] == 0:
+        return default, {"chosen": default, "why": "the held-out positions hold no returns"}
+    walked = float(np.linalg.norm(ends[train_rays] - origins[train_rays], axis=1).sum())
+    scores: dict[str, float] = {}
+    best, best_auc = None, -1.0
+    for size in sorted(candidates, reverse=True):  # coarse first: a tie keeps the coarser
+        if best is not None and walked / (0.5 * size) > MAX_STEPS:
+            continue
+        world = build_world_map_3d(origins[train_rays], ends[train_rays], hits[train_rays], resolution=size,
+                                   **options)
+        auc = roc_auc(world.predict(occupied), world.predict(free))
+        scores[f"{size:g}"] = round(auc, 4)
+        if auc > best_auc + 1e-9:
+            best, best_auc = size, auc
+    assert best is not None
+    return best, {"chosen": best, "inner_auc": scores, "held_out_positions": int(held_out_blocks(count, seed).sum()),
+                  "positions": count}
+
+
+__all__ = ["CANDIDATES", "choose_resolution", "held_out_blocks"]

@@ -1,0 +1,200 @@
+"""The 3D world map drawn for Nav2: the robot's body band over the ground found per tile.
+
+A robot cares about what lies between its ground clearance and the top of its body above
+the ground under it, wherever that ground is. :func:`ground_of_tiles` finds that ground:
+in each tile, the driveable patches (a normal within :data:`DRIVEABLE_SLOPE` of vertical)
+near the ground the robot's own positions imply (the nearest position's sensor height
+below it, :data:`GROUND_WINDOW`); where a tile holds none, the implied ground itself. A
+ramp or an uneven floor is ground, not an obstacle; a table top, far above the implied
+ground, is an obstacle. :func:`project_band` then draws the band:
+
+* **occupied** where a patch that is not ground and whose trust reaches the occupied level
+  (:data:`RASTER_OCCUPIED`) lies at a height inside the band (sampled over its slab);
+* **free** only where the band was seen free: every cell of the band in that column was
+  crossed by a ray, or the robot's body passed there (within its radius of a position);
+* **unknown** elsewhere.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from occtool.errors import InputError
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+
+FloatArray = NDArray[np.float64]
+
+#: Steepest surface a ground robot drives on (degrees from horizontal): a wheelchair ramp is
+#: 5 degrees, a steep road 10-15.
+DRIVEABLE_SLOPE = 20.0
+#: How far (metres) a driveable patch may lie from the ground the positions imply and still
+#: be ground: a kerb or a step, not a table top (0.7 m) or a chair's seat (0.45 m).
+GROUND_WINDOW = 0.3
+#: Occupancy at and above which a band cell is occupied, at and below which it may be free
+#: (map_server's trinary thresholds, as the 2D map's raster uses them).
+RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
+#: Most raster cells drawn (memory: a few bytes each).
+MAX_CELLS = 50_000_000
+
+
+def _tiles(xy: FloatArray, tile: float) -> NDArray[np.int64]:
+    return np.floor(xy / tile).astype(np.int64)
+
+
+class TileGround:
+    """The ground height under any world ``(x, y)``: per tile of ``tile`` metres, the median
+    of the driveable patches near the implied ground there, else the implied ground (the
+    nearest position's z less ``sensor_height``)."""
+
+    def __init__(self, world: Any, positions: ArrayLike, sensor_height: float, tile: float) -> None:
+        from scipy.spatial import cKDTree  # lazy: scipy's import is slow
+
+        self.positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        if self.positions.shape[0] == 0:
+            raise InputError("the body band's ground needs at least one position")
+        self.sensor_height, self.tile = float(sensor_height), float(tile)
+        self._nearest = cKDTree(self.positions[:, :2])
+        g = world.geometry
+        driveable = g.normals[:, 2] >= math.cos(math.radians(DRIVEABLE_SLOPE))
+        centres = g.centres[driveable]
+        implied = self.implied(centres[:, :2])
+        near = np.abs(centres[:, 2] - implied) <= GROUND_WINDOW
+        self.ground_patch = np.zeros(len(g.trust), dtype=bool)
+        self.ground_patch[np.flatnonzero(driveable)[near]] = True
+        keys = _tiles(centres[near, :2], self.tile)
+        heights = centres[near, 2]
+        self._tile_keys = np.zeros((0, 2), dtype=np.int64)
+        self._tile_heights = np.zeros(0)
+        if len(heights):
+            order = np.lexsort((heights, keys[:, 1], keys[:, 0]))
+            keys, heights = keys[order], heights[order]
+            starts = np.r_[0, np.flatnonzero(np.any(np.diff(keys, axis=0) != 0, axis=1)) + 1]
+            counts = np.diff(np.r_[starts, len(heights)])
+            # The median of each tile's sorted heights (the lower middle for an even count).
+            self._tile_keys = keys[starts]
+            self._tile_heights = heights[starts + (counts - 1) // 2]
+
+    def implied(self, xy: FloatArray) -> FloatArray:
+        """The nearest position's z less the sensor height."""
+        _, index = self._nearest.query(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        return np.asarray(self.positions[index, 2] - self.sensor_height, dtype=np.float64)
+
+    def __call__(self, xy: ArrayLike) -> FloatArray:
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        out = self.implied(xy)
+        if len(self._tile_heights):
+            keys = _tiles(xy, self.tile)
+            code = self._tile_keys[:, 0] * (1 << 32) + self._tile_keys[:, 1]
+            wanted = keys[:, 0] * (1 << 32) + keys[:, 1]
+            at = np.clip(np.searchsorted(code, wanted), 0, len(code) - 1)
+            found = code[at] == wanted
+            out[found] = self._tile_heights[at[found]]
+        return out
+
+
+def _patch_samples(world: Any, members: NDArray[np.intp], spacing: float) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Points over each patch's slab: a grid of ``spacing`` over its extent, at its two faces
+    and its middle. Not out to where its ridge falls below the occupied level: that falloff
+    ranks the space near a surface above the free space for a query, but the obstacle a
+    robot must not enter is the surface itself (a 0.4 m cell's falloff would widen every
+    wall by 0.1-0.2 m and close doorways)."""
+    g = world.geometry
+    grow_face = g.thickness[members]
+    half_u = g.extents[members, 0]
+    half_v = g.extents[members, 1]
+    nu = np.maximum(np.ceil(2.0 * half_u / spacing).astype(np.int64), 1) + 1
+    nv = np.maximum(np.ceil(2.0 * half_v / spacing).astype(np.int64), 1) + 1
+    per = nu * nv * 3
+    patch = np.repeat(np.arange(len(members)), per)
+    k = np.arange(int(per.sum())) - np.repeat(np.cumsum(per) - per, per)
+    face, rest = np.divmod(k, (nu * nv)[patch])
+    a, b = np.divmod(rest, nv[patch])
+    su = -half_u[patch] + 2.0 * half_u[patch] * a / np.maximum(nu[patch] - 1, 1)
+    sv = -half_v[patch] + 2.0 * half_v[patch] * b / np.maximum(nv[patch] - 1, 1)
+    sn = (face - 1) * grow_face[patch]
+    index = members[patch]
+    points = (g.centres[index] + su[:, None] * g.u[index] + sv[:, None] * g.v[index]
+              + sn[:, None] * g.normals[index])
+    return points, index
+
+
+def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body_height: float,
+                 ground_clearance: float = 0.05, radius: float = 0.25, resolution: float = 0.05,
+                 tile: float | None = None, max_cells: int = MAX_CELLS) -> Raster:
+    """The Nav2 raster of a :class:`~occtool.fuse.WorldMap3D`: its body band over the ground
+    per tile (module docstring), in the map's frame.
+
+    ``positions`` ``(N, 3)`` are the sensor's positions in the map's frame; the band runs
+    from ``ground_clearance`` to ``body_height`` above the ground; ``radius`` the robot's
+    (the cells its body passed are free); ``tile`` the ground's tile (default: four of the
+    map's cells, at least a metre).
+    """
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise InputError(f"resolution must be a positive number of metres, got {resolution}")
+    places = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if tile is None:
+        tile = max(4.0 * world.resolution, 1.0)
+    ground = TileGround(world, places, sensor_height, tile)
+    bounds = world.bounds
+    origin = np.floor(bounds[0, :2] / resolution) * resolution
+    nx, ny = (np.ceil((bounds[1, :2] - origin) / resolution).astype(np.int64)).tolist()
+    nx, ny = max(nx, 1), max(ny, 1)
+    if nx * ny > max_cells:
+        raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
+    # Free: the columns of the map's cells whose band cells were all crossed.
+    r = world.resolution
+    shape = world.shape
+    keys = world.free_keys
+    i, rest = np.divmod(keys, shape[1] * shape[2])
+    j, k = np.divmod(rest, shape[2])
+    column_xy = (np.column_stack([np.arange(shape[0] * shape[1]) // shape[1],
+                                  np.arange(shape[0] * shape[1]) % shape[1]]) + world.lo[:2] + 0.5) * r
+    column_ground = ground(column_xy)
+    low = np.floor((column_ground + ground_clearance) / r).astype(np.int64) - world.lo[2]
+    high = np.floor((column_ground + body_height) / r).astype(np.int64) - world.lo[2]
+    column = i * shape[1] + j
+    in_band = (k >= low[column]) & (k <= high[column])
+    seen = np.bincount(column[in_band], minlength=shape[0] * shape[1])
+    band_free = seen == (high - low + 1)
+    band_seen = seen > 0
+    jj, ii = np.mgrid[0:ny, 0:nx]
+    centres = np.column_stack([origin[0] + (ii.ravel() + 0.5) * resolution,
+                               origin[1] + (jj.ravel() + 0.5) * resolution])
+    ci = np.floor(centres[:, 0] / r).astype(np.int64) - world.lo[0]
+    cj = np.floor(centres[:, 1] / r).astype(np.int64) - world.lo[1]
+    inside = (ci >= 0) & (ci < shape[0]) & (cj >= 0) & (cj < shape[1])
+    cell_column = np.where(inside, ci * shape[1] + cj, 0)
+    free = inside & band_free[cell_column]
+    explored = inside & band_seen[cell_column]
+    if len(places) and radius > 0:
+        from scipy.spatial import cKDTree  # lazy, as above
+
+        near, _ = cKDTree(places[:, :2]).query(centres, distance_upper_bound=radius)
+        driven = np.isfinite(near)
+        free |= driven
+        explored |= driven
+    # Occupied: the samples of every patch that is not ground and can reach the occupied level.
+    cells = np.where(free, FREE, UNKNOWN).astype(np.uint8)
+    probability = np.where(free, world.free_level, 0.5).astype(np.float32)
+    g = world.geometry
+    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED))
+    if members.size:
+        points, index = _patch_samples(world, members, resolution / math.sqrt(2.0))
+        height = points[:, 2] - ground(points[:, :2])
+        keep = (height >= ground_clearance) & (height <= body_height)
+        col = np.floor((points[keep, 0] - origin[0]) / resolution).astype(np.int64)
+        row = np.floor((points[keep, 1] - origin[1]) / resolution).astype(np.int64)
+        ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        flat = row[ok] * nx + col[ok]
+        cells[flat] = OCCUPIED
+        explored[flat] = True
+        np.maximum.at(probability, flat, g.trust[index[keep][ok]].astype(np.float32))
+    return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
+                  probability.reshape(ny, nx), np.zeros((ny, nx), dtype=bool), explored.reshape(ny, nx))
+
+
+__all__ = ["DRIVEABLE_SLOPE", "GROUND_WINDOW", "TileGround", "project_band"]
