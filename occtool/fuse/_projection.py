@@ -1,12 +1,11 @@
 """The 3D world map drawn for Nav2: the robot's body band over the ground found per tile.
 
 A robot cares about what lies between its ground clearance and the top of its body above
-the ground under it, wherever that ground is. :func:`ground_of_tiles` finds that ground:
-in each tile, the driveable patches (a normal within :data:`DRIVEABLE_SLOPE` of vertical)
-near the ground the robot's own positions imply (the nearest position's sensor height
-below it, :data:`GROUND_WINDOW`); where a tile holds none, the implied ground itself. A
-ramp or an uneven floor is ground, not an obstacle; a table top, far above the implied
-ground, is an obstacle. :func:`project_band` then draws the band:
+the ground under it, wherever that ground is. :class:`TileGround` finds that ground per
+tile, grown outward from the robot's own positions over the driveable patches (a normal
+within :data:`DRIVEABLE_SLOPE` of vertical): a ramp, a tilted or uneven floor is ground,
+not an obstacle; a table top, higher than a slope climbs in a tile, is an obstacle.
+:func:`project_band` then draws the band:
 
 * **occupied** where a patch that is not ground and whose trust reaches the occupied level
   (:data:`RASTER_OCCUPIED`) lies at a height inside the band (sampled over its slab);
@@ -31,8 +30,8 @@ FloatArray = NDArray[np.float64]
 #: Steepest surface a ground robot drives on (degrees from horizontal): a wheelchair ramp is
 #: 5 degrees, a steep road 10-15.
 DRIVEABLE_SLOPE = 20.0
-#: How far (metres) a driveable patch may lie from the ground the positions imply and still
-#: be ground: a kerb or a step, not a table top (0.7 m) or a chair's seat (0.45 m).
+#: Most the ground may climb from one tile to the next (metres): a kerb or a step, not a
+#: table top (0.7 m) or a chair's seat (0.45 m).
 GROUND_WINDOW = 0.3
 #: Occupancy at and above which a band cell is occupied, at and below which it may be free
 #: (map_server's trinary thresholds, as the 2D map's raster uses them).
@@ -41,59 +40,75 @@ RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
 MAX_CELLS = 50_000_000
 
 
-def _tiles(xy: FloatArray, tile: float) -> NDArray[np.int64]:
-    return np.floor(xy / tile).astype(np.int64)
-
-
 class TileGround:
-    """The ground height under any world ``(x, y)``: per tile of ``tile`` metres, the median
-    of the driveable patches near the implied ground there, else the implied ground (the
-    nearest position's z less ``sensor_height``)."""
+    """The ground height under any world ``(x, y)``, per square tile of ``tile`` metres.
+
+    The ground is grown outward from the robot's own positions, as a robot would drive:
+    a tile holding positions starts from the ground they imply (their sensor
+    ``sensor_height`` below them); each neighbouring tile takes the driveable patch
+    (:data:`DRIVEABLE_SLOPE`) whose height lies nearest the ground of the tile it was reached
+    from, within what a driveable slope climbs over a tile (at most :data:`GROUND_WINDOW`),
+    or keeps that ground when it holds none. So a floor tilted in the map's frame, a ramp
+    and a kerb far from the path stay ground, and a table top (higher than a slope climbs in
+    a tile) never becomes it. Driveable patches within that climb of their tile's ground
+    are ground patches (:attr:`ground_patch`), never obstacles.
+    """
 
     def __init__(self, world: Any, positions: ArrayLike, sensor_height: float, tile: float) -> None:
-        from scipy.spatial import cKDTree  # lazy: scipy's import is slow
+        from collections import deque
 
         self.positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         if self.positions.shape[0] == 0:
             raise InputError("the body band's ground needs at least one position")
         self.sensor_height, self.tile = float(sensor_height), float(tile)
-        self._nearest = cKDTree(self.positions[:, :2])
+        self.climb = min(GROUND_WINDOW, 0.5 * self.tile * math.tan(math.radians(DRIVEABLE_SLOPE))) + 0.05
         g = world.geometry
-        driveable = g.normals[:, 2] >= math.cos(math.radians(DRIVEABLE_SLOPE))
-        centres = g.centres[driveable]
-        implied = self.implied(centres[:, :2])
-        near = np.abs(centres[:, 2] - implied) <= GROUND_WINDOW
+        driveable = np.flatnonzero(g.normals[:, 2] >= math.cos(math.radians(DRIVEABLE_SLOPE)))
+        bounds = np.vstack([world.bounds[:, :2], self.positions[:, :2].min(axis=0), self.positions[:, :2].max(axis=0)])
+        self.low = np.floor(bounds.min(axis=0) / self.tile).astype(np.int64)
+        self.shape = tuple((np.floor(bounds.max(axis=0) / self.tile).astype(np.int64) - self.low + 1).tolist())
+        heights: list[list[float]] = [[] for _ in range(self.shape[0] * self.shape[1])]
+        patch_tile = self._flat(g.centres[driveable, :2])
+        for index, z in zip(patch_tile.tolist(), g.centres[driveable, 2].tolist()):
+            heights[index].append(z)
+        ground = np.full(self.shape[0] * self.shape[1], np.nan)
+        seeds = self._flat(self.positions[:, :2])
+        implied = self.positions[:, 2] - self.sensor_height
+        order = np.argsort(seeds, kind="stable")
+        starts = np.r_[0, np.flatnonzero(np.diff(seeds[order])) + 1]
+        queue: deque[int] = deque()
+        for begin, end in zip(starts, np.r_[starts[1:], len(order)]):
+            here = int(seeds[order[begin]])
+            ground[here] = self._nearest_height(heights[here], float(np.median(implied[order[begin:end]])))
+            queue.append(here)
+        # Breadth first over the tiles (their count, not the points', bounds the loop).
+        while queue:
+            here = queue.popleft()
+            i, j = divmod(here, self.shape[1])
+            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                ni, nj = i + di, j + dj
+                if 0 <= ni < self.shape[0] and 0 <= nj < self.shape[1] and np.isnan(ground[ni * self.shape[1] + nj]):
+                    there = ni * self.shape[1] + nj
+                    ground[there] = self._nearest_height(heights[there], float(ground[here]))
+                    queue.append(there)
+        self._ground = ground
         self.ground_patch = np.zeros(len(g.trust), dtype=bool)
-        self.ground_patch[np.flatnonzero(driveable)[near]] = True
-        keys = _tiles(centres[near, :2], self.tile)
-        heights = centres[near, 2]
-        self._tile_keys = np.zeros((0, 2), dtype=np.int64)
-        self._tile_heights = np.zeros(0)
-        if len(heights):
-            order = np.lexsort((heights, keys[:, 1], keys[:, 0]))
-            keys, heights = keys[order], heights[order]
-            starts = np.r_[0, np.flatnonzero(np.any(np.diff(keys, axis=0) != 0, axis=1)) + 1]
-            counts = np.diff(np.r_[starts, len(heights)])
-            # The median of each tile's sorted heights (the lower middle for an even count).
-            self._tile_keys = keys[starts]
-            self._tile_heights = heights[starts + (counts - 1) // 2]
+        self.ground_patch[driveable] = np.abs(g.centres[driveable, 2] - ground[patch_tile]) <= self.climb
 
-    def implied(self, xy: FloatArray) -> FloatArray:
-        """The nearest position's z less the sensor height."""
-        _, index = self._nearest.query(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
-        return np.asarray(self.positions[index, 2] - self.sensor_height, dtype=np.float64)
+    def _flat(self, xy: FloatArray) -> NDArray[np.int64]:
+        ij = np.clip(np.floor(xy / self.tile).astype(np.int64) - self.low, 0, np.array(self.shape) - 1)
+        return np.asarray(ij[:, 0] * self.shape[1] + ij[:, 1], dtype=np.int64)
+
+    def _nearest_height(self, heights: list[float], reference: float) -> float:
+        """The height of ``heights`` nearest ``reference`` within :attr:`climb`, else ``reference``."""
+        if not heights:
+            return reference
+        values = np.asarray(heights)
+        best = int(np.argmin(np.abs(values - reference)))
+        return float(values[best]) if abs(values[best] - reference) <= self.climb else reference
 
     def __call__(self, xy: ArrayLike) -> FloatArray:
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        out = self.implied(xy)
-        if len(self._tile_heights):
-            keys = _tiles(xy, self.tile)
-            code = self._tile_keys[:, 0] * (1 << 32) + self._tile_keys[:, 1]
-            wanted = keys[:, 0] * (1 << 32) + keys[:, 1]
-            at = np.clip(np.searchsorted(code, wanted), 0, len(code) - 1)
-            found = code[at] == wanted
-            out[found] = self._tile_heights[at[found]]
-        return out
+        return np.asarray(self._ground[self._flat(np.asarray(xy, dtype=np.float64).reshape(-1, 2))], dtype=np.float64)
 
 
 def _patch_samples(world: Any, members: NDArray[np.intp], spacing: float) -> tuple[FloatArray, NDArray[np.intp]]:

@@ -133,6 +133,22 @@ def decimate(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
 _WALL_SHADE = np.array([0.85, 0.6, 0.6, 1.0])
 
 
+def _patch_traces(world: Any) -> tuple[list[Any], Any]:
+    """A 3D map's upright patches (walls, furniture sides: a normal within 60 degrees of
+    horizontal) as their horizontal traces, centre plus and minus their half-width along
+    the level direction in their plane, and their trusts."""
+    g = world.geometry
+    upright = np.abs(g.normals[:, 2]) < 0.5
+    normals = g.normals[upright]
+    level = np.column_stack([-normals[:, 1], normals[:, 0], np.zeros(len(normals))])
+    level /= np.maximum(np.linalg.norm(level, axis=1, keepdims=True), 1e-12)
+    half = (np.abs(np.sum(g.u[upright] * level, axis=1)) * g.extents[upright, 0]
+            + np.abs(np.sum(g.v[upright] * level, axis=1)) * g.extents[upright, 1])
+    centres = g.centres[upright, :2]
+    offset = level[:, :2] * half[:, None]
+    return list(np.stack([centres - offset, centres + offset], axis=1)), g.trust[upright]
+
+
 def _trust_key(figure: Any, axes: Any) -> None:
     """The colour bar naming what a wall's colour means: its trust, 0 to 1."""
     from matplotlib.cm import ScalarMappable
@@ -186,11 +202,11 @@ def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SI
         if not (Path(folder) / "world.occmap").is_file():
             raise InputError(f"{folder}: no world.occmap to draw walls from (written by `occtool map`)")
         world = load_map(Path(folder) / "world.occmap")
-        if not isinstance(world, WorldMap):
-            raise InputError(f"{folder}: --walls draws a 2D map's walls; this world.occmap is 3D (its surfaces are "
-                             "patches, described by `occtool info`)")
-        lines = list(np.stack([world.start, world.end], axis=1))
-        colours = np.column_stack([np.ones(len(world)), 1.0 - world.trust, 1.0 - world.trust, np.ones(len(world))])
+        if isinstance(world, WorldMap):
+            lines, trust = list(np.stack([world.start, world.end], axis=1)), world.trust
+        else:
+            lines, trust = _patch_traces(world)
+        colours = np.column_stack([np.ones(len(trust)), 1.0 - trust, 1.0 - trust, np.ones(len(trust))])
         axes.add_collection(LineCollection(lines, colors=colours * _WALL_SHADE, linewidths=0.6,
                                            label="walls (world.occmap)"))
         _trust_key(figure, axes)
