@@ -230,8 +230,9 @@ def merge_maps(maps: Sequence[WorldMap], transforms: Sequence[Transform | None] 
          for world, t in zip(maps, placed, strict=True)]), axis=0)
     regions = [_place_region(world.region, t) for world, t in zip(maps, placed, strict=True)
                if not world.region.is_empty]
-    # In a canonical order: GEOS's union is exact up to snap rounding, its output order is the input's.
-    regions.sort(key=lambda r: shapely.to_wkb(r))
+    # Distinct, in a canonical order: GEOS's union is exact up to snap rounding, and its
+    # output's order (and the snapping of a polygon met twice) follows its input.
+    regions = [shapely.from_wkb(wkb) for wkb in sorted({shapely.to_wkb(r) for r in regions})]
     region = (shapely.normalize(shapely.union_all(regions, grid_size=unit)) if regions
               else shapely.MultiPolygon())
     return _assemble(codes, positions, region, settings, unit, half_unit)
@@ -283,4 +284,46 @@ def _assemble(codes: _Codes, positions: NDArray[np.int64], region: Any, settings
     return WorldMap.from_arrays(arrays)
 
 
-__all__ = ["COVER_ANGLE_STEPS", "COVER_MARGIN", "merge_maps"]
+def _load(path: Any) -> WorldMap:
+    """:func:`load_map`, with a 3D map (version 5) named as such."""
+    from occtool.fuse._world import load_map
+
+    try:
+        return load_map(path)
+    except InputError:
+        if _version(path) == 5:
+            raise InputError(f"{path}: a 3D world map (occmap version 5); occtool merges 2D world maps "
+                             "(versions 1-4)") from None
+        raise
+
+
+def _version(path: Any) -> Any:
+    """The format version a ``.occmap`` file's header names (``None`` if it names none)."""
+    import json
+    import struct
+
+    from occtool.formats.occmap import MAGIC, MAX_HEADER
+
+    try:
+        with open(path, "rb") as stream:
+            prefix = stream.read(len(MAGIC) + 4)
+            if len(prefix) < len(MAGIC) + 4 or not prefix.startswith(MAGIC):
+                return None
+            (length,) = struct.unpack("<I", prefix[len(MAGIC):])
+            header = json.loads(stream.read(min(length, MAX_HEADER)).decode("utf-8"))
+    except (OSError, ValueError):
+        return None
+    return header.get("version") if isinstance(header, dict) else None
+
+
+def merge_files(paths: Sequence[Any], output: Any, transforms: Sequence[Transform | None] | None = None, *,
+                overwrite: bool = True) -> WorldMap:
+    """``occtool merge``: the ``.occmap`` files ``paths`` (with one transform each, or
+    ``None``) merged by :func:`merge_maps` and written to ``output`` atomically; returns
+    the merged map."""
+    merged = merge_maps([_load(path) for path in paths], transforms)
+    merged.save(output, overwrite=overwrite)
+    return merged
+
+
+__all__ = ["COVER_ANGLE_STEPS", "COVER_MARGIN", "merge_files", "merge_maps"]
