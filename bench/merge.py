@@ -106,6 +106,29 @@ def score_merge(log: str | os.PathLike[str], *, seed: int = 0, robots: int = ROB
             raise SystemExit(f"occtool merge failed: {timing.get('error')}")
         rows.append({"name": f"merged ({robots} robots, occtool merge)", "scans": len(train),
                      **fused_row(merged, xy, n)})
+        # Merged in pairs first, merge(merge(1, 2), merge(3, 4)): nested merges differ in a few
+        # segments and the region's snap rounding (docs/map.md, "Merging maps").
+        half = len(parts) // 2
+        for name, group in (("pairs-a", parts[:half]), ("pairs-b", parts[half:])):
+            (scratch / name).mkdir(exist_ok=True)
+            done = _merge(group, scratch / name / "world.occmap")
+            if done["exit_status"]:
+                raise SystemExit(f"occtool merge failed: {done.get('error')}")
+        (scratch / "nested").mkdir(exist_ok=True)
+        done = _merge([scratch / "pairs-a" / "world.occmap", scratch / "pairs-b" / "world.occmap"],
+                      scratch / "nested" / "world.occmap")
+        if done["exit_status"]:
+            raise SystemExit(f"occtool merge failed: {done.get('error')}")
+        rows.append({"name": "merged in pairs, merge(merge(1, 2), merge(3, 4))", "scans": len(train),
+                     **fused_row(scratch / "nested", xy, n)})
+        nested_same = _digest(scratch / "nested" / "world.occmap") == _digest(merged / "world.occmap")
+        # The single run's map merged alone: what the merge's own dropping of covered segments does.
+        (scratch / "single-merged").mkdir(exist_ok=True)
+        done = _merge([scratch / "single" / "world.occmap"], scratch / "single-merged" / "world.occmap")
+        if done["exit_status"]:
+            raise SystemExit(f"occtool merge failed: {done.get('error')}")
+        rows.append({"name": "single run's map merged alone (its covered segments dropped)", "scans": len(train),
+                     **fused_row(scratch / "single-merged", xy, n)})
         # Every order of the inputs gives the same bytes.
         digests = set()
         for order in itertools.permutations(parts):
@@ -120,14 +143,15 @@ def score_merge(log: str | os.PathLike[str], *, seed: int = 0, robots: int = ROB
             shutil.rmtree(scratch, ignore_errors=True)
     return {"log": Path(log).name, "seed": seed, "scans": len(scans), "held_out_scans": int(test.sum()),
             "occupied_points": n, "free_points": len(free), "robots": robots, "rows": rows, "merge": timing,
-            "orders": len(list(itertools.permutations(range(robots)))), "same_bytes_every_order": same_bytes}
+            "orders": len(list(itertools.permutations(range(robots)))), "same_bytes_every_order": same_bytes,
+            "nested_same_bytes": nested_same}
 
 
 def markdown(result: dict[str, Any]) -> str:
     """The table of :func:`score_merge` and the issue's target."""
     rows = {row["name"]: row for row in result["rows"]}
     single = result["rows"][0]
-    merged = result["rows"][-1]
+    merged = rows[f"merged ({result['robots']} robots, occtool merge)"]
     timing = result["merge"]
     lines = [f"**{result['log']}**, seed {result['seed']}: {result['held_out_scans']} of {result['scans']} scans held "
              f"out in blocks of 40 (bench/heldout.py); {result['occupied_points']:,} returns and "
@@ -146,6 +170,8 @@ def markdown(result: dict[str, Any]) -> str:
               f"{'met' if ok_bytes else 'NOT met'})",
               f"- same bytes for all {result['orders']} orders of the inputs: "
               f"{'yes' if result['same_bytes_every_order'] else 'NO'}",
+              "- merged in pairs first, the same bytes as merged at once: "
+              f"{'yes' if result['nested_same_bytes'] else 'no (a few segments and the region differ; its AUC above)'}",
               f"- `occtool merge` of the {result['robots']} maps: {timing['wall_s']:.2f} s wall"
               + (f", {timing['user_s'] + timing['system_s']:.2f} s CPU, peak RSS {timing['peak_rss_kb'] / 1024:.0f} MB"
                  if "user_s" in timing else "")]
