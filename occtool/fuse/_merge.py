@@ -144,9 +144,10 @@ def _covered(codes: _Codes, unit: float, half_unit: float) -> NDArray[np.bool_]:
     normal = np.column_stack([-axis[t, 1], axis[t, 0]])
     across_limit = thickness[t] + thickness[s] + COVER_MARGIN
     inside = np.ones(t.size, dtype=bool)
+    # From the middles' difference in whole units: the test is the same wherever the pair lies.
+    between = (codes.middle[s] - codes.middle[t]) * unit
     for sign in (-1.0, 1.0):  # both end points of s
-        end = middle[s] + sign * half[s, None] * axis[s]
-        rel = end - middle[t]
+        rel = between + sign * half[s, None] * axis[s]
         across = np.abs(rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1])
         along = np.abs(rel[:, 0] * axis[t, 0] + rel[:, 1] * axis[t, 1]) - half[t]
         inside &= (across <= across_limit) & (along <= COVER_MARGIN)
