@@ -150,6 +150,12 @@ def test_the_command_writes_the_librarys_map(robots: list[WorldMap], tmp_path: P
     assert result.exit_code == 0, result.output
     expected = merge_maps([load_map(p) for p in paths], [None, (0.5, -0.25, math.radians(10)), None])
     assert out.read_bytes() == encode(expected)
+    # A folder `occtool map` wrote stands for its world.occmap.
+    (tmp_path / "run").mkdir()
+    robots[0].save(tmp_path / "run" / "world.occmap")
+    result = CliRunner().invoke(cli, ["merge", str(tmp_path / "run"), str(paths[1]), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes() == encode(merge_maps(robots[:2]))
 
 
 @pytest.mark.parametrize("case", ["not a map", "3d map", "bad transform", "unknown transform", "twice moved"])

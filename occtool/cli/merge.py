@@ -46,8 +46,7 @@ def _same(a: str, b: str) -> bool:
 
 
 @click.command("merge")
-@click.argument("maps", metavar="MAP.occmap...", nargs=-1, required=True,
-                type=click.Path(exists=True, dir_okay=False))
+@click.argument("maps", metavar="MAP.occmap...", nargs=-1, required=True, type=click.Path(exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="The merged map (an .occmap file, written completely or not at all).")
 @click.option("--transform", "transforms", nargs=2, multiple=True, metavar="MAP.occmap X,Y,YAW",
@@ -58,7 +57,8 @@ def _same(a: str, b: str) -> bool:
 @overwrite_option
 @config_option
 def merge(maps: tuple[str, ...], output: str, transforms: tuple[tuple[str, Any], ...], overwrite: bool) -> None:
-    """Merge the world maps MAP.occmap... (`occtool map` writes DIR/world.occmap) into one:
+    """Merge the world maps MAP.occmap... (`occtool map` writes DIR/world.occmap; a folder
+    stands for its world.occmap) into one:
     each wall once (of segments several maps give, a few centimetres apart, the longest),
     the union of the observed regions and every map's positions. The maps must share the
     robot's body band and settings. The output's bytes do not depend on the order of the

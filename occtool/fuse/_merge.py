@@ -286,9 +286,14 @@ def _assemble(codes: _Codes, positions: NDArray[np.int64], region: Any, settings
 
 
 def _load(path: Any) -> WorldMap:
-    """:func:`load_map`, with a 3D map (version 5) named as such."""
+    """:func:`load_map` of a file or of a folder's ``world.occmap`` (``occtool map``'s output),
+    with a 3D map (version 5) named as such."""
+    import os
+
     from occtool.fuse._world import load_map
 
+    if os.path.isdir(path):
+        path = os.path.join(path, "world.occmap")
     try:
         return load_map(path)
     except InputError:
@@ -319,9 +324,9 @@ def _version(path: Any) -> Any:
 
 def merge_files(paths: Sequence[Any], output: Any, transforms: Sequence[Transform | None] | None = None, *,
                 overwrite: bool = True) -> WorldMap:
-    """``occtool merge``: the ``.occmap`` files ``paths`` (with one transform each, or
-    ``None``) merged by :func:`merge_maps` and written to ``output`` atomically; returns
-    the merged map."""
+    """``occtool merge``: the ``.occmap`` files ``paths`` (a folder: its ``world.occmap``),
+    with one transform each or ``None``, merged by :func:`merge_maps` and written to
+    ``output`` atomically; returns the merged map."""
     merged = merge_maps([_load(path) for path in paths], transforms)
     merged.save(output, overwrite=overwrite)
     return merged
