@@ -109,6 +109,10 @@ def _segment_codes(world: WorldMap, transform: Transform | None, unit: float, ha
     return _Codes(middle, step, half, thickness, trust, facing)
 
 
+#: Segments whose covering candidates are found at once (bounds the pairs held in memory).
+COVER_CHUNK = 4096
+
+
 def _covered(codes: _Codes, unit: float, half_unit: float) -> NDArray[np.bool_]:
     """Which segments another one of higher rank covers (module docstring)."""
     from scipy.spatial import cKDTree
@@ -117,41 +121,39 @@ def _covered(codes: _Codes, unit: float, half_unit: float) -> NDArray[np.bool_]:
     dropped = np.zeros(n, dtype=bool)
     if n < 2:
         return dropped
-    middle = codes.middle * unit
     half = codes.half * half_unit
     thickness = codes.thickness / 1000.0
     angle = codes.step * (math.pi / DIRECTION_STEPS)
     axis = np.column_stack([np.cos(angle), np.sin(angle)])
-    reach = 2.0 * float(half.max()) + 2.0 * COVER_MARGIN
-    pairs = cKDTree(middle).query_pairs(reach, output_type="ndarray")
-    if not pairs.size:
-        return dropped
-    # Both ways round: t may cover s, s may cover t.
-    t = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    s = np.concatenate([pairs[:, 1], pairs[:, 0]])
-    # The rank: half-length, then trust, then every code (distinct rows: a total order).
     rank = _rank(codes)
-    higher = rank[t] > rank[s]
-    gap = np.abs(codes.step[t] - codes.step[s])
-    wrapped = gap > DIRECTION_STEPS // 2
-    gap = np.where(wrapped, DIRECTION_STEPS - gap, gap)
-    aligned = (gap <= COVER_ANGLE_STEPS) | (half[s] < COVER_MARGIN)
-    # Facings compare along the same direction: a pair coded across the wrap of pi runs opposite.
-    facing_s = np.where(wrapped, -codes.facing[s], codes.facing[s])
-    sides = codes.facing[t] * facing_s >= 0
-    keep = higher & aligned & sides
-    t, s = t[keep], s[keep]
-    normal = np.column_stack([-axis[t, 1], axis[t, 0]])
-    across_limit = thickness[t] + thickness[s] + COVER_MARGIN
-    inside = np.ones(t.size, dtype=bool)
-    # From the middles' difference in whole units: the test is the same wherever the pair lies.
-    between = (codes.middle[s] - codes.middle[t]) * unit
-    for sign in (-1.0, 1.0):  # both end points of s
-        rel = between + sign * half[s, None] * axis[s]
-        across = np.abs(rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1])
-        along = np.abs(rel[:, 0] * axis[t, 0] + rel[:, 1] * axis[t, 1]) - half[t]
-        inside &= (across <= across_limit) & (along <= COVER_MARGIN)
-    dropped[s[inside]] = True
+    index = cKDTree(codes.middle * unit)
+    # A segment t covers only segments whose middle lies in its band: within this of its middle.
+    radius = half + 2.0 * COVER_MARGIN + thickness + float(thickness.max())
+    for first in range(0, n, COVER_CHUNK):  # a loop over chunks of segments, each vectorised
+        block = np.arange(first, min(first + COVER_CHUNK, n))
+        near = index.query_ball_point(codes.middle[block] * unit, radius[block], return_sorted=False)
+        counts = np.fromiter((len(found) for found in near), dtype=np.int64, count=block.size)
+        t = np.repeat(block, counts)
+        s = np.concatenate([np.asarray(found, dtype=np.int64) for found in near]) if t.size else t
+        gap = np.abs(codes.step[t] - codes.step[s])
+        wrapped = gap > DIRECTION_STEPS // 2
+        gap = np.where(wrapped, DIRECTION_STEPS - gap, gap)
+        aligned = (gap <= COVER_ANGLE_STEPS) | (half[s] < COVER_MARGIN)
+        # Facings compare along the same direction: a pair coded across the wrap of pi runs opposite.
+        facing_s = np.where(wrapped, -codes.facing[s], codes.facing[s])
+        keep = (rank[t] > rank[s]) & aligned & (codes.facing[t] * facing_s >= 0)
+        t, s = t[keep], s[keep]
+        normal = np.column_stack([-axis[t, 1], axis[t, 0]])
+        across_limit = thickness[t] + thickness[s] + COVER_MARGIN
+        inside = np.ones(t.size, dtype=bool)
+        # From the middles' difference in whole units: the test is the same wherever the pair lies.
+        between = (codes.middle[s] - codes.middle[t]) * unit
+        for sign in (-1.0, 1.0):  # both end points of s
+            rel = between + sign * half[s, None] * axis[s]
+            across = np.abs(rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1])
+            along = np.abs(rel[:, 0] * axis[t, 0] + rel[:, 1] * axis[t, 1]) - half[t]
+            inside &= (across <= across_limit) & (along <= COVER_MARGIN)
+        dropped[s[inside]] = True
     return dropped
 
 
