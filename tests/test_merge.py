@@ -133,6 +133,8 @@ def test_maps_of_different_robots_or_bad_transforms_are_refused(robots: list[Wor
         merge_maps([robots[1]], [None, None])
     with pytest.raises(InputError, match="three numbers"):
         merge_maps([robots[1]], [(1.0, 2.0)])  # type: ignore[list-item]
+    with pytest.raises(InputError, match="three numbers"):
+        merge_maps([robots[1]], ["123"])  # type: ignore[list-item]
     with pytest.raises(InputError, match="finite"):
         merge_maps([robots[1]], [(1.0, 2.0, math.inf)])
     with pytest.raises(InputError, match="no maps"):

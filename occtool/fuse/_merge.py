@@ -14,7 +14,9 @@ merged map is
   :data:`COVER_ANGLE_STEPS` of the other's, they do not face opposite sides, and the other
   ranks higher: longer, then more trusted, then by its codes (a total order, so no two
   segments drop each other). Two robots that saw a wall give it twice, a few centimetres
-  apart: the map keeps the longer piece;
+  apart: the map keeps the longer piece (longer first kept fewer segments and scored
+  higher on held-out scans than more trusted first, docs/map.md). A map's own segments
+  cover one another too: a map merged alone loses its covered pieces;
 * **the union of the observed regions**, on the grid (GEOS's snap-rounding overlay);
 * **the positions of every input**, distinct, sorted by their grid codes.
 
@@ -180,6 +182,8 @@ def _check(maps: Sequence[WorldMap], transforms: Sequence[Transform | None] | No
             out.append(None)
             continue
         try:
+            if isinstance(transform, (str, bytes)):  # "123" would unpack as 1, 2, 3
+                raise TypeError
             x, y, yaw = (float(v) for v in transform)
         except (TypeError, ValueError):
             raise InputError(f"transform {k + 1} must be three numbers x, y, yaw, got {transform!r}") from None
