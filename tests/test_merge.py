@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from pathlib import Path
 
@@ -14,8 +13,8 @@ from click.testing import CliRunner
 
 from occtool.cli.main import cli
 from occtool.errors import InputError
-from occtool.formats.occmap import encode, framed
-from occtool.fuse import WorldMap, decode_map, load_map, merge_maps
+from occtool.formats.occmap import encode
+from occtool.fuse import WorldMap, build_world_map_3d, decode_map, load_map, merge_maps
 
 INTEL = Path(__file__).resolve().parents[1] / "fixtures" / "maps" / "intel.occmap"
 
@@ -139,6 +138,8 @@ def test_maps_of_different_robots_or_bad_transforms_are_refused(robots: list[Wor
         merge_maps([robots[1]], [(1.0, 2.0, math.inf)])
     with pytest.raises(InputError, match="no maps"):
         merge_maps([])
+    with pytest.raises(InputError, match="not a WorldMap"):
+        merge_maps([robots[1], "robot2/world.occmap"])  # type: ignore[list-item]
 
 
 def test_the_command_writes_the_librarys_map(robots: list[WorldMap], tmp_path: Path) -> None:
@@ -170,8 +171,11 @@ def test_bad_input_is_one_line_and_writes_nothing(robots: list[WorldMap], tmp_pa
         other.write_text("x,y,z\n0,0,0\n")
         wanted = "not a readable occtool map"
     elif case == "3d map":
-        other.write_bytes(framed(json.dumps({"format": "occtool.occmap", "version": 5}).encode(), b""))
-        wanted = "3D world map"
+        # A small real one: rays from a point to a sphere of 2 m.
+        directions = np.random.default_rng(0).normal(size=(800, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        build_world_map_3d(np.zeros((800, 3)), 2.0 * directions, resolution=0.25).save(other)
+        wanted = "a 3D world map (occmap version 5); occtool merges 2D world maps"
     else:
         robots[1].save(other)
         args += {"bad transform": ["--transform", str(other), "1,2,east"],

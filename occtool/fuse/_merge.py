@@ -47,6 +47,7 @@ from occtool.errors import InputError
 from occtool.formats._occmap_packing import DIRECTION_STEPS, HALF_UNIT, _grid, _segment_ends, _tiles
 from occtool.formats.occmap import UNIT, MapArrays
 from occtool.fuse._world import WorldMap
+from occtool.fuse._world3d import WorldMap3D
 
 FloatArray = NDArray[np.float64]
 Transform = tuple[float, float, float]
@@ -224,6 +225,10 @@ def merge_maps(maps: Sequence[WorldMap], transforms: Sequence[Transform | None] 
     import shapely
 
     placed = _check(maps, transforms)
+    for k, world in enumerate(maps, 1):
+        if not isinstance(world, WorldMap):
+            raise InputError(f"map {k}: {_NOT_2D}" if isinstance(world, WorldMap3D)
+                             else f"map {k} is a {type(world).__name__}, not a WorldMap")
     maps = [world if world.unit is not None and world.half_unit is not None else world.quantised()
             for world in maps]
     settings = _settings(maps)
@@ -292,40 +297,22 @@ def _assemble(codes: _Codes, positions: NDArray[np.int64], region: Any, settings
 
 
 def _load(path: Any) -> WorldMap:
-    """:func:`load_map` of a file or of a folder's ``world.occmap`` (``occtool map``'s output),
-    with a 3D map (version 5) named as such."""
+    """:func:`occtool.fuse.load_map` of a file or of a folder's ``world.occmap`` (``occtool
+    map``'s output); a 3D map (version 5) is refused."""
     import os
 
-    from occtool.fuse._world import load_map
+    from occtool.fuse._load import load_map
 
     if os.path.isdir(path):
         path = os.path.join(path, "world.occmap")
-    try:
-        return load_map(path)
-    except InputError:
-        if _version(path) == 5:
-            raise InputError(f"{path}: a 3D world map (occmap version 5); occtool merges 2D world maps "
-                             "(versions 1-4)") from None
-        raise
+    world = load_map(path)
+    if not isinstance(world, WorldMap):
+        raise InputError(f"{path}: {_NOT_2D}")
+    return world
 
 
-def _version(path: Any) -> Any:
-    """The format version a ``.occmap`` file's header names (``None`` if it names none)."""
-    import json
-    import struct
-
-    from occtool.formats.occmap import MAGIC, MAX_HEADER
-
-    try:
-        with open(path, "rb") as stream:
-            prefix = stream.read(len(MAGIC) + 4)
-            if len(prefix) < len(MAGIC) + 4 or not prefix.startswith(MAGIC):
-                return None
-            (length,) = struct.unpack("<I", prefix[len(MAGIC):])
-            header = json.loads(stream.read(min(length, MAX_HEADER)).decode("utf-8"))
-    except (OSError, ValueError):
-        return None
-    return header.get("version") if isinstance(header, dict) else None
+#: Why a 3D map is refused.
+_NOT_2D = "a 3D world map (occmap version 5); occtool merges 2D world maps (versions 1-4)"
 
 
 def merge_files(paths: Sequence[Any], output: Any, transforms: Sequence[Transform | None] | None = None, *,
