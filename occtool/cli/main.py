@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "evaluate": ("occtool.cli.evaluate", "evaluate", "Score a navigation polygon against a scene's truth."),
     "map": ("occtool.cli.map", "map_command", "Fuse every position of a log into one world map (Nav2, Foxglove)."),
     "query": ("occtool.cli.query", "query", "Occupancy of x, y, z points in a saved world map (world.occmap)."),
+    "merge": ("occtool.cli.merge", "merge", "Merge saved world maps (world.occmap) into one, in any order."),
     "evaluate-log": ("occtool.cli.evaluate_log", "evaluate_log",
                      "Score a log's fused map against a grid on held-out scans."),
     "compare-grid": ("occtool.cli.compare_grid", "compare_grid", "Compare the model with occupancy grids."),

@@ -79,6 +79,7 @@ from occtool.fuse._inner_split import choose_resolution
 from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.fuse._load import load_map
 from occtool.fuse._map import FRONT_MARGIN, FusedMap
+from occtool.fuse._merge import merge_files, merge_maps
 from occtool.fuse._projection import project_band
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns, returns_of_positions
@@ -179,6 +180,8 @@ __all__ = [
     "is_scanning_laser",
     "load_map",
     "map_log_3d",
+    "merge_files",
+    "merge_maps",
     "nearest_returns",
     "observe",
     "observed_reach",
