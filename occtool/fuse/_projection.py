@@ -38,6 +38,8 @@ GROUND_WINDOW = 0.3
 RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
 #: Most raster cells drawn (memory: a few bytes each).
 MAX_CELLS = 50_000_000
+#: Raster cells filled at once.
+STRIP_CELLS = 1 << 20
 
 
 class TileGround:
@@ -176,25 +178,38 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     seen = np.bincount(column[in_band], minlength=shape[0] * shape[1])
     band_free = seen == (high - low + 1)
     band_seen = seen > 0
-    jj, ii = np.mgrid[0:ny, 0:nx]
-    centres = np.column_stack([origin[0] + (ii.ravel() + 0.5) * resolution,
-                               origin[1] + (jj.ravel() + 0.5) * resolution])
-    ci = np.floor(centres[:, 0] / r).astype(np.int64) - world.lo[0]
-    cj = np.floor(centres[:, 1] / r).astype(np.int64) - world.lo[1]
-    inside = (ci >= 0) & (ci < shape[0]) & (cj >= 0) & (cj < shape[1])
-    cell_column = np.where(inside, ci * shape[1] + cj, 0)
-    free = inside & band_free[cell_column]
-    explored = inside & band_seen[cell_column]
+    # A raster cell's map column is separable: its x picks i, its y picks j. Rows are
+    # filled in strips (memory of a strip, not of the raster, beyond the output itself).
+    ci = np.floor((origin[0] + (np.arange(nx) + 0.5) * resolution) / r).astype(np.int64) - world.lo[0]
+    cj = np.floor((origin[1] + (np.arange(ny) + 0.5) * resolution) / r).astype(np.int64) - world.lo[1]
+    ci_in, cj_in = (ci >= 0) & (ci < shape[0]), (cj >= 0) & (cj < shape[1])
+    ci, cj = np.clip(ci, 0, shape[0] - 1), np.clip(cj, 0, shape[1] - 1)
+    cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
+    explored = np.zeros((ny, nx), dtype=bool)
+    strip = max(1, STRIP_CELLS // nx)
+    for begin in range(0, ny, strip):
+        rows = slice(begin, min(begin + strip, ny))
+        column = cj[rows, None] + ci[None, :] * shape[1]
+        inside = cj_in[rows, None] & ci_in[None, :]
+        cells[rows][inside & band_free[column]] = FREE
+        explored[rows] = inside & band_seen[column]
     if len(places) and radius > 0:
-        from scipy.spatial import cKDTree  # lazy, as above
-
-        near, _ = cKDTree(places[:, :2]).query(centres, distance_upper_bound=radius)
-        driven = np.isfinite(near)
-        free |= driven
-        explored |= driven
+        # The cells whose centres lie within the radius of a position: the robot's body was there.
+        reach = int(math.ceil(radius / resolution))
+        offset = np.arange(-reach, reach + 1)
+        pc = np.floor((places[:, 0] - origin[0]) / resolution).astype(np.int64)
+        pr = np.floor((places[:, 1] - origin[1]) / resolution).astype(np.int64)
+        col = pc[:, None, None] + offset[None, None, :]
+        row = pr[:, None, None] + offset[None, :, None]
+        dx = origin[0] + (col + 0.5) * resolution - places[:, 0, None, None]
+        dy = origin[1] + (row + 0.5) * resolution - places[:, 1, None, None]
+        near = (dx * dx + dy * dy <= radius * radius) & (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        row, col = np.broadcast_to(row, near.shape)[near], np.broadcast_to(col, near.shape)[near]
+        cells[row, col] = FREE
+        explored[row, col] = True
+    cells, explored = cells.reshape(-1), explored.reshape(-1)
+    probability = np.where(cells == FREE, np.float32(world.free_level), np.float32(0.5)).astype(np.float32)
     # Occupied: the samples of every patch that is not ground and can reach the occupied level.
-    cells = np.where(free, FREE, UNKNOWN).astype(np.uint8)
-    probability = np.where(free, world.free_level, 0.5).astype(np.float32)
     g = world.geometry
     members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED))
     if members.size:
