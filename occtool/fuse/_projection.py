@@ -156,12 +156,6 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     if tile is None:
         tile = max(4.0 * world.resolution, 1.0)
     ground = TileGround(world, places, sensor_height, tile)
-    bounds = world.bounds
-    origin = np.floor(bounds[0, :2] / resolution) * resolution
-    nx, ny = (np.ceil((bounds[1, :2] - origin) / resolution).astype(np.int64)).tolist()
-    nx, ny = max(nx, 1), max(ny, 1)
-    if nx * ny > max_cells:
-        raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
     # Free: the columns of the map's cells whose band cells were all crossed.
     r = world.resolution
     shape = world.shape
@@ -178,6 +172,24 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     seen = np.bincount(column[in_band], minlength=shape[0] * shape[1])
     band_free = seen == (high - low + 1)
     band_seen = seen > 0
+    # Occupied: the samples of every patch that is not ground and can reach the occupied level.
+    g = world.geometry
+    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED))
+    points, index = _patch_samples(world, members, resolution / math.sqrt(2.0))
+    height = points[:, 2] - ground(points[:, :2])
+    keep = (height >= ground_clearance) & (height <= body_height)
+    points, index = points[keep], index[keep]
+    # The raster covers what the band holds (a lidar's rays reach far above it): the columns
+    # whose band was seen, the obstacles in it and the robot's footprint.
+    seen_ij = np.column_stack(np.divmod(np.flatnonzero(band_seen), shape[1])) + world.lo[:2]
+    corners = [seen_ij * r, (seen_ij + 1) * r, points[:, :2], places[:, :2] - radius, places[:, :2] + radius]
+    every = np.concatenate([c.reshape(-1, 2) for c in corners])
+    low_xy, high_xy = (every.min(axis=0), every.max(axis=0)) if len(every) else (np.zeros(2), np.zeros(2))
+    origin = np.floor(low_xy / resolution) * resolution
+    nx, ny = (np.ceil((high_xy - origin) / resolution).astype(np.int64)).tolist()
+    nx, ny = max(nx, 1), max(ny, 1)
+    if nx * ny > max_cells:
+        raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
     # A raster cell's map column is separable: its x picks i, its y picks j. Rows are
     # filled in strips (memory of a strip, not of the raster, beyond the output itself).
     ci = np.floor((origin[0] + (np.arange(nx) + 0.5) * resolution) / r).astype(np.int64) - world.lo[0]
@@ -209,20 +221,13 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         explored[row, col] = True
     cells, explored = cells.reshape(-1), explored.reshape(-1)
     probability = np.where(cells == FREE, np.float32(world.free_level), np.float32(0.5)).astype(np.float32)
-    # Occupied: the samples of every patch that is not ground and can reach the occupied level.
-    g = world.geometry
-    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED))
-    if members.size:
-        points, index = _patch_samples(world, members, resolution / math.sqrt(2.0))
-        height = points[:, 2] - ground(points[:, :2])
-        keep = (height >= ground_clearance) & (height <= body_height)
-        col = np.floor((points[keep, 0] - origin[0]) / resolution).astype(np.int64)
-        row = np.floor((points[keep, 1] - origin[1]) / resolution).astype(np.int64)
-        ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-        flat = row[ok] * nx + col[ok]
-        cells[flat] = OCCUPIED
-        explored[flat] = True
-        np.maximum.at(probability, flat, g.trust[index[keep][ok]].astype(np.float32))
+    col = np.floor((points[:, 0] - origin[0]) / resolution).astype(np.int64)
+    row = np.floor((points[:, 1] - origin[1]) / resolution).astype(np.int64)
+    ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+    flat = row[ok] * nx + col[ok]
+    cells[flat] = OCCUPIED
+    explored[flat] = True
+    np.maximum.at(probability, flat, g.trust[index[ok]].astype(np.float32))
     return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
                   probability.reshape(ny, nx), np.zeros((ny, nx), dtype=bool), explored.reshape(ny, nx))
 
