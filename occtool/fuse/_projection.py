@@ -38,8 +38,9 @@ GROUND_WINDOW = 0.3
 RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
 #: Most raster cells drawn (memory: a few bytes each).
 MAX_CELLS = 50_000_000
-#: Raster cells filled at once.
+#: Raster cells filled at once, and patch samples drawn at once (memory, not speed).
 STRIP_CELLS = 1 << 20
+SAMPLES_AT_ONCE = 1 << 20
 
 
 class TileGround:
@@ -69,10 +70,10 @@ class TileGround:
         bounds = np.vstack([world.bounds[:, :2], self.positions[:, :2].min(axis=0), self.positions[:, :2].max(axis=0)])
         self.low = np.floor(bounds.min(axis=0) / self.tile).astype(np.int64)
         self.shape = tuple((np.floor(bounds.max(axis=0) / self.tile).astype(np.int64) - self.low + 1).tolist())
-        heights: list[list[float]] = [[] for _ in range(self.shape[0] * self.shape[1])]
         patch_tile = self._flat(g.centres[driveable, :2])
-        for index, z in zip(patch_tile.tolist(), g.centres[driveable, 2].tolist()):
-            heights[index].append(z)
+        order = np.argsort(patch_tile, kind="stable")
+        self._heights = g.centres[driveable, 2][order]
+        self._bounds = np.searchsorted(patch_tile[order], np.arange(self.shape[0] * self.shape[1] + 1))
         ground = np.full(self.shape[0] * self.shape[1], np.nan)
         seeds = self._flat(self.positions[:, :2])
         implied = self.positions[:, 2] - self.sensor_height
@@ -81,7 +82,7 @@ class TileGround:
         queue: deque[int] = deque()
         for begin, end in zip(starts, np.r_[starts[1:], len(order)]):
             here = int(seeds[order[begin]])
-            ground[here] = self._nearest_height(heights[here], float(np.median(implied[order[begin:end]])))
+            ground[here] = self._nearest_height(here, float(np.median(implied[order[begin:end]])))
             queue.append(here)
         # Breadth first over the tiles (their count, not the points', bounds the loop).
         while queue:
@@ -91,7 +92,7 @@ class TileGround:
                 ni, nj = i + di, j + dj
                 if 0 <= ni < self.shape[0] and 0 <= nj < self.shape[1] and np.isnan(ground[ni * self.shape[1] + nj]):
                     there = ni * self.shape[1] + nj
-                    ground[there] = self._nearest_height(heights[there], float(ground[here]))
+                    ground[there] = self._nearest_height(there, float(ground[here]))
                     queue.append(there)
         self._ground = ground
         self.ground_patch = np.zeros(len(g.trust), dtype=bool)
@@ -101,11 +102,12 @@ class TileGround:
         ij = np.clip(np.floor(xy / self.tile).astype(np.int64) - self.low, 0, np.array(self.shape) - 1)
         return np.asarray(ij[:, 0] * self.shape[1] + ij[:, 1], dtype=np.int64)
 
-    def _nearest_height(self, heights: list[float], reference: float) -> float:
-        """The height of ``heights`` nearest ``reference`` within :attr:`climb`, else ``reference``."""
-        if not heights:
+    def _nearest_height(self, tile: int, reference: float) -> float:
+        """The height of a driveable patch of ``tile`` nearest ``reference`` within :attr:`climb`,
+        else ``reference``."""
+        values = self._heights[self._bounds[tile]:self._bounds[tile + 1]]
+        if not values.size:
             return reference
-        values = np.asarray(heights)
         best = int(np.argmin(np.abs(values - reference)))
         return float(values[best]) if abs(values[best] - reference) <= self.climb else reference
 
@@ -172,17 +174,18 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     seen = np.bincount(column[in_band], minlength=shape[0] * shape[1])
     band_free = seen == (high - low + 1)
     band_seen = seen > 0
-    # Occupied: the samples of every patch that is not ground and can reach the occupied level.
+    # Occupied: every patch that is not ground and can reach the occupied level, and whose
+    # slab reaches into the band (by its centre's height and its half-diagonal).
     g = world.geometry
-    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED))
-    points, index = _patch_samples(world, members, resolution / math.sqrt(2.0))
-    height = points[:, 2] - ground(points[:, :2])
-    keep = (height >= ground_clearance) & (height <= body_height)
-    points, index = points[keep], index[keep]
+    reach = np.sqrt(np.sum(g.extents ** 2, axis=1)) + g.thickness
+    above = g.centres[:, 2] - ground(g.centres[:, :2])
+    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED)
+                             & (above + reach >= ground_clearance) & (above - reach <= body_height))
     # The raster covers what the band holds (a lidar's rays reach far above it): the columns
     # whose band was seen, the obstacles in it and the robot's footprint.
     seen_ij = np.column_stack(np.divmod(np.flatnonzero(band_seen), shape[1])) + world.lo[:2]
-    corners = [seen_ij * r, (seen_ij + 1) * r, points[:, :2], places[:, :2] - radius, places[:, :2] + radius]
+    corners = [seen_ij * r, (seen_ij + 1) * r, g.centres[members, :2] - reach[members, None],
+               g.centres[members, :2] + reach[members, None], places[:, :2] - radius, places[:, :2] + radius]
     every = np.concatenate([c.reshape(-1, 2) for c in corners])
     low_xy, high_xy = (every.min(axis=0), every.max(axis=0)) if len(every) else (np.zeros(2), np.zeros(2))
     origin = np.floor(low_xy / resolution) * resolution
@@ -221,13 +224,19 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         explored[row, col] = True
     cells, explored = cells.reshape(-1), explored.reshape(-1)
     probability = np.where(cells == FREE, np.float32(world.free_level), np.float32(0.5)).astype(np.float32)
-    col = np.floor((points[:, 0] - origin[0]) / resolution).astype(np.int64)
-    row = np.floor((points[:, 1] - origin[1]) / resolution).astype(np.int64)
-    ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-    flat = row[ok] * nx + col[ok]
-    cells[flat] = OCCUPIED
-    explored[flat] = True
-    np.maximum.at(probability, flat, g.trust[index[ok]].astype(np.float32))
+    spacing = resolution / math.sqrt(2.0)
+    across = np.ceil(2.0 * g.extents[members] / spacing) + 2
+    batch = np.cumsum(3 * across[:, 0] * across[:, 1]) // SAMPLES_AT_ONCE  # about as many samples a batch
+    for part in np.split(members, np.flatnonzero(np.diff(batch)) + 1):
+        points, index = _patch_samples(world, part, spacing)
+        height = points[:, 2] - ground(points[:, :2])
+        col = np.floor((points[:, 0] - origin[0]) / resolution).astype(np.int64)
+        row = np.floor((points[:, 1] - origin[1]) / resolution).astype(np.int64)
+        ok = (height >= ground_clearance) & (height <= body_height) & (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        flat = row[ok] * nx + col[ok]
+        cells[flat] = OCCUPIED
+        explored[flat] = True
+        np.maximum.at(probability, flat, g.trust[index[ok]].astype(np.float32))
     return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
                   probability.reshape(ny, nx), np.zeros((ny, nx), dtype=bool), explored.reshape(ny, nx))
 
