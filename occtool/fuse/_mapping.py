@@ -149,17 +149,23 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
                                      keyframe_share=keyframe_share, progress=progress,
                                      heights_from_data=heights_from_data)
     positions = list(zip(report.fitted, fused.poses, fused.stamps))
-    world3d, sensors = None, None
+    world3d, sensors, seconds = None, None, 0.0
     if world == "3d" or (world == "auto" and is_3d_log(log)):
+        import time
+
         import numpy as np
 
         from occtool.fuse._world3d import map_log_3d
 
+        started = time.perf_counter()
         world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
+        seconds = time.perf_counter() - started
         sensors = np.array([p.pose.translation for p in log.positions if p.pose is not None]).reshape(-1, 3)
     run = map_of_run(fused, models, positions, resolution=resolution,
                      navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
                      world3d=world3d, sensor_positions=sensors)
+    if world3d is not None:
+        run.seconds["world_map"] = seconds
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
              "skipped_positions": [index for index, _ in report.skipped],
              "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}
