@@ -96,9 +96,9 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
 
 
 def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
-           xs: FloatArray, ys: FloatArray, first: NDArray[np.intp], last: NDArray[np.intp],
-           inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None, near: list[NDArray[np.bool_]],
-           within: float, doubted_trust: float) -> None:
+           xs: NDArray[np.floating[Any]], ys: NDArray[np.floating[Any]], first: NDArray[np.intp],
+           last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
+           near: list[NDArray[np.bool_]], within: float, doubted_trust: float) -> None:
     """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``near``:
     the tiles a ridge reaches, and those a wall's band or rim reaches."""
     from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED

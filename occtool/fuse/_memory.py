@@ -1,0 +1,116 @@
+"""The memory a run of ``occtool map`` needs, estimated before the work starts (:func:`estimate_map_memory`),
+and the refusal of a run over the user's limit (:func:`check_map_memory`).
+
+What a run holds at its peak grows with two things a log says up front:
+
+* its **positions** (scans): each one's features while it is fitted, its keyframe model,
+  its returns per pan bin (:class:`occtool.fuse.RunReturns`), its navigation map and its
+  share of the navigation region;
+* the **raster** of its extent: the world map's Nav2 cells (one byte), their occupancy
+  (float32) and explored flags, held whole, with the frontier search's labels and the MCAP
+  grid beside them at the peak. The world map's walls reach :data:`WALL_REACH` from each
+  position, so the extent is the box of every position and of its features within that reach.
+
+The figures are from runs on the project's 2-core machine (:data:`BASE_BYTES`, ...); the
+estimate errs high, so a run it passes fits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import InputError
+from occtool.fuse._refit import WALL_REACH
+from occtool.limits import DEFAULT_MEMORY_LIMIT, memory_bytes
+
+#: The process before any data: Python, numpy, scipy, shapely and occtool's modules (an
+#: ``occtool map`` of a 10-scan log peaks near this).
+BASE_BYTES = 150 * 10**6
+#: Per position of the log: its model and returns while fused, its navigation map and its
+#: share of the navigation region (the Freiburg campus's 1833 positions held ~250 MB beside its raster).
+POSITION_BYTES = 150 * 10**3
+#: Per feature of the log: its float64 point and evidence, and the copies a fit makes.
+FEATURE_BYTES = 100
+#: Per cell of a trinary raster at the peak: the cells (1 byte), occupancy (4), explored (1),
+#: then the frontier labels (4) and flags or the MCAP grid's copies (int8 values, bytes, message).
+RASTER_CELL_BYTES = 14
+#: ... and of a ``scale`` raster, whose PNG is made from the graded occupancy (float32 and RGBA copies).
+SCALE_CELL_BYTES = 28
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    """What :func:`estimate_map_memory` found: ``total`` bytes, and its parts by name."""
+
+    total: int
+    parts: dict[str, int] = field(default_factory=dict)
+    #: The raster's rows and columns, as estimated from the positions and their features.
+    raster_shape: tuple[int, int] = (0, 0)
+    resolution: float = 0.05
+
+
+def _gb(size: int) -> str:
+    return f"{size / 1e9:.1f} GB" if size >= 10**8 else f"{size / 1e6:.0f} MB"
+
+
+def raster_extent(log: Any, reach: float = WALL_REACH) -> tuple[np.ndarray, np.ndarray] | None:
+    """World ``(x, y)`` lower and upper corners of the positions of ``log`` (a
+    :class:`~occtool.features.RangeLog`) and their features within ``reach`` metres;
+    ``None`` when no position has a pose."""
+    lower = np.full(2, np.inf)
+    upper = np.full(2, -np.inf)
+    for position in log.positions:  # a loop over positions, each vectorised over its features
+        pose = position.pose
+        if pose is None:
+            continue
+        points = position.features.points
+        near = points[np.hypot(points[:, 0], points[:, 1]) <= reach, :2]
+        xy = np.concatenate([pose.to_world(near), [[pose.x, pose.y]]])
+        lower = np.minimum(lower, xy.min(axis=0))
+        upper = np.maximum(upper, xy.max(axis=0))
+    return (lower, upper) if np.isfinite(lower).all() else None
+
+
+def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = "trinary") -> MemoryEstimate:
+    """The peak memory ``occtool map`` needs for ``log`` (a :class:`~occtool.features.RangeLog`
+    with poses), in bytes, from its positions, its features and the raster of its extent
+    at ``resolution`` metres (``nav2_mode`` ``"scale"`` costs more a cell)."""
+    if not resolution > 0:
+        raise InputError(f"resolution must be a positive number of metres, got {resolution}")
+    positions = len(log.positions)
+    features = sum(len(position.features) for position in log.positions)
+    extent = raster_extent(log)
+    rows = columns = 0
+    if extent is not None:
+        # As WorldMap.rasterise places it: origin on the grid, one cell more each way.
+        lower, upper = extent
+        origin = np.floor(lower / resolution) * resolution
+        columns, rows = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
+    per_cell = SCALE_CELL_BYTES if nav2_mode == "scale" else RASTER_CELL_BYTES
+    parts = {"base": BASE_BYTES, "positions": positions * POSITION_BYTES + features * FEATURE_BYTES,
+             "raster": int(rows) * int(columns) * per_cell}
+    return MemoryEstimate(sum(parts.values()), parts, (int(rows), int(columns)), float(resolution))
+
+
+def check_map_memory(log: Any, *, memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT,
+                     resolution: float = 0.05, nav2_mode: str = "trinary") -> MemoryEstimate:
+    """:func:`estimate_map_memory`, refused with an :class:`InputError` naming
+    ``memory_limit=`` (the command line's ``--memory-limit``) when the estimate is over
+    ``memory_limit`` (bytes, or a size such as ``"8G"``; ``None``: no limit). Returns the estimate."""
+    limit = memory_bytes(memory_limit)
+    estimate = estimate_map_memory(log, resolution=resolution, nav2_mode=nav2_mode)
+    if limit is not None and estimate.total > limit:
+        rows, columns = estimate.raster_shape
+        wanted = max(1, -(-estimate.total // 10**9))  # whole gigabytes, rounded up
+        raise InputError(
+            f"mapping {log.source or 'this log'} needs about {_gb(estimate.total)} of memory "
+            f"({len(log.positions)} positions: {_gb(estimate.parts['positions'])}; a {rows} x {columns} raster "
+            f"at {resolution:g} m: {_gb(estimate.parts['raster'])}), over the limit of {_gb(limit)}: "
+            f"raise it with memory_limit='{wanted}G' or map at a coarser resolution=")
+    return estimate
+
+
+__all__ = ["MemoryEstimate", "check_map_memory", "estimate_map_memory", "raster_extent"]
