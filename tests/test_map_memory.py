@@ -93,3 +93,33 @@ def test_the_command_line_refuses_with_the_flag(room_log, tmp_path):
     assert not (tmp_path / "out").exists()
     bad = CliRunner().invoke(cli, ["map", str(room_log), "-o", str(tmp_path / "out"), "--memory-limit", "lots"])
     assert bad.exit_code == 2 and "--memory-limit" in bad.output
+
+
+def test_map_pgm_written_in_strips_is_the_whole_image(tmp_path, monkeypatch):
+    """The PGM is written a few rows at a time, top row first, with the bytes of one copy."""
+    import occtool.formats.nav2 as nav2
+
+    pixels = np.random.default_rng(0).choice(np.array([0, 205, 254], dtype=np.uint8), size=(37, 11))
+    monkeypatch.setattr(nav2, "_STRIP_BYTES", 30)  # two rows a strip, the last strip one row
+    _, image = nav2.write_nav2(pixels, 0.05, (0.0, 0.0), tmp_path / "map.yaml")
+    data = image.read_bytes()
+    header = b"P5\n# occtool fused map\n11 37\n255\n"
+    assert data == header + pixels[::-1].tobytes()
+    assert np.array_equal(nav2.read_nav2(tmp_path / "map.yaml").cells == -1, pixels == 205)
+
+
+def test_the_memory_limit_option_passes_a_size_on_and_refuses_anything_else():
+    import click
+
+    from occtool.cli.options import memory_limit_option
+
+    @click.command()
+    @memory_limit_option
+    def command(memory_limit):
+        click.echo(repr(memory_limit))
+
+    assert CliRunner().invoke(command, []).output.strip() == "'4G'"
+    assert CliRunner().invoke(command, ["--memory-limit", "500M"]).output.strip() == "'500M'"
+    assert CliRunner().invoke(command, ["--memory-limit", "none"]).output.strip() == "None"
+    bad = CliRunner().invoke(command, ["--memory-limit", "lots"])
+    assert bad.exit_code == 2 and "Invalid value for '--memory-limit': must be a size" in bad.output

@@ -40,6 +40,8 @@ from occtool.limits import MAX_DISTANCE
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
+#: Bytes of image rows written at a time.
+_STRIP_BYTES = 1 << 20
 #: Map images larger than this many cells are refused before they are decoded.
 MAX_IMAGE_CELLS = 50_000_000
 #: A scale map's free threshold, map_saver's default (its unknown is transparency, not a grey).
@@ -82,8 +84,11 @@ def write_nav2(pixels: NDArray[np.uint8], resolution: float, origin: tuple[float
     header = f"P5\n# occtool fused map\n{cols} {rows}\n255\n".encode("ascii")
     with atomic_write(image_path, "wb", overwrite=overwrite) as handle:
         handle.write(header)
-        # PGM's first row is the top of the picture: the map's highest y.
-        handle.write(np.ascontiguousarray(pixels[::-1]).tobytes())
+        # PGM's first row is the top of the picture: the map's highest y. Written in strips
+        # of rows, so that a large map is never copied whole.
+        step = max(1, _STRIP_BYTES // cols)
+        for top in range(rows, 0, -step):
+            handle.write(np.ascontiguousarray(pixels[max(0, top - step):top][::-1]).tobytes())
     _write_yaml(yaml_path, image_path.name, "trinary", resolution, origin, FREE_THRESH, overwrite)
     return yaml_path, image_path
 

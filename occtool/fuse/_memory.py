@@ -27,13 +27,16 @@ from occtool.fuse._refit import WALL_REACH
 from occtool.limits import DEFAULT_MEMORY_LIMIT, memory_bytes
 
 #: The process before any data: Python, numpy, scipy, shapely and occtool's modules (an
-#: ``occtool map`` of a 10-scan log peaks near this).
-BASE_BYTES = 150 * 10**6
+#: ``occtool map`` of a 10-scan log peaks near 100 MB).
+BASE_BYTES = 100 * 10**6
 #: Per position of the log: its model and returns while fused, its navigation map and its
-#: share of the navigation region (the Freiburg campus's 1833 positions held ~250 MB beside its raster).
-POSITION_BYTES = 150 * 10**3
-#: Per feature of the log: its float64 point and evidence, and the copies a fit makes.
-FEATURE_BYTES = 100
+#: share of the navigation region ...
+POSITION_BYTES = 120 * 10**3
+#: ... and per feature: its float64 point and evidence, and the copies a fit makes. With
+#: :data:`RASTER_CELL_BYTES` these put the four CARMEN logs and the two largest at 1.1-1.6
+#: times their measured peaks (Intel 226 MB for 153, FR-079 388 for 246, the Freiburg campus
+#: 651 for 586, the MIT corridor 670 for 576).
+FEATURE_BYTES = 60
 #: Per cell of a trinary raster at the peak: the cells (1 byte), occupancy (4), explored (1),
 #: then the frontier labels (4) and flags or the MCAP grid's copies (int8 values, bytes, message).
 RASTER_CELL_BYTES = 14
