@@ -56,7 +56,9 @@ class MemoryEstimate:
 
 
 def _gb(size: int) -> str:
-    return f"{size / 1e9:.1f} GB" if size >= 10**8 else f"{size / 1e6:.0f} MB"
+    if size >= 10**8:
+        return f"{size / 1e9:.1f} GB"
+    return f"{size / 1e6:.0f} MB" if size >= 10**6 else "under 1 MB"
 
 
 def raster_extent(log: Any, reach: float = WALL_REACH) -> tuple[np.ndarray, np.ndarray] | None:
