@@ -63,26 +63,26 @@ def _gb(size: int) -> str:
 
 def raster_extent(log: Any, reach: float = WALL_REACH) -> tuple[np.ndarray, np.ndarray] | None:
     """World ``(x, y)`` lower and upper corners of the positions of ``log`` (a
-    :class:`~occtool.features.RangeLog`) and their features within ``reach`` metres;
-    ``None`` when no position has a pose."""
+    :class:`~occtool.features.RangeLog`) and their features within ``reach`` metres (a
+    position without a pose in its own frame); ``None`` when the log has no positions."""
     lower = np.full(2, np.inf)
     upper = np.full(2, -np.inf)
     for position in log.positions:  # a loop over positions, each vectorised over its features
-        pose = position.pose
-        if pose is None:
-            continue
         points = position.features.points
         near = points[np.hypot(points[:, 0], points[:, 1]) <= reach, :2]
-        xy = np.concatenate([pose.to_world(near), [[pose.x, pose.y]]])
+        pose = position.pose
+        # A position without a pose is mapped in its own frame.
+        xy = np.concatenate([near, [[0.0, 0.0]]]) if pose is None else \
+            np.concatenate([pose.to_world(near), [[pose.x, pose.y]]])
         lower = np.minimum(lower, xy.min(axis=0))
         upper = np.maximum(upper, xy.max(axis=0))
     return (lower, upper) if np.isfinite(lower).all() else None
 
 
 def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = "trinary") -> MemoryEstimate:
-    """The peak memory ``occtool map`` needs for ``log`` (a :class:`~occtool.features.RangeLog`
-    with poses), in bytes, from its positions, its features and the raster of its extent
-    at ``resolution`` metres (``nav2_mode`` ``"scale"`` costs more a cell)."""
+    """The peak memory ``occtool map`` needs for ``log`` (a :class:`~occtool.features.RangeLog`),
+    in bytes, from its positions, its features and the raster of its extent at
+    ``resolution`` metres (``nav2_mode`` ``"scale"`` costs more a cell)."""
     if not resolution > 0:
         raise InputError(f"resolution must be a positive number of metres, got {resolution}")
     positions = len(log.positions)
