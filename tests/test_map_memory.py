@@ -123,3 +123,27 @@ def test_the_memory_limit_option_passes_a_size_on_and_refuses_anything_else():
     assert CliRunner().invoke(command, ["--memory-limit", "none"]).output.strip() == "None"
     bad = CliRunner().invoke(command, ["--memory-limit", "lots"])
     assert bad.exit_code == 2 and "Invalid value for '--memory-limit': must be a size" in bad.output
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_scale_map_built_in_strips_is_the_whole_image(tmp_path, monkeypatch, dtype):
+    """The RGBA image of a scale map is filled a few rows at a time, flipped: its pixels are
+    those of the whole-array formula (grey 255 (1 - p), transparent where unknown)."""
+    pytest.importorskip("PIL")
+    from PIL import Image
+
+    import occtool.formats.nav2 as nav2
+
+    rng = np.random.default_rng(1)
+    occupancy = rng.random((23, 9)).astype(dtype)
+    occupancy[rng.random(occupancy.shape) < 0.3] = np.nan
+    monkeypatch.setattr(nav2, "_STRIP_BYTES", 20)  # two rows a strip, the last one row
+    _, image = nav2.write_nav2_scale(occupancy, 0.05, (0.0, 0.0), tmp_path / "map.yaml")
+    known = np.isfinite(occupancy)
+    grey = np.rint(255.0 * (1.0 - np.where(known, occupancy, 0.5))).astype(np.uint8)
+    expected = np.stack([grey, grey, grey, np.where(known, 255, 0).astype(np.uint8)], axis=-1)[::-1]
+    with Image.open(image) as read:
+        assert np.array_equal(np.asarray(read), expected)
+    occupancy[5, 5] = 1.5
+    with pytest.raises(InputError, match=r"must lie in \[0, 1\]"):
+        nav2.write_nav2_scale(occupancy, 0.05, (0.0, 0.0), tmp_path / "bad.yaml")
