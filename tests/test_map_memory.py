@@ -147,3 +147,25 @@ def test_a_scale_map_built_in_strips_is_the_whole_image(tmp_path, monkeypatch, d
     occupancy[5, 5] = 1.5
     with pytest.raises(InputError, match=r"must lie in \[0, 1\]"):
         nav2.write_nav2_scale(occupancy, 0.05, (0.0, 0.0), tmp_path / "bad.yaml")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_frontiers_found_in_strips_are_those_of_the_whole_raster(seed):
+    """Frontiers cut by strip boundaries are joined again (8-connected): the points, their
+    order and their bits are frontiers_of's, for strips of one row up to the whole raster."""
+    from occtool.fuse import frontiers_of
+    from occtool.fuse._frontiers import frontiers_in_strips
+    from occtool.raster import Raster
+
+    rng = np.random.default_rng(seed)
+    shape = (41, 29)
+    cells = rng.choice(np.array([0, 205, 254], dtype=np.uint8), size=shape, p=[0.1, 0.3, 0.6])
+    explored = rng.random(shape) < 0.5 if seed else None
+    raster = Raster(cells, 0.05, (-1.0, 2.0), np.zeros(shape, np.float32), np.zeros(shape, bool), explored=explored)
+    for length in (0.05, 0.15):
+        whole = frontiers_of(raster, length)
+        assert len(whole) >= 1
+        for strip in (1, 29 * 3, 29 * 7 + 5, 10**6):
+            assert np.array_equal(frontiers_in_strips(raster, length, strip_cells=strip), whole)
+    raster = load_map(FIXTURES / "maps" / "fr079.occmap").rasterise(0.1)
+    assert np.array_equal(frontiers_in_strips(raster, 0.5, strip_cells=5000), frontiers_of(raster))

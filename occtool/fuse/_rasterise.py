@@ -92,6 +92,9 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
             _strip(world, cells[t0:t1, c0:c1], probability[t0:t1, c0:c1], explored[t0:t1, c0:c1], xs[c0:c1], ys,
                    lo - c0, hi - c0, inside, outside, near, within, doubted_trust)
+    from occtool.fuse._memory import release_free_memory
+
+    release_free_memory()  # the strips' freed temporaries
     return Raster(cells, float(resolution), origin, probability, np.zeros((ny, nx), dtype=bool), explored=explored)
 
 
