@@ -50,3 +50,36 @@ MAX_WORLD_COORDINATE = 1e8
 #: 200,000 region polygons grew the process by 256 MB: float64 end points and GEOS
 #: vertices for a few bytes each), so a hostile file stays under ~0.9 GB.
 MAX_MAP_BYTES = 32 * 2**20
+#: The memory a run of ``occtool map`` may be estimated to need before it is refused
+#: (``memory_limit=``, ``--memory-limit``): half of a robot computer's 8 GB. The Freiburg
+#: campus, the largest shared log, needs about 0.6 GB.
+DEFAULT_MEMORY_LIMIT = "4G"
+#: Size suffixes of a memory limit (decimal, as ``free -h`` and vendors count: 4G is 4e9 bytes).
+_SIZE_SUFFIXES = {"": 1, "K": 10**3, "M": 10**6, "G": 10**9, "T": 10**12}
+
+
+def memory_bytes(value: int | float | str | None, keyword: str = "memory_limit") -> int | None:
+    """Bytes of a memory limit: a number of bytes, or a text such as ``"500M"``, ``"8G"``,
+    ``"1.5T"`` (decimal K, M, G, T; a trailing ``B`` allowed); ``None`` or ``"none"``: no
+    limit. Anything else is an :class:`~occtool.errors.InputError` naming ``keyword``."""
+    if value is None:
+        return None
+    if isinstance(value, bool):
+        value = str(value)  # refused below: True is no size
+    if isinstance(value, (int, float)):
+        number, scale = float(value), 1
+    else:
+        if str(value).strip().lower() == "none":
+            return None
+        text = str(value).strip().upper().removesuffix("B").strip()
+        suffix = text[-1:] if text[-1:] in _SIZE_SUFFIXES else ""
+        try:
+            number, scale = float(text[: len(text) - len(suffix)]), _SIZE_SUFFIXES[suffix]
+        except ValueError:
+            number, scale = float("nan"), 1
+    if not (number > 0 and number * scale < 2**63):  # NaN and infinity fail too
+        from occtool.errors import InputError
+
+        raise InputError(f"{keyword} must be a size such as '500M' or '8G' (bytes; 'none': no limit), "
+                         f"got {value!r}")
+    return int(number * scale)

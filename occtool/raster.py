@@ -34,8 +34,14 @@ class Raster:
         """The fused occupancy of every cell the run observed (or placed a wall near), NaN
         elsewhere: the cells of a ``scale`` Nav2 map (:func:`occtool.formats.nav2.write_nav2_scale`),
         which keeps the map's grades where the trinary cells round them to three."""
-        known = self.cells != UNKNOWN if self.explored is None else self.explored | (self.cells != UNKNOWN)
-        return np.where(known, self.probability, np.float32(np.nan)).astype(np.float32)
+        out = self.probability.astype(np.float32)  # a copy, blanked a strip of rows at a time
+        step = max(1, (1 << 20) // max(1, out.shape[1]))
+        for low in range(0, out.shape[0], step):
+            unknown = self.cells[low:low + step] == UNKNOWN
+            if self.explored is not None:
+                unknown &= ~self.explored[low:low + step]
+            out[low:low + step][unknown] = np.float32(np.nan)
+        return out
 
     def unexplored(self, row: NDArray[np.intp], col: NDArray[np.intp]) -> NDArray[np.bool_]:
         """Whether cells ``(row, col)`` are unknown because nothing observed them."""

@@ -32,6 +32,7 @@ from occtool.io.read_options import (  # a light module: --help imports no numpy
     check_no_return_range,
 )
 from occtool.limits import (
+    DEFAULT_MEMORY_LIMIT,
     MAX_ANGLES,
     MAX_BODY_SAMPLES,
     MAX_DISTANCE,
@@ -95,6 +96,25 @@ overwrite_option = click.option(
     help="Replace existing output files, or refuse (and write nothing) if one exists.",
 )
 
+
+
+def _memory_limit(ctx: click.Context | None, param: click.Parameter | None, value: Any) -> str | None:
+    """``--memory-limit``: checked here (a usage error naming the flag), passed on as given."""
+    from occtool.errors import InputError
+    from occtool.limits import memory_bytes
+
+    try:
+        return None if memory_bytes(value, "--memory-limit") is None else str(value)
+    except InputError as exc:
+        raise click.BadParameter(str(exc).removeprefix("--memory-limit "), ctx=ctx, param=param) from None
+
+
+#: ``--memory-limit`` (``map``): the library's ``memory_limit`` (:func:`occtool.fuse._memory.check_map_memory`).
+memory_limit_option = click.option(
+    "--memory-limit", default=DEFAULT_MEMORY_LIMIT, show_default=True, metavar="SIZE", callback=_memory_limit,
+    help="Refuse (before the work) a run estimated to need more memory than SIZE: bytes, or 500M, 8G "
+         "(decimal); 'none': no limit. The estimate counts the positions and the raster of the log's extent.",
+)
 
 #: ``--keyframe-share`` (``map``, ``evaluate-log``): what it changes for the user. The cells
 #: are :data:`occtool.fuse._keyframes.KEYFRAME_CELL` wide (not imported: numpy, cold start).

@@ -20,6 +20,7 @@ KEYWORD_FLAGS = {
     "features": "--features",
     "format": "--format",
     "group_by": "--group-by",
+    "memory_limit": "--memory-limit",
     "no_return_range": "--no-return-range",
     "octomap": "--octomap",
     "overwrite": "--overwrite",

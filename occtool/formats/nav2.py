@@ -40,6 +40,8 @@ from occtool.limits import MAX_DISTANCE
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
+#: Bytes of image rows written at a time.
+_STRIP_BYTES = 1 << 20
 #: Map images larger than this many cells are refused before they are decoded.
 MAX_IMAGE_CELLS = 50_000_000
 #: A scale map's free threshold, map_saver's default (its unknown is transparency, not a grey).
@@ -82,8 +84,11 @@ def write_nav2(pixels: NDArray[np.uint8], resolution: float, origin: tuple[float
     header = f"P5\n# occtool fused map\n{cols} {rows}\n255\n".encode("ascii")
     with atomic_write(image_path, "wb", overwrite=overwrite) as handle:
         handle.write(header)
-        # PGM's first row is the top of the picture: the map's highest y.
-        handle.write(np.ascontiguousarray(pixels[::-1]).tobytes())
+        # PGM's first row is the top of the picture: the map's highest y. Written in strips
+        # of rows, so that a large map is never copied whole.
+        step = max(1, _STRIP_BYTES // cols)
+        for top in range(rows, 0, -step):
+            handle.write(np.ascontiguousarray(pixels[max(0, top - step):top][::-1]).tobytes())
     _write_yaml(yaml_path, image_path.name, "trinary", resolution, origin, FREE_THRESH, overwrite)
     return yaml_path, image_path
 
@@ -105,19 +110,30 @@ def write_nav2_scale(occupancy: NDArray[np.floating], resolution: float, origin:
     occupancy = np.asarray(occupancy)
     if occupancy.ndim != 2 or occupancy.size == 0 or occupancy.dtype.kind != "f":
         raise InputError(f"a scale Nav2 map needs a non-empty 2D float array, got {occupancy.dtype} {occupancy.shape}")
-    known = np.isfinite(occupancy)
-    if ((occupancy[known] < 0) | (occupancy[known] > 1)).any():
-        raise InputError("a scale Nav2 map's occupancy must lie in [0, 1] (NaN: unknown)")
+    rows, cols = occupancy.shape
+    # Strips of rows: the temporaries are a strip's, the RGBA image the only whole copy.
+    step = max(1, _STRIP_BYTES // cols)
+    for low in range(0, rows, step):
+        part = occupancy[low:low + step]
+        known = np.isfinite(part)
+        if ((part[known] < 0) | (part[known] > 1)).any():
+            raise InputError("a scale Nav2 map's occupancy must lie in [0, 1] (NaN: unknown)")
     if not (np.isfinite(resolution) and resolution > 0):
         raise InputError(f"map resolution must be a positive number of metres, got {resolution}")
     image_module = _pillow("a scale Nav2 map (PNG)")
     yaml_path = Path(yaml_path)
     image_path = yaml_path.with_name(image_name or yaml_path.stem + ".png")
-    grey = np.rint(255.0 * (1.0 - np.where(known, occupancy, 0.5))).astype(np.uint8)
-    # map_server reads transparency as unknown only in scale mode; map_saver writes 50 % grey there.
-    rgba = np.stack([grey, grey, grey, np.where(known, 255, 0).astype(np.uint8)], axis=-1)[::-1]
+    rgba = np.empty((rows, cols, 4), dtype=np.uint8)
+    for low in range(0, rows, step):
+        part = occupancy[low:low + step]
+        known = np.isfinite(part)
+        # The image's first row is the map's top: this strip's rows land flipped at the bottom end.
+        out = rgba[rows - low - part.shape[0]:rows - low][::-1]
+        out[..., :3] = np.rint(255.0 * (1.0 - np.where(known, part, 0.5))).astype(np.uint8)[..., None]
+        # map_server reads transparency as unknown only in scale mode; map_saver writes 50 % grey there.
+        out[..., 3] = np.where(known, 255, 0)
     with atomic_write(image_path, "wb", overwrite=overwrite) as handle:
-        image_module.fromarray(np.ascontiguousarray(rgba), mode="RGBA").save(handle, format="PNG")
+        image_module.fromarray(rgba, mode="RGBA").save(handle, format="PNG")
     _write_yaml(yaml_path, image_path.name, "scale", resolution, origin, SCALE_FREE_THRESH, overwrite)
     return yaml_path, image_path
 

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
+from occtool.fuse._memory import release_free_memory
 from occtool.fuse._sightings import RunReturns, returns_of_fused
 from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
 from occtool.fuse._world import WorldMap
@@ -88,7 +89,9 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
                      positions=own.poses[:, :2], facing=segments.facing, **params)
     # Rounded to the file's precision now, so that the map written is the map used.
-    return world.quantised()
+    world = world.quantised()
+    release_free_memory()  # the unions' GEOS garbage, before the raster
+    return world
 
 
 __all__ = ["REGION_REACH", "THROUGH_MARGIN", "WALL_REACH", "build_world_map"]

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from occtool.errors import InputError
 from occtool.formats.occmap import UNIT, MapArrays, quantise, unreadable
 from occtool.formats.occmap import decode as occmap_decode
-from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.raster import Raster
 
 FloatArray = NDArray[np.float64]
 #: What :meth:`WorldMap._near_segments` yields: points' rows, segments, offsets across and along.
@@ -249,14 +249,18 @@ class WorldMap:
         axis = np.where(length[:, None] > 1e-12, span / np.maximum(length, 1e-12)[:, None], [1.0, 0.0])
         return middle, axis, np.column_stack([-axis[:, 1], axis[:, 0]]), 0.5 * length
 
-    def _neighbours(self, xy: FloatArray, reach: float) -> tuple[FloatArray, NDArray[np.intp]]:
+    def _segment_tree(self) -> Any:
+        """The k-d tree of the segments' middles (built once, with the segments' frames)."""
         from scipy.spatial import cKDTree
 
         if self._index is None:
             self._frames = self._segment_frames()
             self._index = cKDTree(self._frames[0])
+        return self._index
+
+    def _neighbours(self, xy: FloatArray, reach: float) -> tuple[FloatArray, NDArray[np.intp]]:
         k = min(NEIGHBOURS, len(self))
-        distance, index = self._index.query(xy, k=k, distance_upper_bound=reach)
+        distance, index = self._segment_tree().query(xy, k=k, distance_upper_bound=reach)
         return np.asarray(distance).reshape(len(xy), k), np.asarray(index).reshape(len(xy), k)
 
     def _reach(self, beyond: float) -> float:
@@ -386,36 +390,18 @@ class WorldMap:
         bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks
         the cells the run observed or placed a wall near (within those rims: the unknown
         among them are uncertain, not unexplored: no frontier lies there)."""
+        from occtool.fuse._rasterise import raster_shape
+        from occtool.fuse._rasterise import rasterise as rasterise_strips
+
         if not (math.isfinite(resolution) and resolution > 0):
             raise InputError(f"resolution must be a positive number of metres, got {resolution}")
-        lower, upper = self.bounds
-        origin = np.floor(lower / resolution) * resolution
-        nx, ny = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
+        origin, nx, ny = raster_shape(self, resolution)
         if nx * ny > max_cells:
             raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
-        jj, ii = np.mgrid[0:ny, 0:nx]
-        centres = np.column_stack([origin[0] + (ii.ravel() + 0.5) * resolution,
-                                   origin[1] + (jj.ravel() + 0.5) * resolution])
-        observed = self.observed(centres)
-        # One query for the bands round the trusted and the doubted walls (exact up to the widest).
-        near_doubted, near = self._wall_distances(
-            centres, max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST)
-        wall = near <= self.wall_half_width
-        rim = (near <= self.wall_rim) | (near_doubted <= self.doubted_wall_rim)
-        base = np.full(centres.shape[0], self.unknown_level)
-        base[observed] = self.free_value(centres[observed])
-        every, of_trusted = self._wall_values(centres)
-        probability = np.maximum(base, every)
-        drawn = np.maximum(base, of_trusted)
-        cells = np.full(centres.shape[0], UNKNOWN, dtype=np.uint8)
-        # Never free near a trusted wall, nor right at a doubted one: a held-out return
-        # scattered in front of its band, or off a door that was open for most positions,
-        # lands on unknown, not on free (the free cells are a subset of the fixed band's).
-        cells[observed & ~rim & (drawn <= RASTER_FREE)] = FREE
-        cells[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
-        return Raster(cells.reshape(ny, nx), float(resolution), (float(origin[0]), float(origin[1])),
-                      probability.reshape(ny, nx).astype(np.float32), np.zeros((ny, nx), dtype=bool),
-                      explored=(observed | rim | wall).reshape(ny, nx))
+        # Cell by cell as described above, a strip of rows at a time (occtool.fuse._rasterise):
+        # one query for the bands round the trusted and the doubted walls (exact up to the widest).
+        return rasterise_strips(self, float(resolution), nx, ny, origin,
+                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST)
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays)."""

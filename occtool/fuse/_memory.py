@@ -1,0 +1,142 @@
+"""The memory a run of ``occtool map`` needs, estimated before the work starts (:func:`estimate_map_memory`),
+and the refusal of a run over the user's limit (:func:`check_map_memory`).
+
+What a run holds at its peak grows with two things a log says up front:
+
+* its **positions** (scans): each one's features while it is fitted, its keyframe model,
+  its returns per pan bin (:class:`occtool.fuse.RunReturns`), its navigation map and its
+  share of the navigation region;
+* the **raster** of its extent: the world map's Nav2 cells (one byte), their occupancy
+  (float32) and explored flags, held whole, with the frontier search's labels and the MCAP
+  grid beside them at the peak. The world map's walls reach :data:`WALL_REACH` from each
+  position, so the extent is the box of every position and of its features within that reach.
+
+The figures are from runs on the project's 2-core machine (:data:`BASE_BYTES`, ...); the
+estimate errs high, so a run it passes fits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from occtool.errors import InputError
+from occtool.limits import DEFAULT_MEMORY_LIMIT, memory_bytes
+
+#: The process before any data: Python, numpy, scipy, shapely and occtool's modules (an
+#: ``occtool map`` of a 10-scan log peaks near 100 MB).
+BASE_BYTES = 100 * 10**6
+#: Per position of the log: its model and returns while fused, its navigation map and its
+#: share of the navigation region ...
+POSITION_BYTES = 120 * 10**3
+#: ... and per feature: its float64 point and evidence, and the copies a fit makes. With
+#: :data:`RASTER_CELL_BYTES` these put the four CARMEN logs and the two largest at 1.1-1.6
+#: times their measured peaks (Intel 226 MB for 153, FR-079 388 for 246, the Freiburg campus
+#: 651 for 586, the MIT corridor 670 for 576).
+FEATURE_BYTES = 60
+#: Per cell of a trinary raster at the peak: the cells (1 byte), occupancy (4), explored (1),
+#: then the frontier labels (4) and flags or the MCAP grid's copies (int8 values, bytes, message).
+RASTER_CELL_BYTES = 14
+#: ... and of a ``scale`` raster, whose PNG is made from the graded occupancy (float32 and RGBA copies).
+SCALE_CELL_BYTES = 28
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    """What :func:`estimate_map_memory` found: ``total`` bytes, and its parts by name."""
+
+    total: int
+    parts: dict[str, int] = field(default_factory=dict)
+    #: The raster's rows and columns, as estimated from the positions and their features.
+    raster_shape: tuple[int, int] = (0, 0)
+    resolution: float = 0.05
+
+
+def _gb(size: int) -> str:
+    if size >= 10**8:
+        return f"{size / 1e9:.1f} GB"
+    return f"{size / 1e6:.0f} MB" if size >= 10**6 else "under 1 MB"
+
+
+def release_free_memory() -> None:
+    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
+    elsewhere). GEOS and numpy's small allocations leave the heap fragmented after a stage:
+    on the Freiburg campus the process kept 66 MB after the world map's build and 57 MB
+    after the navigation region's union that trimming returned."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (AttributeError, OSError):  # a C library without malloc_trim (musl)
+        pass
+
+
+def raster_extent(log: Any, reach: float | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """World ``(x, y)`` lower and upper corners of the positions of ``log`` (a
+    :class:`~occtool.features.RangeLog`) and their features within ``reach`` metres (a
+    position without a pose in its own frame; default: the walls' reach,
+    :data:`occtool.fuse._refit.WALL_REACH`); ``None`` when the log has no positions."""
+    if reach is None:
+        from occtool.fuse._refit import WALL_REACH
+
+        reach = WALL_REACH
+    lower = np.full(2, np.inf)
+    upper = np.full(2, -np.inf)
+    for position in log.positions:  # a loop over positions, each vectorised over its features
+        points = position.features.points
+        near = points[np.hypot(points[:, 0], points[:, 1]) <= reach, :2]
+        pose = position.pose
+        # A position without a pose is mapped in its own frame.
+        xy = np.concatenate([near, [[0.0, 0.0]]]) if pose is None else \
+            np.concatenate([pose.to_world(near), [[pose.x, pose.y]]])
+        lower = np.minimum(lower, xy.min(axis=0))
+        upper = np.maximum(upper, xy.max(axis=0))
+    return (lower, upper) if np.isfinite(lower).all() else None
+
+
+def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = "trinary") -> MemoryEstimate:
+    """The peak memory ``occtool map`` needs for ``log`` (a :class:`~occtool.features.RangeLog`),
+    in bytes, from its positions, its features and the raster of its extent at
+    ``resolution`` metres (``nav2_mode`` ``"scale"`` costs more a cell)."""
+    if not resolution > 0:
+        raise InputError(f"resolution must be a positive number of metres, got {resolution}")
+    positions = len(log.positions)
+    features = sum(len(position.features) for position in log.positions)
+    extent = raster_extent(log)
+    rows = columns = 0
+    if extent is not None:
+        # As WorldMap.rasterise places it: origin on the grid, one cell more each way.
+        lower, upper = extent
+        origin = np.floor(lower / resolution) * resolution
+        columns, rows = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
+    per_cell = SCALE_CELL_BYTES if nav2_mode == "scale" else RASTER_CELL_BYTES
+    parts = {"base": BASE_BYTES, "positions": positions * POSITION_BYTES + features * FEATURE_BYTES,
+             "raster": int(rows) * int(columns) * per_cell}
+    return MemoryEstimate(sum(parts.values()), parts, (int(rows), int(columns)), float(resolution))
+
+
+def check_map_memory(log: Any, *, memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT,
+                     resolution: float = 0.05, nav2_mode: str = "trinary") -> MemoryEstimate:
+    """:func:`estimate_map_memory`, refused with an :class:`InputError` naming
+    ``memory_limit=`` (the command line's ``--memory-limit``) when the estimate is over
+    ``memory_limit`` (bytes, or a size such as ``"8G"``; ``None``: no limit). Returns the estimate."""
+    limit = memory_bytes(memory_limit)
+    estimate = estimate_map_memory(log, resolution=resolution, nav2_mode=nav2_mode)
+    if limit is not None and estimate.total > limit:
+        rows, columns = estimate.raster_shape
+        wanted = max(1, -(-estimate.total // 10**9))  # whole gigabytes, rounded up
+        raise InputError(
+            f"mapping {log.source or 'this log'} needs about {_gb(estimate.total)} of memory "
+            f"({len(log.positions)} positions: {_gb(estimate.parts['positions'])}; a {rows} x {columns} raster "
+            f"at {resolution:g} m: {_gb(estimate.parts['raster'])}), over the limit of {_gb(limit)}: "
+            f"raise it with memory_limit='{wanted}G' or map at a coarser resolution=")
+    return estimate
+
+
+__all__ = ["MemoryEstimate", "check_map_memory", "estimate_map_memory", "raster_extent", "release_free_memory"]

@@ -1,0 +1,149 @@
+"""A world map's Nav2 raster computed in row strips, tile by tile (:func:`rasterise`).
+
+Every cell of the raster depends only on its centre (:meth:`WorldMap.rasterise` says how),
+so the raster is built a strip of rows at a time: the temporaries (cell centres, the
+walls' neighbour queries, twelve distances and indices a cell) are those of one strip,
+not of the whole extent, and only the raster itself (uint8 cells, float32 occupancy) is
+held whole. Before a strip's cells are queried its square tiles are sorted by what they
+can meet, so that most cells of a large map cost no query at all:
+
+* a tile whose box lies inside the observed region is observed in every cell, one outside
+  it in none; only the cells of tiles on the region's boundary are tested one by one;
+* a tile with no segment middle within reach of its box (the farthest a wall's ridge or
+  rim spreads, plus the box's half-diagonal) meets no wall: its cells skip the neighbour
+  queries.
+
+Both tests only decide tiles whose every cell would get the same answer from the
+per-cell test, so the raster is the same, byte for byte, as one computed over all cells
+at once.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+
+FloatArray = NDArray[np.float64]
+
+#: Side of a tile, cells: large enough that the per-tile tests are few, small enough that
+#: a wall's neighbourhood or the region's boundary takes few tiles' cells with it.
+TILE = 16
+#: Cells of one strip (a whole number of tile rows): bounds the temporaries, about 200
+#: bytes a cell queried (a 2**19-cell strip: ~100 MB at most).
+STRIP_CELLS = 1 << 19
+#: Added to a tile's reach so that rounding never drops a segment the cells would meet.
+_SLACK = 1e-6
+
+
+def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], int, int]:
+    """The raster's origin (lower-left corner, on the ``resolution`` grid) and its columns and rows."""
+    lower, upper = world.bounds
+    origin = np.floor(lower / resolution) * resolution
+    nx, ny = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
+    return (float(origin[0]), float(origin[1])), int(nx), int(ny)
+
+
+def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
+              within: float, doubted_trust: float, *, tile: int = TILE,
+              strip_cells: int = STRIP_CELLS) -> Raster:
+    """The raster of ``world`` (a :class:`WorldMap`), ``ny`` rows of ``nx`` cells from
+    ``origin``, strip by strip; ``within`` is the widest wall band or rim the cells ask
+    about and ``doubted_trust`` the least trust of a doubted wall (:meth:`WorldMap.rasterise`)."""
+    import shapely
+
+    cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
+    probability = np.empty((ny, nx), dtype=np.float32)
+    explored = np.zeros((ny, nx), dtype=bool)
+    xs = origin[0] + (np.arange(nx) + 0.5) * resolution
+    first = np.arange(0, nx, tile)
+    last = np.minimum(first + tile, nx) - 1
+    walls = len(world) > 0
+    if walls:
+        # How far a ridge spreads (the walls' occupancy) and a band or rim (their distances).
+        reaches = (world._reach(max(world.width, world.front_width, world.back_width)), world._reach(within + 1e-9))
+        tree = world._segment_tree()
+    # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
+    chunk = max(1, strip_cells // (tile * tile))
+    pad = 0.25 * resolution
+    for t0 in range(0, ny, tile):
+        t1 = min(t0 + tile, ny)
+        ys = origin[1] + (np.arange(t0, t1) + 0.5) * resolution
+        for k0 in range(0, first.size, chunk):
+            lo, hi = first[k0:k0 + chunk], last[k0:k0 + chunk]
+            # The tiles' boxes round their cell centres, widened by a quarter cell so that
+            # a one-cell tile is still a box; the tests below hold for the wider box too.
+            boxes = shapely.box(xs[lo] - pad, ys[0] - pad, xs[hi] + pad, ys[-1] + pad)
+            if world.region.is_empty:
+                inside = outside = None
+            else:
+                inside = shapely.contains_properly(world.region, boxes)
+                outside = ~shapely.intersects(world.region, boxes)
+            near = [np.zeros(lo.size, dtype=bool), np.zeros(lo.size, dtype=bool)]
+            if walls:
+                half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
+                middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
+                near = [np.asarray(tree.query_ball_point(middles, reach + half + _SLACK, return_length=True)) > 0
+                        for reach in reaches]
+            c0, c1 = int(lo[0]), int(hi[-1]) + 1
+            _strip(world, cells[t0:t1, c0:c1], probability[t0:t1, c0:c1], explored[t0:t1, c0:c1], xs[c0:c1], ys,
+                   lo - c0, hi - c0, inside, outside, near, within, doubted_trust)
+    from occtool.fuse._memory import release_free_memory
+
+    release_free_memory()  # the strips' freed temporaries
+    return Raster(cells, float(resolution), origin, probability, np.zeros((ny, nx), dtype=bool), explored=explored)
+
+
+def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
+           xs: NDArray[np.floating[Any]], ys: NDArray[np.floating[Any]], first: NDArray[np.intp],
+           last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
+           near: list[NDArray[np.bool_]], within: float, doubted_trust: float) -> None:
+    """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``near``:
+    the tiles a ridge reaches, and those a wall's band or rim reaches."""
+    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
+
+    h, nx = ys.size, xs.size
+    tile_of = np.repeat(np.arange(first.size), last - first + 1)
+    shape = (h, nx)
+    x = np.broadcast_to(xs, shape).ravel()
+    y = np.broadcast_to(ys[:, None], shape).ravel()
+    column_tile = np.broadcast_to(tile_of, shape).ravel()
+    if inside is None or outside is None:
+        observed = np.zeros(h * nx, dtype=bool)
+    else:
+        observed = inside[column_tile]
+        edge = np.flatnonzero(~inside[column_tile] & ~outside[column_tile])
+        if edge.size:
+            observed[edge] = world.observed(np.column_stack([x[edge], y[edge]]))
+    base = np.full(h * nx, world.unknown_level)
+    if observed.any():
+        seen = np.flatnonzero(observed)
+        base[seen] = world.free_value(np.column_stack([x[seen], y[seen]]))
+    every = np.full(h * nx, -np.inf)
+    of_trusted = every.copy()
+    wall = np.zeros(h * nx, dtype=bool)
+    rim = wall.copy()
+    queried = np.flatnonzero(near[1][column_tile])
+    if queried.size:
+        near_doubted, near_trusted = world._wall_distances(np.column_stack([x[queried], y[queried]]), within,
+                                                           doubted_trust)
+        wall[queried] = near_trusted <= world.wall_half_width
+        rim[queried] = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
+    queried = np.flatnonzero(near[0][column_tile])
+    if queried.size:
+        every[queried], of_trusted[queried] = world._wall_values(np.column_stack([x[queried], y[queried]]))
+    drawn = np.maximum(base, of_trusted)
+    out = np.full(h * nx, UNKNOWN, dtype=np.uint8)
+    # Never free near a trusted wall, nor right at a doubted one (WorldMap.rasterise says why).
+    out[observed & ~rim & (drawn <= RASTER_FREE)] = FREE
+    out[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
+    cells[...] = out.reshape(shape)
+    probability[...] = np.maximum(base, every).reshape(shape)
+    explored[...] = (observed | rim | wall).reshape(shape)
+
+
+__all__ = ["STRIP_CELLS", "TILE", "raster_shape", "rasterise"]

@@ -1,0 +1,171 @@
+"""Large runs: the raster built strip by strip is the raster cell by cell, and a run whose
+estimated memory is over the user's limit is refused before any work, naming the option."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _room_log import ROOM, write_room_log
+from click.testing import CliRunner
+
+from occtool.errors import InputError
+from occtool.fuse import load_map
+from occtool.fuse._memory import check_map_memory, estimate_map_memory
+from occtool.fuse._rasterise import raster_shape, rasterise
+from occtool.fuse._world import DOUBTED_TRUST
+from occtool.io import read_log
+from occtool.limits import memory_bytes
+
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+
+
+def test_the_raster_is_the_same_whatever_its_tiles_and_strips():
+    """Tiles decide whole blocks of cells (inside or outside the observed region, out of
+    every wall's reach): the cells, occupancy and explored flags are those of one tile
+    holding the whole map, where every cell is queried on its own."""
+    world = load_map(FIXTURES / "maps" / "intel.occmap")
+    origin, nx, ny = raster_shape(world, 0.2)
+    within = max(world.wall_half_width, world.wall_rim, world.doubted_wall_rim)
+    whole = rasterise(world, 0.2, nx, ny, origin, within, DOUBTED_TRUST, tile=max(nx, ny), strip_cells=nx * ny)
+    assert (whole.cells == 0).any() and (whole.cells == 254).any() and (whole.cells == 205).any()
+    for tile, strip in ((5, 400), (16, 1 << 19)):
+        tiled = rasterise(world, 0.2, nx, ny, origin, within, DOUBTED_TRUST, tile=tile, strip_cells=strip)
+        assert np.array_equal(tiled.cells, whole.cells)
+        assert np.array_equal(tiled.probability, whole.probability)
+        assert np.array_equal(tiled.explored, whole.explored)
+    assert np.array_equal(world.rasterise(0.2).cells, whole.cells)
+
+
+@pytest.fixture(scope="module")
+def room_log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("room") / "room.log"
+    write_room_log(path, scans=10)
+    return path
+
+
+def test_the_estimate_finds_the_rooms_raster(room_log):
+    """The raster is estimated from the positions and their returns: the room's 8 x 4.5 m at 5 cm."""
+    estimate = estimate_map_memory(read_log(room_log))
+    rows, columns = estimate.raster_shape
+    width, height = ROOM[2] - ROOM[0], ROOM[3] - ROOM[1]
+    assert abs(columns * 0.05 - width) <= 0.2 and abs(rows * 0.05 - height) <= 0.2
+    coarse = estimate_map_memory(read_log(room_log), resolution=0.1)
+    assert coarse.parts["raster"] < estimate.parts["raster"] / 3
+    assert estimate.total == sum(estimate.parts.values())
+
+
+def test_a_run_over_the_limit_is_refused_naming_the_keyword_and_the_flag(room_log):
+    from occtool.cli.wording import as_flags
+
+    log = read_log(room_log)
+    assert check_map_memory(log).total < 10**9  # the default limit passes a room
+    assert check_map_memory(log, memory_limit=None).total > 0
+    with pytest.raises(InputError, match=r"over the limit of 1 MB: raise it with memory_limit='1G'") as caught:
+        check_map_memory(log, memory_limit="1M")
+    assert "--memory-limit 1G" in as_flags(str(caught.value))
+
+
+@pytest.mark.parametrize(("given", "size"), [("500M", 5 * 10**8), ("8G", 8 * 10**9), (" 1.5 TB", 15 * 10**11),
+                                             (4096, 4096), ("none", None), (None, None)])
+def test_memory_sizes(given, size):
+    assert memory_bytes(given) == size
+
+
+@pytest.mark.parametrize("given", ["", "lots", "-1G", "0", "nanG", "inf", True, "1e30G"])
+def test_a_memory_limit_that_is_no_size_is_refused(given):
+    with pytest.raises(InputError, match="memory_limit must be a size"):
+        memory_bytes(given)
+
+
+def test_the_command_line_refuses_with_the_flag(room_log, tmp_path):
+    """``occtool map --memory-limit 1M`` is refused in one line naming ``--memory-limit``,
+    before any output is written."""
+    from occtool.cli.main import cli
+
+    if "--memory-limit" not in CliRunner().invoke(cli, ["map", "--help"]).output:
+        pytest.skip("occtool map does not take --memory-limit yet (occtool.cli.options.memory_limit_option)")
+    result = CliRunner().invoke(cli, ["map", str(room_log), "-o", str(tmp_path / "out"), "--memory-limit", "1M",
+                                      "--sensor-height", "0.3", "--body-height", "0.5"])
+    assert result.exit_code != 0
+    assert "--memory-limit 1G" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "out").exists()
+    bad = CliRunner().invoke(cli, ["map", str(room_log), "-o", str(tmp_path / "out"), "--memory-limit", "lots"])
+    assert bad.exit_code == 2 and "--memory-limit" in bad.output
+
+
+def test_map_pgm_written_in_strips_is_the_whole_image(tmp_path, monkeypatch):
+    """The PGM is written a few rows at a time, top row first, with the bytes of one copy."""
+    import occtool.formats.nav2 as nav2
+
+    pixels = np.random.default_rng(0).choice(np.array([0, 205, 254], dtype=np.uint8), size=(37, 11))
+    monkeypatch.setattr(nav2, "_STRIP_BYTES", 30)  # two rows a strip, the last strip one row
+    _, image = nav2.write_nav2(pixels, 0.05, (0.0, 0.0), tmp_path / "map.yaml")
+    data = image.read_bytes()
+    header = b"P5\n# occtool fused map\n11 37\n255\n"
+    assert data == header + pixels[::-1].tobytes()
+    assert np.array_equal(nav2.read_nav2(tmp_path / "map.yaml").cells == -1, pixels == 205)
+
+
+def test_the_memory_limit_option_passes_a_size_on_and_refuses_anything_else():
+    import click
+
+    from occtool.cli.options import memory_limit_option
+
+    @click.command()
+    @memory_limit_option
+    def command(memory_limit):
+        click.echo(repr(memory_limit))
+
+    assert CliRunner().invoke(command, []).output.strip() == "'4G'"
+    assert CliRunner().invoke(command, ["--memory-limit", "500M"]).output.strip() == "'500M'"
+    assert CliRunner().invoke(command, ["--memory-limit", "none"]).output.strip() == "None"
+    bad = CliRunner().invoke(command, ["--memory-limit", "lots"])
+    assert bad.exit_code == 2 and "Invalid value for '--memory-limit': must be a size" in bad.output
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_scale_map_built_in_strips_is_the_whole_image(tmp_path, monkeypatch, dtype):
+    """The RGBA image of a scale map is filled a few rows at a time, flipped: its pixels are
+    those of the whole-array formula (grey 255 (1 - p), transparent where unknown)."""
+    pytest.importorskip("PIL")
+    from PIL import Image
+
+    import occtool.formats.nav2 as nav2
+
+    rng = np.random.default_rng(1)
+    occupancy = rng.random((23, 9)).astype(dtype)
+    occupancy[rng.random(occupancy.shape) < 0.3] = np.nan
+    monkeypatch.setattr(nav2, "_STRIP_BYTES", 20)  # two rows a strip, the last one row
+    _, image = nav2.write_nav2_scale(occupancy, 0.05, (0.0, 0.0), tmp_path / "map.yaml")
+    known = np.isfinite(occupancy)
+    grey = np.rint(255.0 * (1.0 - np.where(known, occupancy, 0.5))).astype(np.uint8)
+    expected = np.stack([grey, grey, grey, np.where(known, 255, 0).astype(np.uint8)], axis=-1)[::-1]
+    with Image.open(image) as read:
+        assert np.array_equal(np.asarray(read), expected)
+    occupancy[5, 5] = 1.5
+    with pytest.raises(InputError, match=r"must lie in \[0, 1\]"):
+        nav2.write_nav2_scale(occupancy, 0.05, (0.0, 0.0), tmp_path / "bad.yaml")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_frontiers_found_in_strips_are_those_of_the_whole_raster(seed):
+    """Frontiers cut by strip boundaries are joined again (8-connected): the points, their
+    order and their bits are frontiers_of's, for strips of one row up to the whole raster."""
+    from occtool.fuse import frontiers_of
+    from occtool.fuse._frontiers import frontiers_in_strips
+    from occtool.raster import Raster
+
+    rng = np.random.default_rng(seed)
+    shape = (41, 29)
+    cells = rng.choice(np.array([0, 205, 254], dtype=np.uint8), size=shape, p=[0.1, 0.3, 0.6])
+    explored = rng.random(shape) < 0.5 if seed else None
+    raster = Raster(cells, 0.05, (-1.0, 2.0), np.zeros(shape, np.float32), np.zeros(shape, bool), explored=explored)
+    for length in (0.05, 0.15):
+        whole = frontiers_of(raster, length)
+        assert len(whole) >= 1
+        for strip in (1, 29 * 3, 29 * 7 + 5, 10**6):
+            assert np.array_equal(frontiers_in_strips(raster, length, strip_cells=strip), whole)
+    raster = load_map(FIXTURES / "maps" / "fr079.occmap").rasterise(0.1)
+    assert np.array_equal(frontiers_in_strips(raster, 0.5, strip_cells=5000), frontiers_of(raster))
