@@ -11,6 +11,7 @@ from occtool.cli.options import (
     config_option,
     fit_options,
     log_options,
+    memory_limit_option,
     overwrite_option,
     seed_option,
 )
@@ -110,12 +111,13 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
 @register_options
 @seed_option
 @overwrite_option
+@memory_limit_option
 @config_option
 def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_mode: str, threshold: float,
                 keyframe_share: float,
                 combination: str, max_range: float,
                 simplify: float | None, precision: int | None, origin: str | None, mcap: bool, world: str,
-                world_resolution: float | None, seed: int, overwrite: bool,
+                world_resolution: float | None, seed: int, overwrite: bool, memory_limit: str | None,
                 **kwargs: Any) -> None:
     """Fuse every robot position of LOG (fitted here with the fit options) or of MODELS (a
     folder written by `occtool fit LOG -o MODELS/`) into one world-frame map and write, in
@@ -194,7 +196,8 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
         result = fuse.map_log(log, output, estimator=estimator, read_options=read_options, register=register,
                               registration=registration, keyframe_share=keyframe_share, **written,
                               heights_from_data=not {"sensor_height", "body_height"} & set(_given(ctx)),
-                              world=world, world_resolution=world_resolution, seed=seed)
+                              world=world, world_resolution=world_resolution, seed=seed,
+                              memory_limit=memory_limit)
         report = result.report
         assert report is not None
         log_notes(logger, Path(source).name, report.notes)

@@ -20,9 +20,11 @@ from occtool.features import RangeLog
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE
+from occtool.fuse._memory import check_map_memory
 from occtool.fuse._outputs import _write_run_map, check_outputs
 from occtool.fuse._run import RunMap, map_of_run
 from occtool.fuse._world3d import is_3d_log
+from occtool.limits import DEFAULT_MEMORY_LIMIT
 
 #: The kinds of world map :func:`map_log` writes.
 WORLD_KINDS = ("auto", "2d", "3d")
@@ -73,7 +75,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             nav2_mode: str = "trinary", simplify: float | None = None, precision: int | None = None,
             georeference: Any | None = None, mcap: bool = True, overwrite: bool = True,
             progress: Callable[[int, int], None] | None = None, heights_from_data: bool = False,
-            world: str = "auto", world_resolution: float | None = None, seed: int = 0) -> MapResult:
+            world: str = "auto", world_resolution: float | None = None, seed: int = 0,
+            memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT) -> MapResult:
     """Map a log: what ``occtool map LOG -o OUTPUT`` does.
 
     Parameters
@@ -115,6 +118,9 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     world_resolution
         The 3D map's cell size, metres; ``None``: chosen on an inner split of the log's own
         positions (:func:`occtool.fuse.choose_resolution`, seeded by ``seed``).
+    memory_limit
+        Refuse a run estimated (from the log, before any fit) to need more memory than this:
+        bytes, or a size such as ``"8G"``; ``None``: no limit (:func:`occtool.fuse.check_map_memory`).
 
     Raises
     ------
@@ -145,6 +151,7 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         log, report_of_registration = read_map_log(source, read_options, register=register,
                                                    settings=registration or RegistrationSettings())
         name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
+    check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode)
     fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
                                      keyframe_share=keyframe_share, progress=progress,
                                      heights_from_data=heights_from_data)

@@ -20,7 +20,9 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose
+from occtool.fuse._frontiers import frontiers_in_strips
 from occtool.fuse._map import FusedMap
+from occtool.fuse._memory import release_free_memory
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns
 from occtool.fuse._world import WorldMap
@@ -198,7 +200,8 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])
     obstacles = np.concatenate([np.asarray(p.nav.obstacle_points, dtype=np.float64).reshape(-1, 2)
                                 for p in placed]) if placed else np.zeros((0, 2))
-    frontiers = frontiers_of(raster, frontier_min_length)
+    release_free_memory()  # the world map's and the raster's temporaries, back to the system
+    frontiers = frontiers_in_strips(raster, frontier_min_length)
     seconds["union_frontiers"] = time.perf_counter() - started
     return RunMap(fused, world, raster, placed, region, obstacles, frontiers, seconds)
 
