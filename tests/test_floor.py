@@ -167,7 +167,7 @@ def test_map_warns_as_fit_does_when_the_data_and_sensor_height_disagree(low_scan
 def test_map_with_no_height_given_takes_the_data_s_floor(low_scan, tmp_path):
     from occtool.fuse import load_map
 
-    result = run("map", low_scan, "-o", tmp_path / "map", "--no-mcap", "--no-register")
+    result = run("map", low_scan, "-o", tmp_path / "map", "--no-mcap", "--no-register", "--world", "2d")
     assert result.exit_code == 0, result.output
     assert "--sensor-height 0.08 taken from the data instead of the default 1" in " ".join(result.output.split())
     # The body band (0.05 to 1 m above the floor) in the world: 0.08 m lower than the sensor.
@@ -175,3 +175,10 @@ def test_map_with_no_height_given_takes_the_data_s_floor(low_scan, tmp_path):
     # A room, not a strip: free floor across it.
     summary = json.loads((tmp_path / "map" / "summary.json").read_text())
     assert summary["raster"]["cells"]["free"] * 0.05 ** 2 > 15.0
+    # The 3D map (the default for a 3D scan) puts its band's ground 0.08 m under the sensor too.
+    result = run("map", low_scan, "-o", tmp_path / "map3d", "--no-mcap", "--no-register")
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "map3d" / "summary.json").read_text())
+    assert summary["world_map"]["kind"] == "3d"
+    assert summary["raster"]["cells"]["free"] * 0.05 ** 2 > 15.0
+    assert summary["raster"]["cells"]["occupied"] * 0.05 > 10.0  # the walls, not the floor

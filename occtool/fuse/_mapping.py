@@ -160,14 +160,12 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     if world == "3d" or (world == "auto" and is_3d_log(log)):
         import time
 
-        import numpy as np
-
-        from occtool.fuse._world3d import map_log_3d
+        from occtool.fuse._world3d import map_log_3d, sensor_positions
 
         started = time.perf_counter()
         world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
         seconds = time.perf_counter() - started
-        sensors = np.array([p.pose.translation for p in log.positions if p.pose is not None]).reshape(-1, 3)
+        sensors = sensor_positions(log)
     run = map_of_run(fused, models, positions, resolution=resolution,
                      navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
                      world3d=world3d, sensor_positions=sensors)

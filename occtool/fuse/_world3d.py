@@ -304,18 +304,30 @@ def is_3d_log(log: Any, sample: int = 200_000) -> bool:
     return bool(every.size) and float(np.mean(np.abs(every) > OFF_PLANE)) >= OFF_PLANE_SHARE
 
 
+def sensor_positions(log: Any) -> FloatArray:
+    """``(N, 3)``: each posed position's sensor in the world frame (a single position without
+    a pose: the origin, its own frame, as :func:`rays_of_log` takes it)."""
+    if len(log.positions) == 1 and log.positions[0].pose is None:
+        return np.zeros((1, 3))
+    return np.array([p.pose.translation for p in log.positions if p.pose is not None], dtype=np.float64).reshape(-1, 3)
+
+
 def rays_of_log(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.intp]]:
     """Each feature of a :class:`~occtool.features.RangeLog` as a world-frame ray: origins (the
     position's pose), end points (its sensor-centred robot-frame point turned by the yaw and
     moved by the pose), hits (evidence above 0; 0 is a free-only ray) and the number of its
     position in the log (0, 1, ...)."""
+    from occtool.features import Pose
+
     origins, ends, hits, counts = [], [], [], []
+    # One position and no pose (a single scan): its own frame is the world's, as in 2D.
+    alone = len(log.positions) == 1 and log.positions[0].pose is None
     for position in log.positions:
-        if position.pose is None:
+        if position.pose is None and not alone:
             raise InputError(f"{log.source or 'the log'}: position {position.index} has no pose; "
                              "a world map needs poses")
         points = np.asarray(position.features.points, dtype=np.float64).reshape(-1, 3)
-        pose = position.pose
+        pose = position.pose or Pose(0.0, 0.0, 0.0, 0.0)
         ends.append(points @ pose.rotation.T + pose.translation)
         origins.append(np.broadcast_to(pose.translation, points.shape))
         hits.append(np.asarray(position.features.evidence, dtype=np.float64).reshape(-1) > 0.0)
@@ -366,4 +378,4 @@ def from_arrays(arrays: Any) -> WorldMap3D:
 
 
 __all__ = ["RESOLUTION", "WorldMap3D", "build_world_map_3d", "from_arrays", "is_3d_log", "load_map_3d", "map_log_3d",
-           "rays_of_log", "rigid"]
+           "rays_of_log", "rigid", "sensor_positions"]
