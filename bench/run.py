@@ -53,8 +53,11 @@ from fleet import fleet_section  # noqa: E402
 from heldout import heldout_section, heldout_targets  # noqa: E402
 from heldout3d import heldout3d_section  # noqa: E402
 from large import large_section  # noqa: E402
+from large_runs import large_runs_section  # noqa: E402
 from log_map import log_map_section  # noqa: E402
 from map_quality import laser_quality, quality_targets, render_quality, scene_quality, summarise_scenes  # noqa: E402
+from merge import markdown as merge_markdown  # noqa: E402
+from merge import score_merge  # noqa: E402
 from registration import registration_section, registration_targets  # noqa: E402
 from unseen_rooms import unseen_rooms_section, unseen_targets  # noqa: E402
 
@@ -623,6 +626,10 @@ def render_whole_logs(results: dict[str, Any]) -> list[str]:
         lines += [results["depth_markdown"], ""]
     if results.get("registration_markdown"):
         lines += [results["registration_markdown"], ""]
+    if results.get("large_runs_markdown"):
+        lines += ["## Large runs: the two largest logs (bench/large_runs.py)", "", results["large_runs_markdown"], ""]
+    if results.get("merge_markdown"):
+        lines += ["## Four robots, one map (bench/merge.py)", "", results["merge_markdown"], ""]
     return lines
 
 
@@ -882,6 +889,25 @@ def write_headline(results: dict[str, Any], readme: Path) -> None:
     readme.write_text(text[:start] + block + text[end + len(HEADLINE_END):], encoding="utf-8")
 
 
+def merge_targets(result: dict[str, Any] | None) -> list[tuple[str, str, bool | None]]:
+    """Issue 36: Intel as four robots merged, within 0.005 of the single run's held-out AUC
+    and at least 0.95, in at most 1.1 times its bytes, the same bytes in every order."""
+    if not result:
+        return []
+    rows = {row["name"]: row for row in result["rows"]}
+    single = result["rows"][0]
+    merged = next(row for name, row in rows.items() if name.startswith("merged (") and "pairs" not in name)
+    if merged["auc"] is None or single["auc"] is None:
+        return [("Intel as four robots, merged: scored", "not available", False)]
+    return [("Intel as four robots, merged: held-out AUC within 0.005 of the single run's and >= 0.95",
+             f"{merged['auc']:.4f} vs {single['auc']:.4f}",
+             merged["auc"] >= single["auc"] - 0.005 and merged["auc"] >= 0.95),
+            ("Intel as four robots, merged: <= 1.1x the single run's bytes",
+             f"{merged['bytes']:,} vs {single['bytes']:,} bytes", merged["bytes"] <= 1.1 * single["bytes"]),
+            ("Intel as four robots, merged: the same bytes for every order of the inputs",
+             f"{result['orders']} orders", bool(result["same_bytes_every_order"]))]
+
+
 def heldout3d_targets(sections: list[dict[str, Any]] | None) -> list[tuple[str, str, bool | None]]:
     """Issue 35 on the TUM cabinet and both lidar sequences, every split: world.occmap's held-out
     AUC in 3D and in the body band at least the best of OctoMap and the textbook 3D grids, in at
@@ -971,6 +997,12 @@ def main(argv: list[str] | None = None) -> int:
         results["heldout3d"] = [heldout3d_section(data, seed=seed) for seed in (0, 1)]
         results["fleet_markdown"], results["fleet"] = fleet_section(data)
         results["registration_markdown"], results["registration"] = registration_section(data)  # issue 22
+        # Issue 36: the two largest logs in bounded memory, and Intel as four robots merged.
+        results["large_runs_markdown"], results["large_runs"] = large_runs_section(data)
+        intel = data / "intel_lab" / "intel-corrected.log.gz"
+        if intel.is_file():
+            results["merge"] = score_merge(intel)
+            results["merge_markdown"] = merge_markdown(results["merge"])
     # Issue 23: depth cameras (the scenes rendered as depth images; about 75 s).
     results["depth_markdown"], results["depth"] = depth_section()
     results["notes"] = notes
@@ -985,6 +1017,8 @@ def main(argv: list[str] | None = None) -> int:
     results["targets"] += registration_targets(results.get("registration"))
     results["targets"] += heldout_targets(results.get("heldout"), results.get("log_map"))  # issue 20
     results["targets"] += heldout3d_targets(results.get("heldout3d"))  # issue 35
+    results["targets"] += (results.get("large_runs") or {}).get("targets", [])  # issue 36
+    results["targets"] += merge_targets(results.get("merge"))
     elapsed = budget.seconds - budget.left
     command = "python bench/run.py " + " ".join(argv if argv is not None else sys.argv[1:])
     results["meta"] = {
