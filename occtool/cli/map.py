@@ -130,6 +130,10 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
     A depth camera or a 3D lidar gets a 3D world map (--world): the surfaces and the space
     every ray crossed, in x, y, z; map.pgm is its body band over the ground under it.
 
+    Several logs (day1.log day2.log) whose poses share a frame map as one log, their
+    positions one after the other; several point clouds (a.pcd b.pcd) as one scan sequence,
+    registered when they have no poses.
+
     Each local model speaks only where its position observed (in front of its first
     obstacle, within its reach); places no position observed stay unknown (205 in the
     Nav2 map), never free. For a 2D laser give its height: --sensor-height 0.3

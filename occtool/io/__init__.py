@@ -66,8 +66,9 @@ def read_log(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], op
     Parameters
     ----------
     path
-        The log file (or a folder of depth frames or scans), or several point-cloud files
-        read as one scan sequence (format ``scans``, each file a scan).
+        The log file (or a folder of depth frames or scans), or several files: point clouds
+        read as one scan sequence (format ``scans``, each file a scan), or range logs read as
+        one log (their positions one after the other; their poses must share a frame).
     options
         How to read it: a :class:`~occtool.io.read_options.ReadOptions`, whose fields are
         the options (``format``, ``topics``, ``evidence``, ``no_return_range``, ...; see
@@ -94,10 +95,37 @@ def read_log(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], op
     >>> features = log.single().features                # doctest: +SKIP
     """
     path, fmt, checked = _checked(path, options, keywords)
+    if fmt == LOGS:
+        return _read_logs(path, checked)
     from occtool.io._formats import read_errors, read_whole
 
     with read_errors(path):
         return read_whole(path, fmt, checked)
+
+
+#: The format name of several range logs given at once (not point clouds): one log of
+#: their positions, in the order given, their poses in one frame.
+LOGS = "logs"
+
+
+def _read_logs(paths: list[Any], options: ReadOptions) -> RangeLog:
+    """Several logs as one: each read with ``options``, their positions one after the other
+    (numbered anew), their notes named by file. Their poses must share a frame: a robot's
+    runs in one building mapped by the same SLAM, or several robots' in a common frame."""
+    from dataclasses import replace
+
+    from occtool.features import Note, RangeLog, note_level
+
+    positions, notes, kinds = [], [], set()
+    for each in paths:
+        log = read_log(each, options)
+        for position in log.positions:
+            positions.append(replace(position, index=len(positions)))
+        notes += [Note(f"{Path(each).name}: {note}", note_level(note)) for note in log.notes]
+        kinds.add(log.pose_kind)
+    merged = RangeLog(positions, source=" + ".join(str(p) for p in paths), notes=notes)
+    merged.pose_kind = kinds.pop() if len(kinds) == 1 else None
+    return merged
 
 
 def iter_positions(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], options: ReadOptions | None = None,
@@ -120,6 +148,8 @@ def iter_positions(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str
     from occtool.io.position_stream import PositionStream
 
     path, fmt, checked = _checked(path, options, keywords)
+    if fmt == LOGS:
+        raise InputError("several logs are read whole (read_log), not streamed: give one log at a time")
     return PositionStream(path, fmt, checked)
 
 
@@ -132,10 +162,21 @@ def _checked(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], op
         if not Path(each).exists():
             raise FileNotFoundError(2, "No such file or directory", str(each))
     checked = as_read_options(options, **keywords)
-    if len(paths) != 1:  # several files: one scan sequence
-        if checked.format not in (None, "scans"):
-            raise InputError(f"several files are read as one scan sequence (format scans), not {checked.format}")
-        return paths, "scans", checked
+    if len(paths) != 1:  # several point clouds: one scan sequence; several logs: one log
+        from occtool.io.scans import FILE_FORMATS
+
+        if checked.format is None:
+            formats = [detect_format(each) for each in paths]
+            clouds = [f in FILE_FORMATS for f in formats]
+            if all(clouds) or checked.poses is not None:
+                return paths, "scans", checked
+            if any(clouds):
+                raise InputError(f"{paths[clouds.index(True)]} is a point cloud and {paths[clouds.index(False)]} a "
+                                 "range log: give several point clouds (one scan sequence) or several logs")
+            return paths, LOGS, checked
+        if checked.format == "scans":
+            return paths, "scans", checked
+        return paths, LOGS, checked
     path = paths[0]
     fmt = checked.format or detect_format(paths[0])
     if checked.poses is not None and fmt != "scans":
