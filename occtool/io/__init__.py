@@ -116,7 +116,9 @@ def _read_logs(paths: list[Any], options: ReadOptions) -> RangeLog:
 
     from occtool.features import Note, RangeLog, note_level
 
-    positions, notes, kinds = [], [], set()
+    positions: list[Position] = []
+    notes: list[str] = []
+    kinds: set[str | None] = set()
     for each in paths:
         log = read_log(each, options)
         for position in log.positions:
