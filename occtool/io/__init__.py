@@ -108,7 +108,7 @@ def read_log(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], op
 LOGS = "logs"
 
 
-def _read_logs(paths: list[Any], options: ReadOptions) -> RangeLog:
+def _read_logs(paths: Any, options: ReadOptions) -> RangeLog:
     """Several logs as one: each read with ``options``, their positions one after the other
     (numbered anew), their notes named by file. Their poses must share a frame: a robot's
     runs in one building mapped by the same SLAM, or several robots' in a common frame."""
