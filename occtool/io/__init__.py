@@ -169,7 +169,7 @@ def _checked(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], op
 
         if checked.format is None:
             formats = [detect_format(each) for each in paths]
-            clouds = [f in FILE_FORMATS for f in formats]
+            clouds = [f in FILE_FORMATS or f == "scans" for f in formats]  # a KITTI .bin detects as scans
             if all(clouds) or checked.poses is not None:
                 return paths, "scans", checked
             if any(clouds):
