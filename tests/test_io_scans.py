@@ -297,6 +297,7 @@ def test_a_folder_of_scans_with_poses_maps_without_registering(tmp_path):
     assert not (tmp_path / "out" / "poses.csv").exists()  # the poses file's poses were kept
 
 
+@pytest.mark.slow
 def test_map_of_the_first_three_seosan_scans(tmp_path, shared_data):
     import json
     import shutil
@@ -311,6 +312,8 @@ def test_map_of_the_first_three_seosan_scans(tmp_path, shared_data):
     assert (tmp_path / "out" / "world.occmap").stat().st_size > 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["positions"] == 3
+    # A 3D lidar: a 3D map; three positions are too few to hold some out: the coarsest cell.
+    assert summary["world_map"]["kind"] == "3d" and summary["world_map"]["resolution"] == 0.4
 
 
 def test_info_describes_a_folder_of_scans(tmp_path):

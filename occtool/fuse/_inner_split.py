@@ -69,17 +69,19 @@ def _test_points(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_])
 
 
 def choose_resolution(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_], groups: NDArray[np.intp], *,
-                      candidates: tuple[float, ...] = CANDIDATES, default: float = 0.2, seed: int = 0,
+                      candidates: tuple[float, ...] = CANDIDATES, default: float | None = None, seed: int = 0,
                       **options: Any) -> tuple[float, dict[str, Any]]:
     """The cell size of :data:`CANDIDATES` whose map of the kept positions best predicts the
     held-out ones (module docstring), and a report (the inner AUC of each size tried).
 
     ``groups`` ``(N,)`` numbers each ray's position (0, 1, ... in the run's order);
     ``options`` are :func:`occtool.fuse.build_world_map_3d`'s. Fewer than
-    :data:`MIN_POSITIONS` positions keep ``default``.
+    :data:`MIN_POSITIONS` positions keep ``default`` (``None``: the coarsest candidate, as
+    a finer cell has nothing to earn its bytes on).
     """
     from occtool.fuse._world3d import build_world_map_3d
 
+    default = max(candidates) if default is None else default
     count = int(groups.max()) + 1 if groups.size else 0
     if count < MIN_POSITIONS:
         return default, {"chosen": default, "why": f"{count} positions: too few to hold some out"}
