@@ -49,8 +49,10 @@ class RegistrationSettings:
     was refused) is ``weak_step_scale`` times less certain in the pose graph, so loops can
     overrule a jump it kept. ``step_information``: the graph weighs each step by GICP's own
     information (its Hessian), scaled so that the median step keeps ``odometry_sigma``;
-    ``loop_information`` the loops by their registration's, the median loop keeping
-    ``loop_sigma`` (a loop matched along a corridor is loose along it). Before each solve,
+    ``loop_information`` the loops by ``loop_sigma`` plus their registration's own
+    uncertainty (its Hessian turned into a covariance by the factor that gives the median
+    step ``odometry_sigma``): a loop matched along a corridor is loose along it, a loop
+    that pins the place down keeps ``loop_sigma``. Before each solve,
     loops whose ends lie within ``loop_pair_travel`` metres of travel of each other are
     checked against each other through the sequential steps between them, and a loop that
     disagrees with more of its neighbours than agree is dropped (0 turns the check off).
@@ -239,6 +241,16 @@ def planar_information(h: FloatArray | None, turn: float) -> FloatArray | None:
     return g @ sub @ g.T
 
 
+def information_scale(blocks: list[FloatArray | None], sigma: tuple[float, float]) -> float | None:
+    """The factor that turns GICP's Hessians into information: the one that gives the
+    median of ``blocks`` the translation information of ``sigma`` (metres, radians);
+    ``None`` without any block."""
+    scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
+    if not scales:
+        return None
+    return (1 / sigma[0] ** 2) / float(np.median(scales))
+
+
 def information_roots(blocks: list[FloatArray | None], sigma: tuple[float, float]) -> FloatArray:
     """Square roots (upper Cholesky factors) of each edge's information, ``(len(blocks), 3, 3)``:
     the blocks scaled so that the median one has the translation information of ``sigma``
@@ -247,10 +259,9 @@ def information_roots(blocks: list[FloatArray | None], sigma: tuple[float, float
     st, sr = sigma
     plain = np.diag([1 / st, 1 / st, 1 / sr])
     out = np.repeat(plain[None] / 3.0, len(blocks), axis=0)
-    scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
-    if not scales:
+    factor = information_scale(blocks, sigma)
+    if factor is None:
         return out
-    factor = (1 / st**2) / float(np.median(scales))
     floor = np.diag([1e-6 / st**2, 1e-6 / st**2, 1e-6 / sr**2])
     for n, block in enumerate(blocks):
         if block is None:

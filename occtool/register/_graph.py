@@ -19,7 +19,6 @@ from occtool.register._core import (
     _matrix,
     _pose,
     _wrap,
-    information_roots,
     matched_share,
     planar_information,
     relative,
@@ -28,11 +27,13 @@ from occtool.register._core import (
 
 def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool, aligner: _Aligner,
                 settings: RegistrationSettings, report: RegistrationReport | None = None,
-                step_weights: FloatArray | None = None) -> list[Pose]:
+                step_weights: FloatArray | None = None, *, information_scale: float | None = None) -> list[Pose]:
     """Re-align revisited places: loop edges found by registration, then the pose graph
     of the sequential steps and the loops solved by :func:`solve_graph` (least squares,
     the loops that disagree with the rest pruned). The graph is planar (x, y, yaw); a 3D
-    scan keeps the height its sequential registration gave it."""
+    scan keeps the height its sequential registration gave it. ``information_scale``: the
+    factor that turns GICP's Hessian into information (:func:`~occtool.register._core.information_scale`
+    of the steps); without it the loops keep the plain ``settings.loop_sigma``."""
     started = time.process_time()
     count = len(poses)
     steps = [(k - 1, k, relative(poses[k - 1], poses[k])) for k in range(1, count)]
@@ -89,11 +90,12 @@ def close_loops(prepared: Sequence[FloatArray], poses: list[Pose], planar: bool,
         if settings.loop_pair_travel > 0.0:
             edges = list(loops.items())
             agree = consistent_loops([(i, j, z) for (i, j), z in edges], poses, settings,
-                                     _loop_weights([information[key] for key, _ in edges], settings))
+                                     _loop_weights([information[key] for key, _ in edges], settings, information_scale))
             rejected.update(key for (key, _), ok in zip(edges, agree) if not ok)
             loops = {key: z for (key, z), ok in zip(edges, agree) if ok}
         current, kept = solve_graph(poses, steps, [(i, j, z) for (i, j), z in loops.items()], settings,
-                                    step_weights, _loop_weights([information[key] for key in loops], settings))
+                                    step_weights, _loop_weights([information[key] for key in loops], settings,
+                                                               information_scale))
         rejected.update((i, j) for (i, j) in loops if (i, j) not in {(a, b) for a, b, _ in kept})
         loops = {(a, b): z for a, b, z in kept}
     if report is not None:
@@ -191,13 +193,29 @@ def consistent_loops(loops: Sequence[tuple[int, int, Pose]], chain: Sequence[Pos
         keep[worst] = False
 
 
-def _loop_weights(blocks: list[FloatArray | None], settings: RegistrationSettings) -> FloatArray | None:
-    """The loops' square-root information for the graph: GICP's own (``settings.loop_information``;
-    a loop along a corridor is loose along it) scaled so that the median loop has
-    ``settings.loop_sigma``, else ``None`` (the plain sigmas)."""
-    if not settings.loop_information or not blocks:
+def _loop_weights(blocks: list[FloatArray | None], settings: RegistrationSettings,
+                  scale: float | None) -> FloatArray | None:
+    """The loops' square-root information for the graph, ``(len(blocks), 3, 3)``, or ``None``
+    (the plain ``settings.loop_sigma``) without ``settings.loop_information`` or ``scale``.
+
+    A loop's covariance is the plain one plus its registration's own (the inverse of its
+    Hessian times ``scale``, the factor that calibrates the steps' Hessians): what a loop
+    pinned down in every direction still carries (the 5 cm: the scans of a revisit do not
+    agree better with each other), and along a corridor the uncertainty of where along it
+    the match settled."""
+    if not settings.loop_information or scale is None or not blocks:
         return None
-    return information_roots(blocks, settings.loop_sigma)
+    lt, lr = settings.loop_sigma
+    floor = np.diag([1e-6 / lt**2, 1e-6 / lt**2, 1e-6 / lr**2])
+    cov = np.repeat(np.diag([lt**2, lt**2, lr**2])[None], len(blocks), axis=0)
+    for n, block in enumerate(blocks):
+        if block is None:
+            continue
+        try:
+            cov[n] += np.linalg.inv(scale * 0.5 * (block + block.T) + floor)
+        except np.linalg.LinAlgError:
+            continue
+    return np.linalg.cholesky(np.linalg.inv(cov)).transpose(0, 2, 1)
 
 
 def optimise_graph(initial: list[Pose], steps: list[tuple[int, int, Pose]], loops: list[tuple[int, int, Pose]],

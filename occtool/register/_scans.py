@@ -27,6 +27,7 @@ from occtool.register._core import (
     _pose,
     compose,
     information_roots,
+    information_scale,
     matched_share,
     planar_information,
     relative,
@@ -109,7 +110,8 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         report.seconds["registration"] = time.process_time() - started
     if settings.loop_closure and count > 2:
         weights = step_weights(poses, information, weak, settings)
-        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights)
+        scale = information_scale(_step_blocks(poses, information), settings.odometry_sigma)
+        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights, information_scale=scale)
     return poses
 
 
@@ -134,6 +136,11 @@ def _retried(aligner: _Aligner, target: FloatArray, source: FloatArray, matrix: 
     return chosen[0], chosen[1], best < settings.retry_below
 
 
+def _step_blocks(poses: list[Pose], information: Sequence[FloatArray | None]) -> list[FloatArray | None]:
+    """Each step's x, y, yaw information from GICP, in the frame of the step's first pose."""
+    return [planar_information(information[k], poses[k].yaw - poses[k - 1].yaw) for k in range(1, len(poses))]
+
+
 def step_weights(poses: list[Pose], information: Sequence[FloatArray | None], weak: NDArray[np.bool_],
                  settings: RegistrationSettings) -> FloatArray | None:
     """Square roots of each step's information for the pose graph, ``(len(poses) - 1, 3, 3)``,
@@ -148,8 +155,7 @@ def step_weights(poses: list[Pose], information: Sequence[FloatArray | None], we
         return None
     out = np.repeat(plain[None], len(poses) - 1, axis=0)
     if settings.step_information:
-        out = information_roots([planar_information(information[k], poses[k].yaw - poses[k - 1].yaw)
-                                 for k in range(1, len(poses))], settings.odometry_sigma)
+        out = information_roots(_step_blocks(poses, information), settings.odometry_sigma)
     out[weak[1:]] /= settings.weak_step_scale
     return out
 
