@@ -13,6 +13,7 @@ import numpy as np
 from occtool.features import Pose
 from occtool.register import RegistrationSettings, compose, consistent_loops, relative, solve_graph
 from occtool.register._core import information_roots, planar_information
+from occtool.register._graph import _loop_weights
 
 
 def _square(side: float = 10.0, step: float = 0.5) -> list[Pose]:
@@ -90,7 +91,8 @@ def test_a_loop_loose_along_a_corridor_does_not_pull_along_it():
     steps = [(k - 1, k, relative(truth[k - 1], truth[k])) for k in range(1, len(truth))]
     z = compose(relative(truth[0], truth[lap]), Pose(0.5, 0.0, 0.0, 0.0))
     settings = RegistrationSettings()
-    loose_along_x = information_roots([np.diag([1e-4, 1.0, 1.0]), np.diag([1.0, 1.0, 1.0])], settings.loop_sigma)[:1]
+    # GICP's Hessian (x, y, yaw) of a match that cannot tell where along x it is.
+    loose_along_x = _loop_weights([np.diag([1e-6, 1.0, 1.0]) * 100.0], settings, 2500.0)
     plain, _ = solve_graph(chain, steps, [(0, lap, z)], settings)
     weighed, kept = solve_graph(chain, steps, [(0, lap, z)], settings, loop_weights=loose_along_x)
     assert len(kept) == 1
@@ -116,3 +118,20 @@ def test_information_is_scaled_to_the_median_and_turned_into_the_edge_frame():
     turned = planar_information(h, math.pi / 2)
     assert turned is not None and np.allclose(turned, np.diag([1.0, 9.0, 5.0]))
     assert planar_information(np.full((6, 6), np.nan), 0.0) is None
+
+
+def test_a_loop_is_as_certain_as_the_plain_sigma_at_most_and_loose_where_its_match_is():
+    settings = RegistrationSettings()
+    lt, lr = settings.loop_sigma
+    scale = 1 / 0.02**2  # a Hessian of 1 is a 2 cm step
+    pinned = np.diag([1e4, 1e4, 1e6])  # a match that pins the place down: its own error is tiny
+    corridor = np.diag([1e-4, 1e4, 1e6])  # ... except along x (Hessian 1e-4: 2 m)
+    roots = _loop_weights([pinned, corridor, None], settings, scale)
+    assert roots is not None
+    sigma = np.sqrt(np.diagonal(np.linalg.inv(roots.transpose(0, 2, 1) @ roots), axis1=1, axis2=2))
+    assert np.allclose(sigma[0], [lt, lt, lr], rtol=0.01)  # the plain sigmas, never tighter
+    assert np.allclose(sigma[2], [lt, lt, lr])  # no Hessian: the plain sigmas
+    assert sigma[1][0] > 1.0 and np.isclose(sigma[1][1], lt, rtol=0.01)
+    # Without the calibration (or with the weights off) the loops keep the plain sigmas.
+    assert _loop_weights([pinned], settings, None) is None
+    assert _loop_weights([pinned], RegistrationSettings(loop_information=False), scale) is None
