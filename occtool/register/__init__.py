@@ -30,7 +30,7 @@ from occtool.register._evaluate import (
     segment_errors,
     trajectory_error,
 )
-from occtool.register._graph import close_loops, optimise_graph, solve_graph
+from occtool.register._graph import close_loops, consistent_loops, optimise_graph, solve_graph
 from occtool.register._poses import read_map_log, trajectory, write_map_poses, write_poses_csv
 from occtool.register._scans import (
     needs_registration,
@@ -41,7 +41,8 @@ from occtool.register._scans import (
     register_scans,
 )
 
-__all__ = ["NOISE_MODELS", "RegistrationReport", "RegistrationSettings", "close_loops", "compose", "degrade_odometry",
+__all__ = ["NOISE_MODELS", "RegistrationReport", "RegistrationSettings", "close_loops", "compose",
+           "consistent_loops", "degrade_odometry",
            "degrade_poses",
            "matched_share", "needs_registration", "optimise_graph", "pose_kind", "positions_with_poses",
            "read_map_log", "read_registered_log", "register_log", "register_scans", "relative", "scan_points",

@@ -48,7 +48,14 @@ class RegistrationSettings:
     ``retry_margin`` more of them than the first. A step whose result still fits poorly (or
     was refused) is ``weak_step_scale`` times less certain in the pose graph, so loops can
     overrule a jump it kept. ``step_information``: the graph weighs each step by GICP's own
-    information (its Hessian), scaled so that the median step keeps ``odometry_sigma``.
+    information (its Hessian), scaled so that the median step keeps ``odometry_sigma``;
+    ``loop_information`` the loops by ``loop_sigma`` plus their registration's own
+    uncertainty (its Hessian turned into a covariance by the factor that gives the median
+    step ``odometry_sigma``): a loop matched along a corridor is loose along it, a loop
+    that pins the place down keeps ``loop_sigma``. Before each solve,
+    loops whose ends lie within ``loop_pair_travel`` metres of travel of each other are
+    checked against each other through the sequential steps between them, and a loop that
+    disagrees with more of its neighbours than agree is dropped (0 turns the check off).
     ``backend``: ``"small_gicp"`` (the default, the ``register`` extra) or ``"kiss_icp"``
     (KISS-ICP's point-to-point ICP, kept for the comparison in docs/register.md).
     """
@@ -81,6 +88,8 @@ class RegistrationSettings:
     retry_margin: float = 0.1
     weak_step_scale: float = 10.0
     step_information: bool = True
+    loop_information: bool = True
+    loop_pair_travel: float = 5.0
 
 
 @dataclass
@@ -218,6 +227,50 @@ def matched_share(target: FloatArray, source: FloatArray, matrix: FloatArray, ra
     moved = source @ matrix[:3, :3].T + matrix[:3, 3]
     distance, _ = cKDTree(target).query(moved, distance_upper_bound=radius)
     return float(np.isfinite(distance).mean())
+
+
+def planar_information(h: FloatArray | None, turn: float) -> FloatArray | None:
+    """The x, y, yaw block of small_gicp's 6x6 information ``h`` (given in the source's
+    frame) turned by ``turn`` radians into the frame an edge's residual is written in (the
+    edge's first pose), or ``None`` when there is none or it is not finite."""
+    if h is None or not np.isfinite(h).all():
+        return None
+    sub = h[np.ix_([3, 4, 2], [3, 4, 2])]
+    g = np.eye(3)
+    g[:2, :2] = [[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]]
+    return g @ sub @ g.T
+
+
+def information_scale(blocks: list[FloatArray | None], sigma: tuple[float, float]) -> float | None:
+    """The factor that turns GICP's Hessians into information: the one that gives the
+    median of ``blocks`` the translation information of ``sigma`` (metres, radians);
+    ``None`` without any block."""
+    scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
+    if not scales:
+        return None
+    return (1 / sigma[0] ** 2) / float(np.median(scales))
+
+
+def information_roots(blocks: list[FloatArray | None], sigma: tuple[float, float]) -> FloatArray:
+    """Square roots (upper Cholesky factors) of each edge's information, ``(len(blocks), 3, 3)``:
+    the blocks scaled so that the median one has the translation information of ``sigma``
+    (metres, radians), a block missing (or not positive definite) the plain sigmas three
+    times wider."""
+    st, sr = sigma
+    plain = np.diag([1 / st, 1 / st, 1 / sr])
+    out = np.repeat(plain[None] / 3.0, len(blocks), axis=0)
+    factor = information_scale(blocks, sigma)
+    if factor is None:
+        return out
+    floor = np.diag([1e-6 / st**2, 1e-6 / st**2, 1e-6 / sr**2])
+    for n, block in enumerate(blocks):
+        if block is None:
+            continue
+        try:
+            out[n] = np.linalg.cholesky(factor * 0.5 * (block + block.T) + floor).T
+        except np.linalg.LinAlgError:
+            pass
+    return out
 
 
 def _voxel_down(points: FloatArray, voxel: float) -> FloatArray:

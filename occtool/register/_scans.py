@@ -26,7 +26,10 @@ from occtool.register._core import (
     _matrix,
     _pose,
     compose,
+    information_roots,
+    information_scale,
     matched_share,
+    planar_information,
     relative,
     scan_points,
 )
@@ -107,7 +110,8 @@ def register_scans(scans: Sequence[FloatArray], odometry: Sequence[Pose | None] 
         report.seconds["registration"] = time.process_time() - started
     if settings.loop_closure and count > 2:
         weights = step_weights(poses, information, weak, settings)
-        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights)
+        scale = information_scale(_step_blocks(poses, information), settings.odometry_sigma)
+        poses = close_loops(prepared, poses, planar, aligner, settings, report, weights, information_scale=scale)
     return poses
 
 
@@ -132,6 +136,11 @@ def _retried(aligner: _Aligner, target: FloatArray, source: FloatArray, matrix: 
     return chosen[0], chosen[1], best < settings.retry_below
 
 
+def _step_blocks(poses: list[Pose], information: Sequence[FloatArray | None]) -> list[FloatArray | None]:
+    """Each step's x, y, yaw information from GICP, in the frame of the step's first pose."""
+    return [planar_information(information[k], poses[k].yaw - poses[k - 1].yaw) for k in range(1, len(poses))]
+
+
 def step_weights(poses: list[Pose], information: Sequence[FloatArray | None], weak: NDArray[np.bool_],
                  settings: RegistrationSettings) -> FloatArray | None:
     """Square roots of each step's information for the pose graph, ``(len(poses) - 1, 3, 3)``,
@@ -146,28 +155,7 @@ def step_weights(poses: list[Pose], information: Sequence[FloatArray | None], we
         return None
     out = np.repeat(plain[None], len(poses) - 1, axis=0)
     if settings.step_information:
-        blocks: list[FloatArray | None] = []
-        for k in range(1, len(poses)):
-            h = information[k]
-            if h is None or not np.isfinite(h).all():
-                blocks.append(None)
-                continue
-            sub = h[np.ix_([3, 4, 2], [3, 4, 2])]
-            turn = poses[k].yaw - poses[k - 1].yaw
-            g = np.eye(3)
-            g[:2, :2] = [[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]]
-            blocks.append(g @ sub @ g.T)
-        scales = [0.5 * (b[0, 0] + b[1, 1]) for b in blocks if b is not None]
-        factor = (1 / st**2) / float(np.median(scales)) if scales else 1.0
-        floor = np.diag([1e-6 / st**2, 1e-6 / st**2, 1e-6 / sr**2])
-        for n, block in enumerate(blocks):
-            if block is None:
-                out[n] = plain / 3.0
-                continue
-            try:
-                out[n] = np.linalg.cholesky(factor * 0.5 * (block + block.T) + floor).T
-            except np.linalg.LinAlgError:
-                out[n] = plain / 3.0
+        out = information_roots(_step_blocks(poses, information), settings.odometry_sigma)
     out[weak[1:]] /= settings.weak_step_scale
     return out
 
