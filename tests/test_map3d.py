@@ -113,7 +113,7 @@ def test_held_out_blocks_are_blocks_and_the_choice_is_deterministic() -> None:
     assert picked.sum() == 8  # 15 % of 48 in blocks of 4
     starts = np.flatnonzero(np.diff(np.r_[0, picked.astype(int)]) == 1)
     assert all(picked[s:s + 4].all() for s in starts)
-    origins, ends, hits = _scene(n=1500)
+    origins, ends, hits = _scene(n=800)
     groups = np.repeat(np.arange(len(ends)), [len(e) for e in ends])
     flat = (np.concatenate([np.broadcast_to(o, e.shape) for o, e in zip(origins, ends)]), np.concatenate(ends),
             np.concatenate(hits), groups)
@@ -145,7 +145,7 @@ def test_a_3d_log_is_told_from_a_2d_laser() -> None:
 
 
 def test_map_log_of_a_3d_log_writes_a_3d_world_map(tmp_path: Path) -> None:
-    origins, ends, hits = _scene(table=(2.5, 3.5, 0.75), n=1500)
+    origins, ends, hits = _scene(table=(2.5, 3.5, 0.75), n=1000)
     result = map_log(_log(origins, ends, hits), tmp_path / "map", world_resolution=0.2, mcap=False,
                      heights_from_data=True)
     world = load_map(tmp_path / "map" / "world.occmap")
