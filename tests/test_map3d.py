@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from occtool.cli.main import cli
+from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
 from occtool.fuse import (
     WorldMap,
@@ -157,6 +158,13 @@ def test_map_log_of_a_3d_log_writes_a_3d_world_map(tmp_path: Path) -> None:
     assert result.run.raster.cells.size > 0
     flat = map_log(_log(origins, ends, hits), tmp_path / "flat", world="2d", mcap=False, heights_from_data=True)
     assert isinstance(flat.run.world, WorldMap)
+    # The memory estimate counts the 3D map's build, a few hundred bytes a ray.
+    from occtool.fuse._memory import estimate_map_memory
+
+    rays = sum(len(e) for e in ends)
+    assert estimate_map_memory(_log(origins, ends, hits), world3d=True).parts["world3d"] >= 300 * rays
+    with pytest.raises(InputError, match="the 3D map of 8,000 rays"):
+        map_log(_log(origins, ends, hits), tmp_path / "refused", mcap=False, memory_limit="103M")
 
 
 @pytest.mark.slow

@@ -151,13 +151,14 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         log, report_of_registration = read_map_log(source, read_options, register=register,
                                                    settings=registration or RegistrationSettings())
         name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
-    check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode)
+    three_d = world == "3d" or (world == "auto" and is_3d_log(log))
+    check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d)
     fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
                                      keyframe_share=keyframe_share, progress=progress,
                                      heights_from_data=heights_from_data)
     positions = list(zip(report.fitted, fused.poses, fused.stamps))
     world3d, sensors, seconds = None, None, 0.0
-    if world == "3d" or (world == "auto" and is_3d_log(log)):
+    if three_d:
         import time
 
         from occtool.fuse._world3d import map_log_3d, sensor_positions
