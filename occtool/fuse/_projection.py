@@ -210,8 +210,8 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         explored[rows] = inside & band_seen[column]
     if len(places) and radius > 0:
         # The cells whose centres lie within the radius of a position: the robot's body was there.
-        reach = int(math.ceil(radius / resolution))
-        offset = np.arange(-reach, reach + 1)
+        span = int(math.ceil(radius / resolution))
+        offset = np.arange(-span, span + 1)
         pc = np.floor((places[:, 0] - origin[0]) / resolution).astype(np.int64)
         pr = np.floor((places[:, 1] - origin[1]) / resolution).astype(np.int64)
         col = pc[:, None, None] + offset[None, None, :]
@@ -227,7 +227,7 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     spacing = resolution / math.sqrt(2.0)
     across = np.ceil(2.0 * g.extents[members] / spacing) + 2
     batch = np.cumsum(3 * across[:, 0] * across[:, 1]) // SAMPLES_AT_ONCE  # about as many samples a batch
-    for part in np.split(members, np.flatnonzero(np.diff(batch)) + 1):
+    for part in np.split(members, np.flatnonzero(np.diff(batch)) + 1) if members.size else []:
         points, index = _patch_samples(world, part, spacing)
         height = points[:, 2] - ground(points[:, :2])
         col = np.floor((points[:, 0] - origin[0]) / resolution).astype(np.int64)
