@@ -83,3 +83,20 @@ def memory_bytes(value: int | float | str | None, keyword: str = "memory_limit")
         raise InputError(f"{keyword} must be a size such as '500M' or '8G' (bytes; 'none': no limit), "
                          f"got {value!r}")
     return int(number * scale)
+
+
+def release_free_memory() -> None:
+    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
+    elsewhere). GEOS and numpy's small allocations leave the heap fragmented after a stage:
+    on the Freiburg campus the process kept 66 MB after the world map's build and 57 MB
+    after the navigation region's union that trimming returned."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (AttributeError, OSError):  # a C library without malloc_trim (musl)
+        pass

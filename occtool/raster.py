@@ -9,6 +9,10 @@ from numpy.typing import ArrayLike, NDArray
 
 #: Nav2 pixel values (trinary mode).
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
+#: Occupancy at and above which a map's raster cell is occupied (map_server's own
+#: ``occupied_thresh``), and at and below which it may be free (the 2D and 3D maps' rules
+#: add what else a free cell needs).
+RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
 
 
 @dataclass

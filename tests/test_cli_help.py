@@ -41,7 +41,7 @@ def test_jobs_says_what_runs_in_parallel_for_each_command():
 
 def test_map_threshold_states_the_nav2_maps_own_thresholds():
     from occtool.formats.nav2 import FREE_THRESH, OCCUPIED_THRESH, SCALE_FREE_THRESH
-    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
+    from occtool.raster import RASTER_FREE, RASTER_OCCUPIED
 
     text = help_of("map")
     threshold = text[text.index("--threshold"):text.index("--keyframe-share")]

@@ -8,7 +8,8 @@ import pytest
 from occtool.errors import InputError
 from occtool.features import Features, Pose, Position, RangeLog
 from occtool.formats import occmap3d
-from occtool.fuse._world3d import WorldMap3D, build_world_map_3d, load_map_3d, map_log_3d
+from occtool.fuse._log3d import map_log_3d
+from occtool.fuse._world3d import WorldMap3D, build_world_map_3d, load_map_3d
 
 ROOM = 4.0  # a 4 m square room, floor at z = 0, no ceiling
 TABLE = (1.5, 2.5, 0.8)  # x and y from 1.5 to 2.5, top at 0.8 m

@@ -174,7 +174,7 @@ def test_walls_few_positions_saw_through_read_less_occupied():
     # Across the trusted wall (ridge 1 falling to 0 over WIDTH 0.2 m) the cells follow its
     # occupancy: occupied to 0.07 m (0.65), then unknown; free from 0.13 m (0.35) and past
     # the wall's rim (0.125 m); a cell's centre decides.
-    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
+    from occtool.raster import RASTER_FREE, RASTER_OCCUPIED
 
     occupied_to, free_from = (1.0 - RASTER_OCCUPIED) * world.width, (1.0 - RASTER_FREE) * world.width
     # (points inside cells whose centres lie 0.025, 0.125 and 0.175 m from the wall's line)
@@ -556,7 +556,7 @@ def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_the
     """Safety of the trinary cells: a free cell is observed, at most RASTER_FREE, farther
     than the rim from every trusted wall and than the doubted rim from every doubted one;
     every cell on a trusted wall's band is occupied; an untrusted wall is not drawn."""
-    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
+    from occtool.raster import RASTER_FREE, RASTER_OCCUPIED
 
     region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 3.0, 2.0)])
     world = WorldMap([[1.0, 0.2], [2.2, 0.0]], [[1.3, 1.8], [2.2, 2.0]], [0.01, 0.02], [0.9, 0.3], region,

@@ -44,6 +44,7 @@ The parts, one concept a module (private; everything public is imported from her
 ``_mapping``    :func:`map_log`, :func:`map_model_set`: the library ``occtool map``
 ``_patches``    planar patches and crossed free space: the numbers of a 3D map
 ``_world3d``    :class:`WorldMap3D`: the run in x, y, z (a 3D log's ``world.occmap``)
+``_log3d``      :func:`map_log_3d`: a log's rays, whether it is 3D, its 3D map built
 ``_inner_split``  :func:`choose_resolution`: the 3D map's cell size, on the run's own positions
 ``_projection`` :func:`project_band`: a 3D map's body band over the ground per tile, for Nav2
 ``_load``       :func:`load_map`: a saved map of either kind
@@ -78,13 +79,14 @@ from occtool.fuse._combine import (
 from occtool.fuse._inner_split import choose_resolution
 from occtool.fuse._keyframes import KEYFRAME_CELL, KEYFRAME_NEW_SHARE, select_keyframes
 from occtool.fuse._load import load_map
+from occtool.fuse._log3d import is_3d_log, map_log_3d
 from occtool.fuse._map import FRONT_MARGIN, FusedMap
 from occtool.fuse._merge import merge_files, merge_maps
 from occtool.fuse._projection import project_band
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns, returns_of_positions
 from occtool.fuse._world import WorldMap, decode_map
-from occtool.fuse._world3d import WorldMap3D, build_world_map_3d, is_3d_log, map_log_3d
+from occtool.fuse._world3d import WorldMap3D, build_world_map_3d
 from occtool.observation import (
     LASER_RETURNS_PER_DEGREE,
     NO_OBSTACLE,

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool._stats import roc_auc
+from occtool.fuse._world3d import build_world_map_3d
 
 FloatArray = NDArray[np.float64]
 
@@ -79,8 +80,6 @@ def choose_resolution(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bo
     :data:`MIN_POSITIONS` positions keep ``default`` (``None``: the coarsest candidate, as
     a finer cell has nothing to earn its bytes on).
     """
-    from occtool.fuse._world3d import build_world_map_3d
-
     default = max(candidates) if default is None else default
     count = int(groups.max()) + 1 if groups.size else 0
     if count < MIN_POSITIONS:

@@ -20,10 +20,10 @@ from occtool.features import RangeLog
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE
+from occtool.fuse._log3d import is_3d_log, map_log_3d, sensor_positions
 from occtool.fuse._memory import check_map_memory
 from occtool.fuse._outputs import _write_run_map, check_outputs
 from occtool.fuse._run import RunMap, map_of_run
-from occtool.fuse._world3d import is_3d_log
 from occtool.limits import DEFAULT_MEMORY_LIMIT
 
 #: The kinds of world map :func:`map_log` writes.
@@ -160,8 +160,6 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     world3d, sensors, seconds = None, None, 0.0
     if three_d:
         import time
-
-        from occtool.fuse._world3d import map_log_3d, sensor_positions
 
         started = time.perf_counter()
         world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)

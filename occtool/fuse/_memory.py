@@ -64,23 +64,6 @@ def _gb(size: int) -> str:
     return f"{size / 1e6:.0f} MB" if size >= 10**6 else "under 1 MB"
 
 
-def release_free_memory() -> None:
-    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing
-    elsewhere). GEOS and numpy's small allocations leave the heap fragmented after a stage:
-    on the Freiburg campus the process kept 66 MB after the world map's build and 57 MB
-    after the navigation region's union that trimming returned."""
-    import sys
-
-    if not sys.platform.startswith("linux"):
-        return
-    import ctypes
-
-    try:
-        ctypes.CDLL(None).malloc_trim(0)
-    except (AttributeError, OSError):  # a C library without malloc_trim (musl)
-        pass
-
-
 def raster_extent(log: Any, reach: float | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """World ``(x, y)`` lower and upper corners of the positions of ``log`` (a
     :class:`~occtool.features.RangeLog`) and their features within ``reach`` metres (a
@@ -150,4 +133,4 @@ def check_map_memory(log: Any, *, memory_limit: int | float | str | None = DEFAU
     return estimate
 
 
-__all__ = ["MemoryEstimate", "check_map_memory", "estimate_map_memory", "raster_extent", "release_free_memory"]
+__all__ = ["MemoryEstimate", "check_map_memory", "estimate_map_memory", "raster_extent"]

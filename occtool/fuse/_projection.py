@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
-from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.raster import FREE, OCCUPIED, RASTER_OCCUPIED, UNKNOWN, Raster
 
 FloatArray = NDArray[np.float64]
 
@@ -33,9 +33,6 @@ DRIVEABLE_SLOPE = 20.0
 #: Most the ground may climb from one tile to the next (metres): a kerb or a step, not a
 #: table top (0.7 m) or a chair's seat (0.45 m).
 GROUND_WINDOW = 0.3
-#: Occupancy at and above which a band cell is occupied, at and below which it may be free
-#: (map_server's trinary thresholds, as the 2D map's raster uses them).
-RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
 #: Most raster cells drawn (memory: a few bytes each).
 MAX_CELLS = 50_000_000
 #: Raster cells filled at once, and patch samples drawn at once (memory, not speed).

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, Raster
 
 FloatArray = NDArray[np.float64]
 
@@ -92,7 +92,7 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
             _strip(world, cells[t0:t1, c0:c1], probability[t0:t1, c0:c1], explored[t0:t1, c0:c1], xs[c0:c1], ys,
                    lo - c0, hi - c0, inside, outside, near, within, doubted_trust)
-    from occtool.fuse._memory import release_free_memory
+    from occtool.limits import release_free_memory
 
     release_free_memory()  # the strips' freed temporaries
     return Raster(cells, float(resolution), origin, probability, np.zeros((ny, nx), dtype=bool), explored=explored)
@@ -104,7 +104,6 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
            near: list[NDArray[np.bool_]], within: float, doubted_trust: float) -> None:
     """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``near``:
     the tiles a ridge reaches, and those a wall's band or rim reaches."""
-    from occtool.fuse._world import RASTER_FREE, RASTER_OCCUPIED
 
     h, nx = ys.size, xs.size
     tile_of = np.repeat(np.arange(first.size), last - first + 1)

@@ -11,10 +11,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.fuse._memory import release_free_memory
 from occtool.fuse._sightings import RunReturns, returns_of_fused
 from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
 from occtool.fuse._world import WorldMap
+from occtool.limits import release_free_memory
 
 FloatArray = NDArray[np.float64]
 

@@ -22,10 +22,10 @@ from occtool.errors import InputError
 from occtool.features import Pose
 from occtool.fuse._frontiers import frontiers_in_strips
 from occtool.fuse._map import FusedMap
-from occtool.fuse._memory import release_free_memory
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns
 from occtool.fuse._world import WorldMap
+from occtool.limits import release_free_memory
 from occtool.raster import FREE, UNKNOWN, Raster
 from occtool.robot import Robot
 

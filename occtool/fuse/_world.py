@@ -61,15 +61,12 @@ FREE_SLOPE = 0.01
 FREE_CAP = 0.45
 #: Occupancy where no position observed.
 UNKNOWN_LEVEL = 0.5
-#: The Nav2 raster's cells are occupied where the map's occupancy at their centre reaches
-#: this (map_server's own ``occupied_thresh``) ...
-RASTER_OCCUPIED = 0.65
-#: ... free where it is at most this, the run observed them and no trusted wall is within
-#: :data:`WALL_RIM`, unknown between; the walls most positions saw through left out (chosen
-#: on inner splits of the four CARMEN logs' training scans, docs/map.md: against the fixed
-#: 7.5 cm wall band before it, trinary AUC +0.001 to +0.011 on each; its free cells are a
-#: subset of the band's).
-RASTER_FREE = 0.35
+# The Nav2 raster's cells are occupied where the map's occupancy at their centre reaches
+# occtool.raster.RASTER_OCCUPIED (map_server's own occupied_thresh) and free where it is at
+# most RASTER_FREE, the run observed them and no trusted wall is within WALL_RIM, unknown
+# between; the walls most positions saw through left out (chosen on inner splits of the
+# four CARMEN logs' training scans, docs/map.md: against the fixed 7.5 cm wall band before
+# it, trinary AUC +0.001 to +0.011 on each; its free cells are a subset of the band's).
 #: A trusted wall's band is occupied in the raster however low its occupancy there: cell
 #: centres within this of it (metres, past its thickness; half a 5 cm cell). The occupancy
 #: threshold decides the rest (files before it kept 0.075 and draw their bands that wide).
@@ -382,8 +379,8 @@ class WorldMap:
         """Free / occupied / unknown cells, as Nav2 loads them, from the occupancy of the
         trusted walls (:meth:`predict` without the walls most positions saw through, which the
         trinary map does not draw) at the cell's centre: occupied where it reaches
-        :data:`RASTER_OCCUPIED` or within :attr:`wall_half_width` of a trusted wall's band;
-        free where the run observed the cell, it is at most :data:`RASTER_FREE` and the cell
+        :data:`occtool.raster.RASTER_OCCUPIED` or within :attr:`wall_half_width` of a trusted wall's band;
+        free where the run observed the cell, it is at most :data:`occtool.raster.RASTER_FREE` and the cell
         lies farther than :attr:`wall_rim` from a trusted wall's band and than
         :attr:`doubted_wall_rim` from a doubted one's (trust >= :data:`DOUBTED_TRUST`);
         unknown elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the
