@@ -57,18 +57,20 @@ def test_the_map_has_the_cabinet_and_the_floor_round_it_free(mapped):
     cx, cy, hx, hy = CABINET
     for (x, y), (ox, oy) in (((cx + hx, cy), (1, 0)), ((cx - hx, cy), (-1, 0)),
                              ((cx, cy + hy), (0, 1)), ((cx, cy - hy), (0, -1))):
-        # Each side's surface occupied within 5 cm; the floor 30 cm outside it free (nearer,
-        # the wall's uncertain edge is unknown: occtool.fuse._world.WALL_RIM).
+        # Each side's surface occupied within 5 cm; the floor 40 cm outside it free (nearer,
+        # the 3D map's 0.4 m patches reach past the surface and no cell within
+        # occtool.fuse._projection.FREE_RIM of an occupied one is free).
         assert CELL_OCCUPIED in [cell(x + d * ox, y + d * oy) for d in (-0.05, 0.0, 0.05)], (x, y)
-        assert cell(x + 0.3 * ox, y + 0.3 * oy) == CELL_FREE, (x, y)
+        assert cell(x + 0.4 * ox, y + 0.4 * oy) == CELL_FREE, (x, y)
     assert cell(cx, cy) != CELL_FREE
     # The floor between the camera and the cabinet: 30 % and 50 % of the way from each
-    # position of the path to the cabinet's centre (measured: 21 and 20 of 22 free).
+    # position of the path to the cabinet's centre (measured: 22 and 16 of 22 free; half
+    # way is 0.2-0.3 m from the cabinet, where its 0.4 m patches and their rim reach).
     path = np.array(json.loads((mapped / "summary.json").read_text())["path"])
     assert len(path) >= 15
-    for share in (0.3, 0.5):
+    for share, least in ((0.3, 0.9), (0.5, 0.7)):
         free = [cell(*(p + share * (np.array([cx, cy]) - p))) == CELL_FREE for p in path]
-        assert np.mean(free) >= 0.75, (share, free)
+        assert np.mean(free) >= least, (share, free)
     world_bytes = (mapped / "world.occmap").stat().st_size
     assert 0 < world_bytes < 20_000  # measured 3.7 KB
 

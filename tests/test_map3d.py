@@ -90,6 +90,14 @@ def test_the_band_makes_a_table_top_an_obstacle_and_leaves_the_floor_free() -> N
     assert _cell(raster, 0.03, 3.0) == OCCUPIED  # a wall
     assert _cell(raster, 2.0, 3.0) == FREE  # the floor beside the table, seen free up to the body's top
     assert _cell(raster, 4.0, 2.0) == FREE
+    # No free cell within FREE_RIM of an occupied one (a return scattered off it lands on unknown).
+    from scipy import ndimage
+
+    from occtool.fuse._projection import FREE_RIM
+
+    span = int(round(FREE_RIM / raster.resolution))
+    disk = np.hypot(*np.mgrid[-span:span + 1, -span:span + 1]) <= span
+    assert not (ndimage.binary_dilation(raster.cells == OCCUPIED, structure=disk) & (raster.cells == FREE)).any()
     # A robot 0.5 m tall passes under the table: its band stops below the top.
     low = project_band(world, np.array(origins), sensor_height=1.0, body_height=0.5, radius=0.25)
     assert not any(_cell(low, x, y) == OCCUPIED for x in np.arange(2.6, 3.41, 0.1) for y in np.arange(2.6, 3.41, 0.1))
