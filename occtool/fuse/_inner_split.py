@@ -72,8 +72,9 @@ def _test_points(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_])
 def choose_resolution(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_], groups: NDArray[np.intp], *,
                       candidates: tuple[float, ...] = CANDIDATES, default: float | None = None, seed: int = 0,
                       **options: Any) -> tuple[float, dict[str, Any]]:
-    """The cell size of :data:`CANDIDATES` whose map of the kept positions best predicts the
-    held-out ones (module docstring), and a report (the inner AUC of each size tried).
+    """The cell size of :data:`CANDIDATES` chosen on held-out blocks of positions, refined
+    coarse to fine while a finer one earns its bytes (module docstring), and a report (the
+    inner AUC of each size tried).
 
     ``groups`` ``(N,)`` numbers each ray's position (0, 1, ... in the run's order);
     ``options`` are :func:`occtool.fuse.build_world_map_3d`'s. Fewer than
