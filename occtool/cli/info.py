@@ -197,8 +197,9 @@ def _world_map_3d_summary(path, data):
         frame = "map: the frame of the log's poses (x, y, z in metres)"
     else:
         angle = float(np.degrees(np.arccos(np.clip((np.trace(world.to_map[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))))
+        shift = (np.round(world.to_map[:3, 3], 3) + 0.0).tolist()  # + 0.0: no negative zeros
         frame = (f"queries in the frame of the log's poses, moved into the map's frame (levelled on its floor) by "
-                 f"the stored transform: {angle:.1f} degrees, shift {np.round(world.to_map[:3, 3], 3).tolist()} m")
+                 f"the stored transform: {angle:.1f} degrees, shift {shift} m")
     table.add_row("frame", frame)
     extent = upper - lower
     table.add_row("extent", f"x {lower[0]:.2f} to {upper[0]:.2f} m, y {lower[1]:.2f} to {upper[1]:.2f} m, "
