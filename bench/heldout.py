@@ -684,12 +684,20 @@ def nearest_return_row(train: Scans, xy: FloatArray, n_occupied: int) -> dict[st
             "cpu_s": time.process_time() - started, "note": "the returns as two float32 each"}
 
 
-def score_log(path: str | os.PathLike[str], seed: int = 0, keep: str | os.PathLike[str] | None = None) -> dict[str, Any]:
-    """Every row for one log (module docstring); ``keep``: a folder to keep ``train.log`` and the map in."""
+def split_log(path: str | os.PathLike[str], seed: int = 0) -> tuple[Scans, NDArray[np.bool_], Scans, FloatArray,
+                                                                     FloatArray]:
+    """A log's scans, which are held out (:func:`held_out`), the training scans, and the
+    held-out scans' occupied and free test points (:func:`test_points`): the split every
+    scorer of a CARMEN log shares."""
     scans = parse_carmen(path)
     test = held_out(len(scans), seed)
-    train, held = scans.take(~test), scans.take(test)
-    occupied, free = test_points(held)
+    occupied, free = test_points(scans.take(test))
+    return scans, test, scans.take(~test), occupied, free
+
+
+def score_log(path: str | os.PathLike[str], seed: int = 0, keep: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+    """Every row for one log (module docstring); ``keep``: a folder to keep ``train.log`` and the map in."""
+    scans, test, train, occupied, free = split_log(path, seed)
     xy = np.concatenate([occupied, free])
     n = len(occupied)
     scratch = Path(tempfile.mkdtemp(prefix="heldout-", dir=keep))

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from heldout import _time_v, fused_row, held_out, parse_carmen, run_map, test_points  # noqa: E402
+from heldout import _time_v, fused_row, run_map, split_log  # noqa: E402
 
 DEFAULT_LOG = ROOT.parent / "shared" / "data" / "intel_lab" / "intel-corrected.log.gz"
 #: Robots the training scans are shared among, each a time-contiguous part.
@@ -68,10 +68,7 @@ def _digest(path: Path) -> str:
 def score_merge(log: str | os.PathLike[str], *, seed: int = 0, robots: int = ROBOTS,
                 keep: str | os.PathLike[str] | None = None) -> dict[str, Any]:
     """The single run, each robot's map and the merged map, scored on the same held-out points."""
-    scans = parse_carmen(log)
-    test = held_out(len(scans), seed)
-    train, held = scans.take(~test), scans.take(test)
-    occupied, free = test_points(held)
+    scans, test, train, occupied, free = split_log(log, seed)
     xy = np.concatenate([occupied, free])
     n = len(occupied)
     scratch = Path(keep) if keep is not None else Path(tempfile.mkdtemp(prefix="merge-"))

@@ -83,17 +83,25 @@ def frontiers_in_strips(raster: Any, min_length: float, *, strip_cells: int = ST
     rows_of = np.concatenate(cell_rows)
     cols_of = np.concatenate(cell_cols)
     group = component[np.concatenate(cell_ids)]
-    # From here as frontiers_of: the cells in row-major order, each with its frontier.
+    return frontier_points(raster, rows_of, cols_of, group, count, min_length)
+
+
+def frontier_points(raster: Any, rows: NDArray[np.intp], cols: NDArray[np.intp], group: NDArray[np.int64],
+                    count: int, min_length: float) -> FloatArray:
+    """One point a frontier of ``count``: frontier cells ``(rows, cols)`` in row-major order,
+    ``group`` numbering each one's frontier; frontiers shorter than ``min_length`` metres
+    dropped, each other's cell nearest its centroid kept (ties: the first in row-major
+    order), ordered by size, largest first, then by position (:func:`occtool.fuse.frontiers_of`)."""
     sizes = np.bincount(group, minlength=count)
-    centre_row = np.bincount(group, rows_of, count) / sizes
-    centre_col = np.bincount(group, cols_of, count) / sizes
-    spread = (rows_of - centre_row[group]) ** 2 + (cols_of - centre_col[group]) ** 2
+    centre_row = np.bincount(group, rows, count) / sizes
+    centre_col = np.bincount(group, cols, count) / sizes
+    spread = (rows - centre_row[group]) ** 2 + (cols - centre_col[group]) ** 2
     order = np.lexsort((np.arange(len(group)), spread, group))
     nearest = order[np.r_[0, np.flatnonzero(np.diff(group[order])) + 1]]
     keep = nearest[sizes[group[nearest]] * raster.resolution >= min_length]
-    keep = keep[np.lexsort((cols_of[keep], rows_of[keep], -sizes[group[keep]]))]
-    return np.column_stack([raster.origin[0] + (cols_of[keep] + 0.5) * raster.resolution,
-                            raster.origin[1] + (rows_of[keep] + 0.5) * raster.resolution])
+    keep = keep[np.lexsort((cols[keep], rows[keep], -sizes[group[keep]]))]
+    return np.column_stack([raster.origin[0] + (cols[keep] + 0.5) * raster.resolution,
+                            raster.origin[1] + (rows[keep] + 0.5) * raster.resolution])
 
 
-__all__ = ["STRIP_CELLS", "frontiers_in_strips"]
+__all__ = ["STRIP_CELLS", "frontier_points", "frontiers_in_strips"]

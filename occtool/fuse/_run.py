@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import Pose
-from occtool.fuse._frontiers import frontiers_in_strips
+from occtool.fuse._frontiers import frontier_points, frontiers_in_strips
 from occtool.fuse._map import FusedMap
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns
@@ -112,18 +112,7 @@ def frontiers_of(raster: Raster, min_length: float = FRONTIER_MIN_LENGTH) -> Flo
     if count == 0:
         return np.zeros((0, 2))
     rows, cols = np.nonzero(labels)
-    group = labels[rows, cols] - 1
-    sizes = np.bincount(group, minlength=count)
-    centre_row = np.bincount(group, rows, count) / sizes
-    centre_col = np.bincount(group, cols, count) / sizes
-    spread = (rows - centre_row[group]) ** 2 + (cols - centre_col[group]) ** 2
-    # Each frontier's cell nearest its centroid (ties: the first in row-major order).
-    order = np.lexsort((np.arange(len(group)), spread, group))
-    nearest = order[np.r_[0, np.flatnonzero(np.diff(group[order])) + 1]]
-    keep = nearest[sizes[group[nearest]] * raster.resolution >= min_length]
-    keep = keep[np.lexsort((cols[keep], rows[keep], -sizes[group[keep]]))]
-    return np.column_stack([raster.origin[0] + (cols[keep] + 0.5) * raster.resolution,
-                            raster.origin[1] + (rows[keep] + 0.5) * raster.resolution])
+    return frontier_points(raster, rows, cols, labels[rows, cols] - 1, count, min_length)
 
 
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
