@@ -43,11 +43,19 @@ def _segment_codes(world: Any, origin: np.ndarray, unit: float,
                    half_unit: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each segment's middle (uint16 units), direction and half-length (uint8 codes)."""
     middle = 0.5 * (world.start + world.end)
-    span = world.end - world.start
+    steps, half = direction_codes(world.end - world.start, half_unit)
+    return np.clip(np.round((middle - origin) / unit), 0, 65535).astype("<u2"), steps.astype(np.uint8), half.astype(
+        np.uint8)
+
+
+def direction_codes(span: np.ndarray, half_unit: float) -> tuple[np.ndarray, np.ndarray]:
+    """The codes of segments ``start + span``: direction in steps of pi / :data:`DIRECTION_STEPS`
+    over [0, pi) and half-length in ``half_unit`` (0-255), as int64 (the one coding
+    :func:`_segment_codes` and :func:`occtool.fuse.merge_maps` share)."""
     direction = np.mod(np.arctan2(span[:, 1], span[:, 0]), math.pi)
-    steps = np.mod(np.round(direction / (math.pi / DIRECTION_STEPS)), DIRECTION_STEPS).astype(np.uint8)
-    half = np.clip(np.round(0.5 * np.hypot(span[:, 0], span[:, 1]) / half_unit), 0, 255).astype(np.uint8)
-    return np.clip(np.round((middle - origin) / unit), 0, 65535).astype("<u2"), steps, half
+    steps = np.mod(np.round(direction / (math.pi / DIRECTION_STEPS)), DIRECTION_STEPS).astype(np.int64)
+    half = np.clip(np.round(0.5 * np.hypot(span[:, 0], span[:, 1]) / half_unit), 0, 255).astype(np.int64)
+    return steps, half
 
 
 def _segment_ends(middles: np.ndarray, steps: np.ndarray, half: np.ndarray, origin: np.ndarray, unit: float,

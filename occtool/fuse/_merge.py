@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
-from occtool.formats._occmap_packing import DIRECTION_STEPS, HALF_UNIT, _grid, _segment_ends, _tiles
+from occtool.formats._occmap_packing import DIRECTION_STEPS, HALF_UNIT, _grid, _segment_ends, _tiles, direction_codes
 from occtool.formats.occmap import UNIT, MapArrays
 from occtool.fuse._world import WorldMap
 from occtool.fuse._world3d import WorldMap3D
@@ -100,9 +100,7 @@ def _segment_codes(world: WorldMap, transform: Transform | None, unit: float, ha
     start, end = _rotate(world.start, transform), _rotate(world.end, transform)
     span = end - start
     middle = np.round(0.5 * (start + end) / unit).astype(np.int64)
-    direction = np.mod(np.arctan2(span[:, 1], span[:, 0]), math.pi)
-    step = np.mod(np.round(direction / (math.pi / DIRECTION_STEPS)), DIRECTION_STEPS).astype(np.int64)
-    half = np.clip(np.round(0.5 * np.hypot(span[:, 0], span[:, 1]) / half_unit), 0, 255).astype(np.int64)
+    step, half = direction_codes(span, half_unit)
     # The coded direction lies in [0, pi): a segment turned round faces the other way.
     angle = step * (math.pi / DIRECTION_STEPS)
     turned = span[:, 0] * np.cos(angle) + span[:, 1] * np.sin(angle)
