@@ -87,6 +87,7 @@ class WorldMap3D:
     choice: dict[str, Any] | None = field(default=None, repr=False, compare=False)
     _geometry: PatchGeometry | None = field(default=None, repr=False)
     _trees: Any = field(default=None, repr=False)
+    _encoded: Any = field(default=None, repr=False, compare=False)
 
     @property
     def patch_count(self) -> int:
@@ -186,10 +187,15 @@ class WorldMap3D:
         return self.patch_count
 
     def to_bytes(self) -> bytes:
-        """The map's ``.occmap`` file (version 5)."""
+        """The map's ``.occmap`` file (version 5), encoded once (:attr:`nbytes`, the summary
+        and the file all ask for it; a map's numbers do not change once built, its frame
+        transform is part of the key)."""
         from occtool.formats import occmap3d
 
-        return occmap3d.encode(self)
+        key = (self.frame, None if self.to_map is None else self.to_map.tobytes())
+        if self._encoded is None or self._encoded[0] != key:
+            self._encoded = (key, occmap3d.encode(self))
+        return self._encoded[1]
 
     @property
     def nbytes(self) -> int:
@@ -209,10 +215,10 @@ class WorldMap3D:
         return int(round(known * (self.resolution / resolution) ** 3))
 
     def save(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> int:
-        """Write the map (``.occmap``, version 5); returns the bytes written."""
-        from occtool.formats import occmap3d
+        """Write the map (``.occmap``, version 5) atomically; returns the bytes written."""
+        from occtool.formats.occmap import write_file
 
-        return occmap3d.save_map3d(self, path, overwrite=overwrite)
+        return write_file(self.to_bytes(), path, overwrite=overwrite)
 
 
 def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | None = None, *,
