@@ -133,3 +133,12 @@ def test_registered_poses_go_on_tf():
         assert (q.x, q.y) == (0.0, 0.0)
         assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(pose.yaw)
         assert q.z**2 + q.w**2 == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("stamp", [math.nan, -1.0, 1e300, math.inf])
+def test_a_stamp_that_is_no_time_keeps_the_messages_order(stamp):
+    # A library caller's stamps are not read from an index: they must not overflow the writer.
+    run = run_map()
+    run.placed[0].stamp = stamp
+    times = [log_time for _, log_time, _ in read(run_map_mcap_bytes(run))[SCENE_TOPIC]]
+    assert times[1] == round(STAMPS[1] * 1e9) and 0 <= times[0] <= times[1]

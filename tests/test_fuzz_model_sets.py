@@ -105,3 +105,26 @@ def test_any_pose_is_read_checked_or_refused_in_one_line(tmp_path_factory, pose)
         read = entries[1]["pose"]
         assert sorted(read) == ["x", "y", "yaw", "z"]
         assert all(not isinstance(v, bool) and math.isfinite(v) and abs(v) <= 1e8 for v in read.values())
+
+
+@pytest.mark.parametrize("raw, message", [
+    ("NaN", "stamp = nan"), ("1e300", "stamp = 1e+300"), ("-Infinity", "stamp = -inf"),
+    ("true", "stamp is bool"), ('"12:00"', "stamp is str"), ("[1]", "stamp is list"),
+])
+def test_a_stamp_that_is_no_time_is_one_line_naming_the_entry(tmp_path, raw, message):
+    folder = write_set(tmp_path / "set")
+    index = folder / "index.json"
+    index.write_text(index.read_text().replace('"file": "b.json"', f'"file": "b.json", "stamp": {raw}'))
+    with pytest.raises(InputError) as caught:
+        read_model_set(folder)
+    assert message in str(caught.value) and "model entry 2 (position 1)" in str(caught.value)
+    result = CliRunner().invoke(cli, ["-q", "map", str(folder), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1, result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_stamps_from_any_origin_are_read(tmp_path):
+    folder = write_set(tmp_path / "set")
+    index = folder / "index.json"
+    index.write_text(index.read_text().replace('"file": "b.json"', '"file": "b.json", "stamp": -12.5'))
+    assert read_model_set(folder)[1][1]["stamp"] == -12.5

@@ -54,8 +54,13 @@ def _imports() -> Any:
             SceneEntity_pb2, SceneUpdate_pb2, SpherePrimitive_pb2, Vector2_pb2, Vector3_pb2, Writer)
 
 
+#: Latest stamp written as a time (seconds): signed 64-bit nanoseconds end in the year 2262.
+_LAST_STAMP = float(2**63 - 1) / 1e9
+
+
 def _nanoseconds(stamp: float | None, fallback: int) -> int:
-    return round(stamp * 1e9) if stamp is not None and np.isfinite(stamp) and stamp >= 0 else fallback
+    # A stamp that is no time (negative, NaN, past int64 nanoseconds) keeps the message's order instead.
+    return round(stamp * 1e9) if stamp is not None and 0 <= stamp < _LAST_STAMP else fallback
 
 
 def run_map_mcap_bytes(run: Any) -> bytes:

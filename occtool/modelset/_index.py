@@ -48,6 +48,9 @@ READS = (1,)
 POSE_KEYS = ("x", "y", "z", "yaw")
 #: Deepest an index's JSON nests (entries nest 3 deep: ``"models": [{"pose": {}}]``).
 MAX_INDEX_DEPTH = 16
+#: Largest stamp (seconds) an entry may carry: times written as signed 64-bit nanoseconds
+#: (ROS, protobuf's Timestamp) end in the year 2262; a stamp past that is damage, not a time.
+MAX_STAMP = float(2**63 - 1) / 1e9
 
 
 def check_pose(pose: Any, where: str) -> None:
@@ -70,6 +73,18 @@ def check_pose(pose: Any, where: str) -> None:
         if not (math.isfinite(value) and abs(value) <= MAX_WORLD_COORDINATE):
             raise InputError(f"{where}: pose {key} = {value!r:.30} is not a finite number of at most "
                              f"{MAX_WORLD_COORDINATE:g}")
+
+
+def check_stamp(stamp: Any, where: str) -> None:
+    """An :class:`InputError` naming ``where`` unless ``stamp`` is ``None`` or a finite
+    number (not a boolean) of at most :data:`MAX_STAMP` seconds either way (a log's
+    stamps may count from any origin; the MCAP writer places a negative one by order)."""
+    if stamp is None:
+        return
+    if isinstance(stamp, bool) or not isinstance(stamp, (int, float)):
+        raise InputError(f"{where}: stamp is {type(stamp).__name__}, not a number of seconds or null")
+    if not (math.isfinite(stamp) and abs(stamp) <= MAX_STAMP):
+        raise InputError(f"{where}: stamp = {stamp!r:.30} is not a finite time of at most {MAX_STAMP:.4g} s")
 
 
 def _set_member(folder: Path, name: str, where: str) -> Path:
@@ -113,9 +128,9 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
         If the index is missing or malformed (JSON nested deeper than
         :data:`MAX_INDEX_DEPTH`, a ``format_version`` not in :data:`READS`), or an entry
         names a file outside the folder, a missing or non-regular file, a position listed
-        before, or a pose that is no pose (a key missing or unknown, a boolean, NaN,
-        infinite or past :data:`occtool.limits.MAX_WORLD_COORDINATE`); the message names
-        the file and the entry.
+        before, a pose that is no pose (a key missing or unknown, a boolean, NaN,
+        infinite or past :data:`occtool.limits.MAX_WORLD_COORDINATE`) or a stamp that is
+        no time (:func:`check_stamp`); the message names the file and the entry.
     """
     index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
     try:
@@ -151,6 +166,7 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
             raise InputError(f"{index}: model entry {number}'s position {entry['position']} is negative")
         if entry.get("pose") is not None:
             check_pose(entry["pose"], f"{index}: model entry {number} (position {entry['position']})")
+        check_stamp(entry.get("stamp"), f"{index}: model entry {number} (position {entry['position']})")
         if entry["position"] in positions:
             raise InputError(f"{index}: position {entry['position']} is listed twice")
         _set_member(folder, entry["file"], f"{index}: model entry {number}")
@@ -164,4 +180,4 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
     return folder, entries
 
 
-__all__ = ["MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "POSE_KEYS", "check_pose", "read_model_set", "save_model_set_index"]
+__all__ = ["MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "POSE_KEYS", "check_pose", "check_stamp", "read_model_set", "save_model_set_index"]
