@@ -180,4 +180,5 @@ def read_model_set(path: str | os.PathLike[str]) -> tuple[Any, list[dict[str, An
     return folder, entries
 
 
-__all__ = ["MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "POSE_KEYS", "check_pose", "check_stamp", "read_model_set", "save_model_set_index"]
+__all__ = ["MAX_INDEX_BYTES", "MODEL_SET_FORMAT", "POSE_KEYS", "check_pose", "check_stamp", "read_model_set",
+           "save_model_set_index"]
