@@ -171,3 +171,25 @@ def test_sigterm_during_occtool_map_leaves_the_previous_set(runs, tmp_path):
     kept = {name for name in after if after[name] == before[name]}
     new = {name for name in after if after[name] == reference[name]}
     assert kept == set(after) or new | {"summary.json"} == set(after), (kept, new)
+
+
+def test_a_killed_runs_hidden_folder_is_removed_by_the_next_run_and_a_live_ones_kept(runs, tmp_path):
+    # SIGKILL leaves nothing to clean up: the next run into the folder removes what a dead process left.
+    first, _, _ = runs
+    folder = tmp_path / "out"
+    write_run_map(first, folder)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True).stdout.strip()
+    orphans = [folder / f"{STAGING_PREFIX}{dead}-0123abcd", tmp_path / f"{STAGING_PREFIX}{dead}-89abcdef"]
+    for orphan in orphans:
+        (orphan / f"{STAGING_PREFIX}previous").mkdir(parents=True)
+        (orphan / f"{STAGING_PREFIX}previous" / "map.pgm").write_bytes(b"P5 old")
+    alive = folder / f"{STAGING_PREFIX}{os.getppid()}-0123abcd"  # the process that started pytest
+    other = folder / f"{STAGING_PREFIX}notes"  # not a name a run makes
+    for kept in (alive, other):
+        kept.mkdir()
+    write_run_map(first, folder)
+    assert not orphans[0].exists() and alive.is_dir() and other.is_dir()
+    write_run_map(first, tmp_path / "new")  # a new folder: its parent is searched
+    assert not orphans[1].exists()
+    assert sorted(p.name for p in folder.iterdir() if not p.name.startswith(".")) == SET

@@ -98,6 +98,8 @@ def write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: boo
       with ``overwrite`` they are removed with the rest of the previous set; without it
       nothing is removed, and an output that exists (checked before any work, and again
       before anything is moved) is a :class:`FileExistsError`.
+    * A run killed outright (SIGKILL, a power cut) cannot clean up: the next run into the
+      same place removes the hidden folders of processes no longer running (POSIX).
 
     ``nav2_mode``: ``"trinary"`` writes ``map.pgm`` (free / occupied / unknown), ``"scale"``
     ``map.png`` with the fused occupancy graded (needs Pillow)."""
@@ -186,6 +188,7 @@ def _output_set(folder: Path, *, overwrite: bool) -> Iterator[Path]:
     fresh = not folder.exists()
     if fresh:
         folder.parent.mkdir(parents=True, exist_ok=True)
+    _remove_orphans(folder.parent if fresh else folder)
     staging = _new_folder(folder.parent if fresh else folder)
     try:
         yield staging
@@ -205,17 +208,52 @@ def _output_set(folder: Path, *, overwrite: bool) -> Iterator[Path]:
 
 def _new_folder(parent: Path) -> Path:
     """A new hidden folder in ``parent`` made as ``mkdir`` makes one (its mode from the
-    umask, unlike ``tempfile.mkdtemp``'s 0700: a new output folder is this one renamed)."""
+    umask, unlike ``tempfile.mkdtemp``'s 0700: a new output folder is this one renamed),
+    named with this process's id so that a later run can tell an orphan (:func:`_remove_orphans`)."""
     import secrets
 
     for _ in range(100):
-        candidate = parent / f"{STAGING_PREFIX}{secrets.token_hex(4)}"
+        candidate = parent / f"{STAGING_PREFIX}{os.getpid()}-{secrets.token_hex(4)}"
         try:
             candidate.mkdir()
         except FileExistsError:
             continue
         return candidate
     raise FileExistsError(f"no free name for a temporary folder in {parent}")
+
+
+def _remove_orphans(parent: Path) -> None:
+    """Remove the hidden folders in ``parent`` left by a run of this machine that was killed
+    (SIGKILL, a power cut: nothing could clean up), each known by its process id no longer
+    running. A folder of a live process, or of a name this run did not make, is left alone."""
+    import re
+    import shutil
+
+    pattern = re.compile(re.escape(STAGING_PREFIX) + r"(\d{1,10})-[0-9a-f]{8}")
+    try:
+        names = [entry.name for entry in os.scandir(parent) if entry.is_dir(follow_symlinks=False)]
+    except OSError:
+        return
+    for name in names:
+        match = pattern.fullmatch(name)
+        if match is None or int(match.group(1)) == os.getpid() or _running(int(match.group(1))):
+            continue
+        shutil.rmtree(parent / name, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists (one of another user's counts: its folder is not ours to judge)."""
+    if os.name != "posix":  # Windows' os.kill terminates the process it names: assume it runs
+        return True
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True
+    return True
 
 
 def _swap_in(staging: Path, folder: Path, *, overwrite: bool) -> None:
