@@ -226,6 +226,28 @@ def test_the_cli_maps_a_depth_folder(tmp_path, office_frames) -> None:
     assert out.is_file() and DEFAULT_CAMERA.width == 160
 
 
+@pytest.mark.parametrize("layout", ["tum", "3dmatch"])
+def test_occtool_map_takes_the_depth_folder_itself(tmp_path, office_frames, layout) -> None:
+    # The folder a user has (not only its depth.txt) is a log, not a model set without an index.
+    from click.testing import CliRunner
+
+    from occtool.cli.main import cli
+    from occtool.fuse import WorldMap3D, load_map
+
+    frames, _ = office_frames
+    world = np.linalg.inv(frames[0].camera_to_world) if layout == "3dmatch" else None
+    folder = write_depth_folder(frames, tmp_path / layout, layout=layout, world=world)
+    out = tmp_path / "map"
+    result = CliRunner().invoke(cli, ["-q", "map", str(folder), "-o", str(out), "--depth-features", "500",
+                                      "--sensor-height", "1.0"])
+    assert result.exit_code == 0, result.output
+    assert isinstance(load_map(out / "world.occmap"), WorldMap3D)
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    result = CliRunner().invoke(cli, ["-q", "map", str(plain), "-o", str(tmp_path / "none")])
+    assert result.exit_code == 1 and "not a model set" in result.output
+
+
 # --- depth images in MCAP and ROS bags ------------------------------------------------------
 
 

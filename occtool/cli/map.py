@@ -177,10 +177,11 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
         "resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
         "max_range": max_range, "simplify": simplify, "precision": precision, "georeference": georeference,
         "mcap": mcap, "overwrite": overwrite}
-    from occtool.io.scans import is_scan_folder
+    from occtool.io.scans import is_log_folder
 
     source = sources[0]  # several files: one scan sequence, each file a scan
-    folder = Path(source).is_dir() and ((Path(source) / "index.json").exists() or not is_scan_folder(source))
+    # A folder is a model set unless it is read as a log (scans, depth frames) and holds no index.
+    folder = Path(source).is_dir() and ((Path(source) / "index.json").exists() or not is_log_folder(source))
     if len(sources) == 1 and (folder or Path(source).name == "index.json"):
         if kwargs.get("register"):
             raise click.ClickException("--register applies to a log, not to a model set (its poses are fitted in)")

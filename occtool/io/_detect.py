@@ -27,6 +27,19 @@ def is_scan_folder(path: PathLike) -> bool:
     except OSError:
         return False
 
+def is_log_folder(path: PathLike) -> bool:
+    """Whether ``path`` is a folder read as one log: scans (:func:`is_scan_folder`) or depth
+    frames with their poses (TUM RGB-D, 3DMatch / 7-Scenes). Looks at names only."""
+    if is_scan_folder(path):
+        return True
+    from occtool.io.depth_folders import depth_layout
+
+    try:
+        return Path(path).is_dir() and depth_layout(path) is not None
+    except InputError:
+        return False
+
+
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 CARMEN_RECORDS = (b"FLASER", b"RLASER", b"ROBOTLASER1", b"ODOM", b"PARAM", b"NEFF", b"SYNC", b"TRUEPOS")
 
@@ -121,4 +134,4 @@ def _numeric_fields(line: str) -> int:
     return count
 
 
-__all__ = ["CARMEN_RECORDS", "MCAP_MAGIC", "SCAN_SUFFIXES", "detect_format", "is_scan_folder"]
+__all__ = ["CARMEN_RECORDS", "MCAP_MAGIC", "SCAN_SUFFIXES", "detect_format", "is_log_folder", "is_scan_folder"]

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.features import RangeLog
-from occtool.io._detect import SCAN_SUFFIXES, _suffix, detect_format, is_scan_folder
+from occtool.io._detect import SCAN_SUFFIXES, _suffix, detect_format, is_log_folder, is_scan_folder
 from occtool.io.positions import Scan, build_log, check_pose
 from occtool.io.read_options import ReadOptions, as_read_options, options_as_keywords
 
@@ -275,5 +275,5 @@ def read_scans(path: PathLike | Sequence[PathLike], options: ReadOptions | None 
 options_as_keywords(read_scans)
 options_as_keywords(ScanSequence)
 
-__all__ = ["FILE_FORMATS", "MAX_SCANS", "SCAN_SUFFIXES", "ScanSequence", "is_scan_folder", "read_poses",
-           "read_scans", "scan_files", "sequence_name"]
+__all__ = ["FILE_FORMATS", "MAX_SCANS", "SCAN_SUFFIXES", "ScanSequence", "is_log_folder", "is_scan_folder",
+           "read_poses", "read_scans", "scan_files", "sequence_name"]
