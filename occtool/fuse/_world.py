@@ -375,7 +375,7 @@ class WorldMap:
         out[band] = np.clip(np.maximum(base, self.wall_value(xy)), 0.0, 1.0)
         return out
 
-    def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000) -> Raster:
+    def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000, executor: Any = None) -> Raster:
         """Free / occupied / unknown cells, as Nav2 loads them, from the occupancy of the
         trusted walls (:meth:`predict` without the walls most positions saw through, which the
         trinary map does not draw) at the cell's centre: occupied where it reaches
@@ -386,7 +386,9 @@ class WorldMap:
         unknown elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the
         bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks
         the cells the run observed or placed a wall near (within those rims: the unknown
-        among them are uncertain, not unexplored: no frontier lies there)."""
+        among them are uncertain, not unexplored: no frontier lies there). ``executor`` (an
+        :class:`occtool.executor.Executor`, e.g. a Dask cluster's) computes its bands of rows;
+        the raster is the same wherever they ran."""
         from occtool.fuse._rasterise import raster_shape
         from occtool.fuse._rasterise import rasterise as rasterise_strips
 
@@ -398,7 +400,8 @@ class WorldMap:
         # Cell by cell as described above, a strip of rows at a time (occtool.fuse._rasterise):
         # one query for the bands round the trusted and the doubted walls (exact up to the widest).
         return rasterise_strips(self, float(resolution), nx, ny, origin,
-                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST)
+                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST,
+                                executor=executor)
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays)."""
