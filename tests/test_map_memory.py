@@ -169,3 +169,46 @@ def test_frontiers_found_in_strips_are_those_of_the_whole_raster(seed):
             assert np.array_equal(frontiers_in_strips(raster, length, strip_cells=strip), whole)
     raster = load_map(FIXTURES / "maps" / "fr079.occmap").rasterise(0.1)
     assert np.array_equal(frontiers_in_strips(raster, 0.5, strip_cells=5000), frontiers_of(raster))
+
+
+def test_a_raster_without_occupancy_holds_two_bytes_a_cell_and_the_same_cells():
+    """A large raster keeps no float32 occupancy and no conflict flags of its own; its
+    cells, explored flags and counts are those of the raster that keeps them."""
+    world = load_map(FIXTURES / "maps" / "intel.occmap")
+    full = world.rasterise(0.2, occupancy=True)
+    lean = world.rasterise(0.2, occupancy=False)
+    assert lean.probability is None and full.probability is not None
+    assert np.array_equal(lean.cells, full.cells) and np.array_equal(lean.explored, full.explored)
+    assert lean.counts() == full.counts() and lean.conflict.strides == (0, 0)
+    with pytest.raises(InputError, match="without its occupancy"):
+        lean.graded()
+
+
+def test_the_mcap_grid_of_a_large_raster_is_drawn_in_blocks():
+    """Over the grid's cell cap each k x k block is occupied when a cell of it is, else free
+    when one is; under it the grid is the cells themselves."""
+    from occtool.formats.foxglove import grid_values
+    from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+
+    cells = np.full((5, 7), UNKNOWN, dtype=np.uint8)
+    cells[0, 0] = OCCUPIED
+    cells[0, 1] = FREE
+    cells[3, 4] = FREE
+    cells[4, 6] = OCCUPIED
+    raster = Raster(cells, 0.1, (0.0, 0.0), None, np.zeros(cells.shape, dtype=bool))
+    values, k = grid_values(raster)
+    assert k == 1 and values.tolist() == np.select([cells == FREE, cells == OCCUPIED], [0, 100], -1).tolist()
+    values, k = grid_values(raster, max_cells=12)
+    assert k == 2 and values.shape == (3, 4)
+    assert values[0, 0] == 100 and values[1, 2] == 0 and values[2, 3] == 100 and values[0, 1] == -1
+
+
+def test_a_raster_larger_than_the_old_cell_cap_is_estimated_not_refused(room_log):
+    """The cap is the memory estimate: a 0.02 m raster of a large extent is two bytes and a
+    share a cell, not refused for its cell count."""
+    from occtool.fuse._memory import LARGE_RASTER_CELL_BYTES
+
+    estimate = estimate_map_memory(read_log(room_log), resolution=0.0005)
+    rows, columns = estimate.raster_shape
+    assert rows * columns > 50_000_000
+    assert estimate.parts["raster"] < (LARGE_RASTER_CELL_BYTES + 1) * rows * columns

@@ -175,9 +175,14 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
             seconds = time.perf_counter() - started
             sensors = sensor_positions(log)
+        if not isinstance(source, RangeLog):
+            # Read here and fused: the features of every scan are of no more use (a large run's
+            # raster needs the memory they held).
+            del log
         run = map_of_run(fused, models, positions, resolution=resolution,
                          navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
-                         world3d=world3d, sensor_positions=sensors, executor=executor)
+                         world3d=world3d, sensor_positions=sensors, executor=executor,
+                         occupancy=True if nav2_mode == "scale" else None)
     if world3d is not None:
         run.seconds["world_map"] = seconds
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
@@ -211,7 +216,8 @@ def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str]
     with make_executor(jobs, scheduler) as executor:
         run = map_of_run(fused, fitted, positions, resolution=resolution,
                          navigation={"max_range": max_range, "threshold": threshold},
-                         robot_overrides=robot_overrides, executor=executor)
+                         robot_overrides=robot_overrides, executor=executor,
+                         occupancy=True if nav2_mode == "scale" else None)
     extra: dict[str, Any] = {"source": str(models), "fitted_here": False}
     written, summary = _write(run, output, extra, None, overwrite=overwrite, simplify=simplify, precision=precision,
                               mcap=mcap, georeference=georeference, nav2_mode=nav2_mode)

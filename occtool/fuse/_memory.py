@@ -41,6 +41,12 @@ FEATURE_BYTES = 60
 RASTER_CELL_BYTES = 14
 #: ... and of a ``scale`` raster, whose PNG is made from the graded occupancy (float32 and RGBA copies).
 SCALE_CELL_BYTES = 28
+#: Per cell of a trinary raster larger than :data:`occtool.fuse._world.OCCUPANCY_CELLS`, which
+#: keeps no occupancy: its cells and explored flags (1 byte each) and a byte's share of the
+#: strips' temporaries; its MCAP grid is at most :data:`occtool.formats.foxglove.MAX_GRID_CELLS`
+#: cells (:data:`LARGE_GRID_BYTES`: four copies of it while the MCAP is made).
+LARGE_RASTER_CELL_BYTES = 3
+LARGE_GRID_BYTES = 4 << 25
 #: Per ray of a 3D world map's build (:func:`occtool.fuse.map_log_3d`): its origin, end and
 #: direction, its samples' cell keys and the free cells' keys. Seosan's whole run, 1.22 M
 #: rays, built its map in 730 MB over what reading it held (963 MB peak for the whole map).
@@ -104,9 +110,17 @@ def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = 
         lower, upper = extent
         origin = np.floor(lower / resolution) * resolution
         columns, rows = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
-    per_cell = SCALE_CELL_BYTES if nav2_mode == "scale" else RASTER_CELL_BYTES
+    from occtool.fuse._world import OCCUPANCY_CELLS
+
+    cells = int(rows) * int(columns)
+    if nav2_mode == "scale":
+        raster = cells * SCALE_CELL_BYTES
+    elif cells <= OCCUPANCY_CELLS or world3d:
+        raster = cells * RASTER_CELL_BYTES
+    else:
+        raster = cells * LARGE_RASTER_CELL_BYTES + LARGE_GRID_BYTES
     parts = {"base": BASE_BYTES, "positions": positions * POSITION_BYTES + features * FEATURE_BYTES,
-             "raster": int(rows) * int(columns) * per_cell}
+             "raster": raster}
     if world3d:
         parts["world3d"] = features * RAY_BYTES
     return MemoryEstimate(sum(parts.values()), parts, (int(rows), int(columns)), float(resolution))

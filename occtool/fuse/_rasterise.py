@@ -50,23 +50,29 @@ def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], in
 
 def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
               within: float, doubted_trust: float, *, tile: int = TILE,
-              strip_cells: int = STRIP_CELLS, executor: Any = None) -> Raster:
+              strip_cells: int = STRIP_CELLS, executor: Any = None, occupancy: bool = True) -> Raster:
     """The raster of ``world`` (a :class:`WorldMap`), ``ny`` rows of ``nx`` cells from
     ``origin``, strip by strip; ``within`` is the widest wall band or rim the cells ask
     about and ``doubted_trust`` the least trust of a doubted wall (:meth:`WorldMap.rasterise`).
     ``executor`` (an :class:`occtool.executor.Executor`; ``None``: this process) computes
-    the bands of rows (:func:`tile_rows`); the raster is the same wherever they ran."""
+    the bands of rows (:func:`tile_rows`); the raster is the same wherever they ran.
+    Without ``occupancy`` the raster keeps no float32 occupancy (``probability`` ``None``):
+    two bytes a cell held, not six."""
     cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
-    probability = np.empty((ny, nx), dtype=np.float32)
+    probability = np.empty((ny, nx), dtype=np.float32) if occupancy else None
     explored = np.zeros((ny, nx), dtype=bool)
     for low, high, strip in raster_bands(world, resolution, nx, ny, origin, within, doubted_trust, tile=tile,
                                          strip_cells=strip_cells, executor=executor):
-        cells[low:high], probability[low:high], explored[low:high] = strip
+        cells[low:high], explored[low:high] = strip[0], strip[2]
+        if probability is not None:
+            probability[low:high] = strip[1]
         del strip
     from occtool.limits import release_free_memory
 
     release_free_memory()  # the strips' freed temporaries
-    return Raster(cells, float(resolution), origin, probability, np.zeros((ny, nx), dtype=bool), explored=explored)
+    # No cell of a world map's raster holds contradicting positions: one False seen everywhere.
+    conflict = np.broadcast_to(np.zeros(1, dtype=bool), (ny, nx))
+    return Raster(cells, float(resolution), origin, probability, conflict, explored=explored)
 
 
 #: Rows of tiles a task of :func:`raster_bands` computes at most: a band of about this many

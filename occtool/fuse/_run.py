@@ -134,7 +134,8 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
                frontier_min_length: float = FRONTIER_MIN_LENGTH, sightings: RunReturns | None = None,
                robot_overrides: Mapping[str, float] | None = None, world3d: Any | None = None,
-               sensor_positions: Any | None = None, executor: Any = None) -> RunMap:
+               sensor_positions: Any | None = None, executor: Any = None,
+               occupancy: bool | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -168,6 +169,9 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         An :class:`occtool.executor.Executor` (local processes, a Dask cluster) that draws
         the 2D raster's bands of rows and the navigation maps, a few at a time; ``None``:
         this process. The map is the same, byte for byte, wherever they ran.
+    occupancy
+        Keep the 2D raster's float32 occupancy (a ``scale`` Nav2 map needs it); ``None``: for
+        a raster of at most :data:`occtool.fuse._world.OCCUPANCY_CELLS` cells (:meth:`WorldMap.rasterise`).
     """
     if len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
@@ -180,7 +184,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         world: WorldMap | Any = build_world_map(fused, sightings=sightings)
         seconds["world_map"] = time.perf_counter() - started
         started = time.perf_counter()
-        raster = world.rasterise(resolution, executor=executor)
+        raster = world.rasterise(resolution, executor=executor, occupancy=occupancy)
     else:
         from occtool.fuse._projection import project_band
 
