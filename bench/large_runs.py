@@ -122,12 +122,13 @@ def large_run(log: str | Path, out: str | Path, *extra: str, plot: bool = True) 
     return row
 
 
-def scaled_runs(campus: str | Path, scratch: str | Path, copies: tuple[int, ...] = COPIES) -> dict[str, Any]:
+def scaled_runs(campus: str | Path, scratch: str | Path, copies: tuple[int, ...] = COPIES, *,
+                fine: bool = True) -> dict[str, Any]:
     """The campus's raster at :data:`FINE_RESOLUTION` (``fine``), and the campus ``copies``
     times over (``repeated``: :func:`repeated_log`), each mapped by the command under
     ``/usr/bin/time -v``; ``exponent``: CPU's power law in scans over the repeated runs."""
     scratch = Path(scratch)
-    fine = large_run(campus, scratch / "fine", "--resolution", str(FINE_RESOLUTION), "--no-mcap", plot=False)
+    fine_run = large_run(campus, scratch / "fine", "--resolution", str(FINE_RESOLUTION), plot=False) if fine else None
     repeated = []
     for k in copies:
         log = repeated_log(campus, scratch / f"campus-x{k}.log", k)
@@ -137,28 +138,30 @@ def scaled_runs(campus: str | Path, scratch: str | Path, copies: tuple[int, ...]
     done = [r for r in repeated if r["map"]["exit_status"] == 0]
     exponent = (_exponent([r["positions"] for r in done], [r["map"]["cpu_s"] for r in done])
                 if len(done) >= 2 else float("nan"))
-    return {"fine": fine, "repeated": repeated, "exponent": exponent}
+    return {"fine": fine_run, "repeated": repeated, "exponent": exponent}
 
 
 def _scaled_lines(scaled: dict[str, Any]) -> tuple[list[str], list[Any]]:
     fine, repeated = scaled["fine"], scaled["repeated"]
-    lines = ["", f"The campus's Nav2 raster at {FINE_RESOLUTION} m (`--resolution {FINE_RESOLUTION} --no-mcap`), "
+    lines = ["", f"The campus's Nav2 raster at {FINE_RESOLUTION} m (`--resolution {FINE_RESOLUTION}`), "
              "and the campus repeated side by side (bench/large_runs.repeated_log: each copy's poses moved along x "
              "by the campus's width and 72 m, its stamps after the last copy's), each under /usr/bin/time -v.",
              "", "| run | scans | raster cells | CPU | wall | peak RSS |", "|---|---|---|---|---|---|"]
     targets: list[Any] = []
-    for name, row in [(f"campus at {FINE_RESOLUTION} m", fine)] + [(f"campus x{r['copies']}", r) for r in repeated]:
+    runs = [(f"campus at {FINE_RESOLUTION} m", fine)] if fine is not None else []
+    for name, row in runs + [(f"campus x{r['copies']}", r) for r in repeated]:
         run = row["map"]
         if run["exit_status"]:
             lines.append(f"| {name} | failed: {run.get('error')} | | | | |")
             continue
         lines.append(f"| {name} | {row['positions']} | {row['raster_cells'] / 1e6:.1f} M | {run['cpu_s']:.1f} s | "
                      f"{run['wall_s']:.1f} s | {run['peak_rss_mb']:.0f} MB |")
-    run = fine["map"]
-    targets.append((f"campus at {FINE_RESOLUTION} m: Nav2 raster in <= {MAX_FINE_RSS_MB:.0f} MB peak RSS",
-                    "failed" if run["exit_status"] else f"{run['peak_rss_mb']:.0f} MB "
-                    f"({fine['raster_cells'] / 1e6:.0f} M cells)",
-                    not run["exit_status"] and run["peak_rss_mb"] <= MAX_FINE_RSS_MB))
+    if fine is not None:
+        run = fine["map"]
+        targets.append((f"campus at {FINE_RESOLUTION} m: Nav2 raster in <= {MAX_FINE_RSS_MB:.0f} MB peak RSS",
+                        "failed" if run["exit_status"] else f"{run['peak_rss_mb']:.0f} MB "
+                        f"({fine['raster_cells'] / 1e6:.0f} M cells)",
+                        not run["exit_status"] and run["peak_rss_mb"] <= MAX_FINE_RSS_MB))
     largest = repeated[-1]
     run = largest["map"]
     targets.append((f"campus x{largest['copies']}: map peak RSS <= {MAX_REPEATED_RSS_MB:.0f} MB",
@@ -220,11 +223,11 @@ def large_runs_section(data: str | Path = "../shared/data", *, keep: str | None 
 
 
 if __name__ == "__main__":  # pragma: no cover
-    if len(sys.argv) > 2 and sys.argv[1] == "--scaled":  # python bench/large_runs.py --scaled DATA [COPIES,...]
+    if len(sys.argv) > 2 and sys.argv[1] == "--scaled":  # python bench/large_runs.py --scaled DATA [COPIES,... [nofine]]
         campus_log = Path(sys.argv[2]) / LARGE_LOGS[0][1] / LARGE_LOGS[0][2]
         counts = tuple(int(k) for k in sys.argv[3].split(",")) if len(sys.argv) > 3 else COPIES
         with tempfile.TemporaryDirectory() as scratch_folder:
-            scaled_figures = scaled_runs(campus_log, scratch_folder, counts)
+            scaled_figures = scaled_runs(campus_log, scratch_folder, counts, fine="nofine" not in sys.argv[4:])
         print("\n".join(_scaled_lines(scaled_figures)[0]))
         print(json.dumps(scaled_figures, indent=1, default=float))
         sys.exit(0)
