@@ -204,11 +204,13 @@ def test_the_mcap_grid_of_a_large_raster_is_drawn_in_blocks():
 
 
 def test_a_raster_larger_than_the_old_cell_cap_is_estimated_not_refused(room_log):
-    """The cap is the memory estimate: a 0.02 m raster of a large extent is two bytes and a
-    share a cell, not refused for its cell count."""
-    from occtool.fuse._memory import LARGE_RASTER_CELL_BYTES
+    """The cap is the memory estimate: past the MCAP grid's cap a trinary raster costs two
+    bytes a cell more (its cells and explored flags), not a refusal for its cell count."""
+    from occtool.fuse._memory import TRINARY_CELL_BYTES
 
-    estimate = estimate_map_memory(read_log(room_log), resolution=0.0005)
-    rows, columns = estimate.raster_shape
-    assert rows * columns > 50_000_000
-    assert estimate.parts["raster"] < (LARGE_RASTER_CELL_BYTES + 1) * rows * columns
+    log = read_log(room_log)
+    fine, finer = estimate_map_memory(log, resolution=0.0005), estimate_map_memory(log, resolution=0.0004)
+    cells = [rows * columns for rows, columns in (fine.raster_shape, finer.raster_shape)]
+    assert 50_000_000 < cells[0] < cells[1]
+    assert finer.parts["raster"] - fine.parts["raster"] == TRINARY_CELL_BYTES * (cells[1] - cells[0])
+    check_map_memory(log, resolution=0.0004)  # 0.2 G cells under the default 4G

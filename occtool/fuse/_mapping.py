@@ -106,7 +106,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     resolution, max_range
         The raster's cell size and each position's navigation polygon's radius, metres.
     nav2_mode, simplify, precision, georeference, mcap, overwrite
-        As for :func:`occtool.fuse.write_run_map`.
+        As for :func:`occtool.fuse.write_run_map`. The run's 2D raster keeps its float32
+        occupancy (``probability``) only for a ``"scale"`` map.
     progress
         Called with ``(done, total)`` as the keyframes are fitted.
     heights_from_data
@@ -175,6 +176,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
             seconds = time.perf_counter() - started
             sensors = sensor_positions(log)
+        # The raster keeps its float32 occupancy only for a scale map, the one file drawn from
+        # it: four bytes a cell a trinary map would hold for nothing.
         if not isinstance(source, RangeLog):
             # Read here and fused: the features of every scan are of no more use (a large run's
             # raster needs the memory they held).
@@ -182,7 +185,7 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         run = map_of_run(fused, models, positions, resolution=resolution,
                          navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
                          world3d=world3d, sensor_positions=sensors, executor=executor,
-                         occupancy=True if nav2_mode == "scale" else None)
+                         occupancy=nav2_mode == "scale")
     if world3d is not None:
         run.seconds["world_map"] = seconds
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
@@ -217,7 +220,7 @@ def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str]
         run = map_of_run(fused, fitted, positions, resolution=resolution,
                          navigation={"max_range": max_range, "threshold": threshold},
                          robot_overrides=robot_overrides, executor=executor,
-                         occupancy=True if nav2_mode == "scale" else None)
+                         occupancy=nav2_mode == "scale")
     extra: dict[str, Any] = {"source": str(models), "fitted_here": False}
     written, summary = _write(run, output, extra, None, overwrite=overwrite, simplify=simplify, precision=precision,
                               mcap=mcap, georeference=georeference, nav2_mode=nav2_mode)
