@@ -214,3 +214,22 @@ def test_a_raster_larger_than_the_old_cell_cap_is_estimated_not_refused(room_log
     assert 50_000_000 < cells[0] < cells[1]
     assert finer.parts["raster"] - fine.parts["raster"] == TRINARY_CELL_BYTES * (cells[1] - cells[0])
     check_map_memory(log, resolution=0.0004)  # 0.2 G cells under the default 4G
+
+
+def test_a_trinary_run_holds_no_occupancy_and_a_scale_map_of_it_is_drawn_again(room_log, tmp_path):
+    """A trinary map's raster keeps two bytes a cell; writing the run as a scale map draws
+    the occupancy again, the same as a scale run's own."""
+    pytest.importorskip("PIL")
+    from occtool.fit import OccupancyRegressor
+    from occtool.fuse import map_log, write_run_map
+    from occtool.robot import Robot
+
+    estimator = OccupancyRegressor(pieces=8, robot=Robot(sensor_height=0.3, body_height=0.5))
+    trinary = map_log(room_log, tmp_path / "t", estimator=estimator, read_options={"no_return_range": 5.0},
+                      mcap=False)
+    scale = map_log(room_log, tmp_path / "s", estimator=estimator, read_options={"no_return_range": 5.0},
+                    mcap=False, nav2_mode="scale")
+    assert trinary.run.raster.probability is None and scale.run.raster.probability is not None
+    assert np.array_equal(trinary.run.raster.cells, scale.run.raster.cells)
+    write_run_map(trinary.run, tmp_path / "again", nav2_mode="scale", mcap=False)
+    assert (tmp_path / "again" / "map.png").read_bytes() == (tmp_path / "s" / "map.png").read_bytes()
