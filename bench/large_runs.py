@@ -8,7 +8,8 @@ each map in <= 1 GB of peak RSS and <= 40 s of CPU, each plot in <= 500 MB.
 Then the campus's Nav2 raster at 0.02 m (:data:`FINE_RESOLUTION`, 129 M cells) in <= 1 GB,
 and runs :data:`COPIES` times the campus (:func:`repeated_log`: the campus log's scans again,
 each copy beside the last), each in <= 1 GB with CPU growing at most linearly in scans
-(the exponent of a power law fitted to CPU against scans <= 1.1).
+(the exponent of a power law fitted to CPU against scans <= 1.1). These take about 17
+times the campus's CPU (20 minutes and more on a 2-core machine).
 
 ``python bench/large_runs.py [DATA]`` prints the table and the figures (DATA: the shared
 data folder, ``../shared/data`` by default).
@@ -136,7 +137,8 @@ def scaled_runs(campus: str | Path, scratch: str | Path, copies: tuple[int, ...]
         log.unlink()
         print(f"[bench] campus x{k}: {repeated[-1]['map']['cpu_s']:.0f} s CPU", flush=True)
     done = [r for r in repeated if r["map"]["exit_status"] == 0]
-    exponent = (_exponent([r["positions"] for r in done], [r["map"]["cpu_s"] for r in done])
+    # Scans grow as the copies, exactly (the summary's positions are the fused keyframes).
+    exponent = (_exponent([r["copies"] for r in done], [r["map"]["cpu_s"] for r in done])
                 if len(done) >= 2 else float("nan"))
     return {"fine": fine_run, "repeated": repeated, "exponent": exponent}
 
@@ -146,7 +148,7 @@ def _scaled_lines(scaled: dict[str, Any]) -> tuple[list[str], list[Any]]:
     lines = ["", f"The campus's Nav2 raster at {FINE_RESOLUTION} m (`--resolution {FINE_RESOLUTION}`), "
              "and the campus repeated side by side (bench/large_runs.repeated_log: each copy's poses moved along x "
              "by the campus's width and 72 m, its stamps after the last copy's), each under /usr/bin/time -v.",
-             "", "| run | scans | raster cells | CPU | wall | peak RSS |", "|---|---|---|---|---|---|"]
+             "", "| run | fused positions | raster cells | CPU | wall | peak RSS |", "|---|---|---|---|---|---|"]
     targets: list[Any] = []
     runs = [(f"campus at {FINE_RESOLUTION} m", fine)] if fine is not None else []
     for name, row in runs + [(f"campus x{r['copies']}", r) for r in repeated]:
