@@ -203,6 +203,30 @@ class DaskExecutor(Executor):
             self.client.close()
 
 
+def in_order(executor: Executor | None, doing: str, function: Callable[..., Any],
+             arguments: Iterable[tuple[Any, ...]]) -> Iterator[Any]:
+    """``function(*args)`` for each of ``arguments`` on ``executor`` (``None``: this
+    process), yielded in the order of ``arguments`` whatever order they finish in (those
+    that finish early are held until their turn): work split into tasks gives the same
+    result as done here. A task's exception is raised as it was in this process, and as one
+    :class:`~occtool.errors.InputError` saying what was ``doing`` and where otherwise (a
+    worker that died, a cluster that failed)."""
+    where = executor if executor is not None else Executor()
+    held: dict[int, Any] = {}
+    following = 0
+    for n, outcome in where.run_unordered((n, function, args) for n, args in enumerate(arguments)):
+        if isinstance(outcome, BaseException):
+            if type(where) is Executor:
+                raise outcome  # as if called here: it was
+            from occtool.errors import InputError
+
+            raise InputError(f"{doing} on {where.description}: {type(outcome).__name__}: {outcome}")
+        held[n] = outcome
+        while following in held:
+            yield held.pop(following)
+            following += 1
+
+
 def make_executor(jobs: int | None = None, scheduler: Any = None) -> Executor:
     """The executor for ``jobs`` local processes, or for the Dask cluster at ``scheduler``."""
     if scheduler is not None:
@@ -212,4 +236,4 @@ def make_executor(jobs: int | None = None, scheduler: Any = None) -> Executor:
 
 
 __all__ = ["DASK_CLUSTER_CONFIG", "DaskExecutor", "Executor", "ProcessExecutor", "check_jobs", "default_jobs",
-           "make_executor"]
+           "in_order", "make_executor"]

@@ -22,7 +22,10 @@ class Raster:
     ``cells`` is ``(ny, nx)`` uint8 with :data:`FREE`, :data:`OCCUPIED`, :data:`UNKNOWN`,
     row 0 at ``origin[1]`` (the bottom: y grows with the row); cell ``(j, i)`` spans
     ``origin + (i, j) * resolution`` to one resolution more. ``conflict`` marks cells where
-    positions contradicted each other; ``probability`` is the fused occupancy (0.5 unknown).
+    positions contradicted each other (a read-only view of one ``False`` where no cell can:
+    it costs no memory); ``probability`` is the fused occupancy (0.5 unknown), ``None``
+    when the raster was drawn without it (a large one, whose occupancy as float32 would
+    take four times its cells: :meth:`occtool.fuse.WorldMap.rasterise`).
     ``explored`` (``None``: none) marks cells the run observed: an unknown cell there is
     uncertain (a wall's edge), not unexplored, and no frontier.
     """
@@ -30,7 +33,7 @@ class Raster:
     cells: NDArray[np.uint8]
     resolution: float
     origin: tuple[float, float]
-    probability: NDArray[np.float32]
+    probability: NDArray[np.float32] | None
     conflict: NDArray[np.bool_]
     explored: NDArray[np.bool_] | None = field(default=None)
 
@@ -38,6 +41,10 @@ class Raster:
         """The fused occupancy of every cell the run observed (or placed a wall near), NaN
         elsewhere: the cells of a ``scale`` Nav2 map (:func:`occtool.formats.nav2.write_nav2_scale`),
         which keeps the map's grades where the trinary cells round them to three."""
+        if self.probability is None:
+            from occtool.errors import InputError
+
+            raise InputError("this raster was drawn without its occupancy (occupancy=False): no graded map")
         out = self.probability.astype(np.float32)  # a copy, blanked a strip of rows at a time
         step = max(1, (1 << 20) // max(1, out.shape[1]))
         for low in range(0, out.shape[0], step):
@@ -65,5 +72,12 @@ class Raster:
         return np.clip(row, 0, self.shape[0] - 1), np.clip(col, 0, self.shape[1] - 1), inside
 
     def counts(self) -> dict[str, int]:
-        return {"free": int((self.cells == FREE).sum()), "occupied": int((self.cells == OCCUPIED).sum()),
-                "unknown": int((self.cells == UNKNOWN).sum()), "conflict": int(self.conflict.sum())}
+        # A strip of rows at a time: a whole-raster comparison would take a byte a cell.
+        counts = {"free": 0, "occupied": 0, "unknown": 0, "conflict": 0}
+        step = max(1, (1 << 22) // max(1, self.cells.shape[1]))
+        for low in range(0, self.cells.shape[0], step):
+            strip = self.cells[low:low + step]
+            for name, value in (("free", FREE), ("occupied", OCCUPIED), ("unknown", UNKNOWN)):
+                counts[name] += int(np.count_nonzero(strip == value))
+            counts["conflict"] += int(np.count_nonzero(self.conflict[low:low + step]))
+        return counts

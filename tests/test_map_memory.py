@@ -169,3 +169,67 @@ def test_frontiers_found_in_strips_are_those_of_the_whole_raster(seed):
             assert np.array_equal(frontiers_in_strips(raster, length, strip_cells=strip), whole)
     raster = load_map(FIXTURES / "maps" / "fr079.occmap").rasterise(0.1)
     assert np.array_equal(frontiers_in_strips(raster, 0.5, strip_cells=5000), frontiers_of(raster))
+
+
+def test_a_raster_without_occupancy_holds_two_bytes_a_cell_and_the_same_cells():
+    """A large raster keeps no float32 occupancy and no conflict flags of its own; its
+    cells, explored flags and counts are those of the raster that keeps them."""
+    world = load_map(FIXTURES / "maps" / "intel.occmap")
+    full = world.rasterise(0.2, occupancy=True)
+    lean = world.rasterise(0.2, occupancy=False)
+    assert lean.probability is None and full.probability is not None
+    assert np.array_equal(lean.cells, full.cells) and np.array_equal(lean.explored, full.explored)
+    assert lean.counts() == full.counts() and lean.conflict.strides == (0, 0)
+    with pytest.raises(InputError, match="without its occupancy"):
+        lean.graded()
+
+
+def test_the_mcap_grid_of_a_large_raster_is_drawn_in_blocks():
+    """Over the grid's cell cap each k x k block is occupied when a cell of it is, else free
+    when one is; under it the grid is the cells themselves."""
+    from occtool.formats.foxglove import grid_values
+    from occtool.raster import FREE, OCCUPIED, UNKNOWN, Raster
+
+    cells = np.full((5, 7), UNKNOWN, dtype=np.uint8)
+    cells[0, 0] = OCCUPIED
+    cells[0, 1] = FREE
+    cells[3, 4] = FREE
+    cells[4, 6] = OCCUPIED
+    raster = Raster(cells, 0.1, (0.0, 0.0), None, np.zeros(cells.shape, dtype=bool))
+    values, k = grid_values(raster)
+    assert k == 1 and values.tolist() == np.select([cells == FREE, cells == OCCUPIED], [0, 100], -1).tolist()
+    values, k = grid_values(raster, max_cells=12)
+    assert k == 2 and values.shape == (3, 4)
+    assert values[0, 0] == 100 and values[1, 2] == 0 and values[2, 3] == 100 and values[0, 1] == -1
+
+
+def test_a_raster_larger_than_the_old_cell_cap_is_estimated_not_refused(room_log):
+    """The cap is the memory estimate: past the MCAP grid's cap a trinary raster costs two
+    bytes a cell more (its cells and explored flags), not a refusal for its cell count."""
+    from occtool.fuse._memory import TRINARY_CELL_BYTES
+
+    log = read_log(room_log)
+    fine, finer = estimate_map_memory(log, resolution=0.0005), estimate_map_memory(log, resolution=0.0004)
+    cells = [rows * columns for rows, columns in (fine.raster_shape, finer.raster_shape)]
+    assert 50_000_000 < cells[0] < cells[1]
+    assert finer.parts["raster"] - fine.parts["raster"] == TRINARY_CELL_BYTES * (cells[1] - cells[0])
+    check_map_memory(log, resolution=0.0004)  # 0.2 G cells under the default 4G
+
+
+def test_a_trinary_run_holds_no_occupancy_and_a_scale_map_of_it_is_drawn_again(room_log, tmp_path):
+    """A trinary map's raster keeps two bytes a cell; writing the run as a scale map draws
+    the occupancy again, the same as a scale run's own."""
+    pytest.importorskip("PIL")
+    from occtool.fit import OccupancyRegressor
+    from occtool.fuse import map_log, write_run_map
+    from occtool.robot import Robot
+
+    estimator = OccupancyRegressor(pieces=8, robot=Robot(sensor_height=0.3, body_height=0.5))
+    trinary = map_log(room_log, tmp_path / "t", estimator=estimator, read_options={"no_return_range": 5.0},
+                      mcap=False)
+    scale = map_log(room_log, tmp_path / "s", estimator=estimator, read_options={"no_return_range": 5.0},
+                    mcap=False, nav2_mode="scale")
+    assert trinary.run.raster.probability is None and scale.run.raster.probability is not None
+    assert np.array_equal(trinary.run.raster.cells, scale.run.raster.cells)
+    write_run_map(trinary.run, tmp_path / "again", nav2_mode="scale", mcap=False)
+    assert (tmp_path / "again" / "map.png").read_bytes() == (tmp_path / "s" / "map.png").read_bytes()

@@ -10,6 +10,7 @@ from occtool.cli.options import (
     KEYFRAME_SHARE_HELP,
     config_option,
     fit_options,
+    jobs_options,
     log_options,
     memory_limit_option,
     overwrite_option,
@@ -28,7 +29,7 @@ def _occupancy(ctx: click.Context | None, param: click.Parameter | None, value: 
 #: (its navigation maps'); the fit, log, keyframe and registration options apply to a log.
 MODEL_SET_OPTIONS = frozenset({
     "sources", "output", "resolution", "nav2_mode", "threshold", "combination", "max_range", "simplify", "precision",
-    "origin", "mcap", "overwrite", "config", "register",
+    "origin", "mcap", "overwrite", "config", "register", "jobs", "scheduler",
 })
 #: The robot options and the :class:`occtool.robot.Robot` fields they set.
 ROBOT_FIELDS = {"robot_radius": "radius", "sensor_height": "sensor_height", "body_height": "body_height",
@@ -112,13 +113,15 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
 @seed_option
 @overwrite_option
 @memory_limit_option
+@jobs_options("the number of tasks (keyframes' fits, navigation maps, bands of raster rows) run at once",
+              subject="Large maps", default="1, this process")
 @config_option
 def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_mode: str, threshold: float,
                 keyframe_share: float,
                 combination: str, max_range: float,
                 simplify: float | None, precision: int | None, origin: str | None, mcap: bool, world: str,
                 world_resolution: float | None, seed: int, overwrite: bool, memory_limit: str | None,
-                **kwargs: Any) -> None:
+                jobs: int | None, scheduler: str | None, **kwargs: Any) -> None:
     """Fuse every robot position of LOG (fitted here with the fit options) or of MODELS (a
     folder written by `occtool fit LOG -o MODELS/`) into one world-frame map and write, in
     the output folder: map.yaml + map.pgm (Nav2 map_server, trinary; map.png with --nav2-mode
@@ -138,6 +141,9 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
     obstacle, within its reach); places no position observed stay unknown (205 in the
     Nav2 map), never free. For a 2D laser give its height: --sensor-height 0.3
     --body-height 0.5 --no-return-range 5 (docs/map.md).
+
+    With -j N or --scheduler ADDRESS (a Dask cluster) the keyframes' fits, the navigation
+    maps and the raster's bands of rows run as tasks there; the files are the same bytes.
 
     MODELS were fitted already: the robot options given replace the fitted robot's in the
     navigation maps (the navigation region, obstacles and frontiers), and the fit, log,
@@ -176,7 +182,7 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
     written: dict[str, Any] = {
         "resolution": resolution, "nav2_mode": nav2_mode, "threshold": threshold, "combination": combination,
         "max_range": max_range, "simplify": simplify, "precision": precision, "georeference": georeference,
-        "mcap": mcap, "overwrite": overwrite}
+        "mcap": mcap, "overwrite": overwrite, "jobs": 1 if jobs is None else jobs, "scheduler": scheduler}
     from occtool.io.scans import is_log_folder
 
     source = sources[0]  # several files: one scan sequence, each file a scan

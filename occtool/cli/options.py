@@ -167,15 +167,17 @@ def _jobs(ctx: click.Context | None, param: click.Parameter | None, value: Any) 
     return int(value)
 
 
-def jobs_options(work: str) -> Callable[[F], F]:
+def jobs_options(work: str, *, subject: str = "Model sets",
+                 default: str = "as many as the machine has cores") -> Callable[[F], F]:
     """``-j`` and ``--scheduler``, their help saying what runs in parallel for this command
-    (``work``: "positions fitted at once", "models extracted at once", ...)."""
+    (``work``: "positions fitted at once", "models extracted at once", ...), for what
+    (``subject``) and how many by default (``default``)."""
     return _compose(
         click.option("-j", "--jobs", type=int, default=None, callback=_jobs, metavar="N",
-                     help=f"Model sets: {work}, each in a local process [default: as many as the machine has "
-                          "cores]. The output is the same for any N."),
+                     help=f"{subject}: {work}, each in a local process [default: {default}]. "
+                          "The output is the same for any N."),
         click.option("--scheduler", default=None, metavar="ADDRESS",
-                     help="Model sets: run the same work on the Dask cluster at ADDRESS (tcp://host:8786) "
+                     help=f"{subject}: run the same work on the Dask cluster at ADDRESS (tcp://host:8786) "
                           "instead of local processes; needs occtool[dask] here and occtool on the workers."),
     )
 

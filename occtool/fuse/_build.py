@@ -39,10 +39,74 @@ class FuseReport:
     sightings: RunReturns | None = None
 
 
+#: A task of the keyframes' fits holds consecutive keyframes up to this many features (or
+#: :data:`CHUNK_POSITIONS` positions), so that a cluster's cost per task is shared by several
+#: fits (about 0.1 s each) and the results stay in the positions' order.
+CHUNK_FEATURES = 20_000
+CHUNK_POSITIONS = 16
+
+
+@dataclass(frozen=True)
+class _Skipped:
+    """A keyframe whose fit failed for its data (the reason: an exception may not survive pickling)."""
+
+    reason: str
+
+
+def _fit_keyframes(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
+    """Fit a few keyframes' features with ``params`` (runs in this process or on a worker):
+    for each, the fitted model and its :class:`~occtool.observation.Observation`, or :class:`_Skipped`."""
+    from occtool.errors import OcctoolError
+    from occtool.fit import OccupancyRegressor
+
+    out: list[Any] = []
+    for features in chunk:
+        try:
+            model = OccupancyRegressor(**params).fit(features)
+        except OcctoolError as exc:
+            out.append(_Skipped(str(exc)))
+            continue
+        # Every return, far ones too: they mark walls; the map's return_reach keeps them from
+        # lending occupancy or clearing cells past the guard's reach.
+        out.append((model, observe(model, features)))
+    return out
+
+
+def _chunks(positions: Sequence[Any]) -> list[list[int]]:
+    """Consecutive indices into ``positions``, grouped as :data:`CHUNK_FEATURES` and :data:`CHUNK_POSITIONS` say."""
+    chunks: list[list[int]] = [[]]
+    size = 0
+    for k, item in enumerate(positions):
+        if chunks[-1] and (len(chunks[-1]) >= CHUNK_POSITIONS or size + len(item.features) > CHUNK_FEATURES):
+            chunks.append([])
+            size = 0
+        chunks[-1].append(k)
+        size += len(item.features)
+    return [chunk for chunk in chunks if chunk]
+
+
+def fit_in_order(positions: Sequence[Any], params: dict[str, Any], executor: Any = None,
+                 progress: Callable[[int, int], None] | None = None) -> list[Any]:
+    """:func:`_fit_keyframes` of every position of ``positions`` on ``executor`` (an
+    :class:`occtool.executor.Executor`; ``None``: this process), in chunks; the outcomes in
+    the positions' order whatever order the chunks finish in, so the map does not depend on
+    where the fits ran."""
+    from occtool.executor import in_order
+
+    chunks = _chunks(positions)
+    arguments = ((params, [positions[k].features for k in chunk]) for chunk in chunks)
+    outcomes: list[Any] = []
+    for outcome in in_order(executor, "fitting the keyframes", _fit_keyframes, arguments):
+        outcomes += outcome
+        if progress is not None:
+            progress(len(outcomes), len(positions))
+    return outcomes
+
+
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
              progress: Callable[[int, int], None] | None = None,
              keyframe_share: float = KEYFRAME_NEW_SHARE,
-             heights_from_data: bool = False) -> tuple[FusedMap, list[Any], FuseReport]:
+             heights_from_data: bool = False, executor: Any = None) -> tuple[FusedMap, list[Any], FuseReport]:
     """Fit the keyframe positions of ``log`` with copies of ``template`` (an unfitted
     :class:`occtool.fit.OccupancyRegressor`) and fuse them.
 
@@ -60,14 +124,16 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     position without one (its frame becomes the map's, noted in the report); positions
     whose fit fails for their data (no usable features) are skipped and reported.
 
+    ``executor`` (an :class:`occtool.executor.Executor`: local processes or a Dask cluster,
+    :func:`occtool.executor.make_executor`; ``None``: this process) fits the keyframes, a
+    few at a time; the map is the same, byte for byte, wherever they were fitted.
+
     Returns
     -------
     fused, models, report
         The :class:`FusedMap`, the fitted regressors (for their navigation maps) and a
         :class:`FuseReport`.
     """
-    from occtool.errors import OcctoolError
-    from occtool.fit import OccupancyRegressor
     from occtool.modelset import estimator_for_log
 
     notes = []
@@ -91,24 +157,18 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     started = time.perf_counter()
     models, poses, reaches, returns, return_offsets, stamps, skipped = [], [], [], [], [], [], []
     fitted_positions: list[int] = []
-    for done, item in enumerate(positions, start=1):
-        try:
-            model = OccupancyRegressor(**params).fit(item.features)
-        except OcctoolError as exc:
-            skipped.append((item.index, str(exc)))
+    for item, outcome in zip(positions, fit_in_order(positions, params, executor, progress)):
+        if isinstance(outcome, _Skipped):
+            skipped.append((item.index, outcome.reason))
             continue
+        model, observed = outcome
         fitted_positions.append(item.index)
         models.append(model)
         poses.append(item.pose)
         stamps.append(item.stamp)
-        # Every return, far ones too: they mark walls; the map's return_reach keeps them from
-        # lending occupancy or clearing cells past the guard's reach.
-        observed = observe(model, item.features)
         reaches.append(observed.reach)
         returns.append(observed.returns)
         return_offsets.append(observed.offsets)
-        if progress is not None:
-            progress(done, len(positions))
     fitted = time.perf_counter()
     if not models:
         raise InputError(f"{log.source or 'the log'}: no position could be fitted ({skipped[0][1]})")

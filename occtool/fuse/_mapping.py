@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from occtool.executor import make_executor
 from occtool.features import RangeLog
 from occtool.fuse._build import FuseReport, fuse_log, fuse_model_set
 from occtool.fuse._combine import DEFAULT_COMBINATION
@@ -76,7 +77,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             georeference: Any | None = None, mcap: bool = True, overwrite: bool = True,
             progress: Callable[[int, int], None] | None = None, heights_from_data: bool = False,
             world: str = "auto", world_resolution: float | None = None, seed: int = 0,
-            memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT) -> MapResult:
+            memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT, jobs: int | None = 1,
+            scheduler: Any = None) -> MapResult:
     """Map a log: what ``occtool map LOG -o OUTPUT`` does.
 
     Parameters
@@ -104,7 +106,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     resolution, max_range
         The raster's cell size and each position's navigation polygon's radius, metres.
     nav2_mode, simplify, precision, georeference, mcap, overwrite
-        As for :func:`occtool.fuse.write_run_map`.
+        As for :func:`occtool.fuse.write_run_map`. The run's 2D raster keeps its float32
+        occupancy (``probability``) only for a ``"scale"`` map.
     progress
         Called with ``(done, total)`` as the keyframes are fitted.
     heights_from_data
@@ -121,6 +124,13 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     memory_limit
         Refuse a run estimated (from the log, before any fit) to need more memory than this:
         bytes, or a size such as ``"8G"``; ``None``: no limit (:func:`occtool.fuse.check_map_memory`).
+    jobs, scheduler
+        Where the expensive per-position and per-tile work runs (the keyframes' fits, the
+        navigation maps, the 2D raster's bands of rows): ``jobs`` local processes (1: this
+        process; ``None``: the cores), or the Dask cluster at ``scheduler`` (an address such
+        as ``"tcp://host:8786"`` or a ``distributed.Client``; the ``dask`` extra, occtool on
+        the workers): :func:`occtool.executor.make_executor`. The files are the same, byte
+        for byte, wherever it ran.
 
     Raises
     ------
@@ -153,21 +163,29 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
     three_d = world == "3d" or (world == "auto" and is_3d_log(log))
     check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d)
-    fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
-                                     keyframe_share=keyframe_share, progress=progress,
-                                     heights_from_data=heights_from_data)
-    positions = list(zip(report.fitted, fused.poses, fused.stamps))
-    world3d, sensors, seconds = None, None, 0.0
-    if three_d:
-        import time
+    with make_executor(jobs, scheduler) as executor:  # an unreachable scheduler is refused before any fit
+        fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
+                                         keyframe_share=keyframe_share, progress=progress,
+                                         heights_from_data=heights_from_data, executor=executor)
+        positions = list(zip(report.fitted, fused.poses, fused.stamps))
+        world3d, sensors, seconds = None, None, 0.0
+        if three_d:
+            import time
 
-        started = time.perf_counter()
-        world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
-        seconds = time.perf_counter() - started
-        sensors = sensor_positions(log)
-    run = map_of_run(fused, models, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
-                     world3d=world3d, sensor_positions=sensors)
+            started = time.perf_counter()
+            world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
+            seconds = time.perf_counter() - started
+            sensors = sensor_positions(log)
+        # The raster keeps its float32 occupancy only for a scale map, the one file drawn from
+        # it: four bytes a cell a trinary map would hold for nothing.
+        if not isinstance(source, RangeLog):
+            # Read here and fused: the features of every scan are of no more use (a large run's
+            # raster needs the memory they held).
+            del log
+        run = map_of_run(fused, models, positions, resolution=resolution,
+                         navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
+                         world3d=world3d, sensor_positions=sensors, executor=executor,
+                         occupancy=nav2_mode == "scale")
     if world3d is not None:
         run.seconds["world_map"] = seconds
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
@@ -183,7 +201,7 @@ def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str]
                   max_range: float = 1.5, robot_overrides: Mapping[str, float] | None = None,
                   nav2_mode: str = "trinary",
                   simplify: float | None = None, precision: int | None = None, georeference: Any | None = None,
-                  mcap: bool = True, overwrite: bool = True) -> MapResult:
+                  mcap: bool = True, overwrite: bool = True, jobs: int | None = 1, scheduler: Any = None) -> MapResult:
     """Map a model set: what ``occtool map MODELS/ -o OUTPUT`` does.
 
     ``models`` is a set written by ``occtool fit LOG -o DIR/`` (``DIR`` or
@@ -193,13 +211,16 @@ def map_model_set(models: str | os.PathLike[str], output: str | os.PathLike[str]
     :class:`~occtool.robot.Robot` fields (``radius``, ``sensor_height``, ``body_height``,
     ``ground_clearance``) that replace the fitted robot's in the navigation maps (the
     navigation region, obstacles and frontiers; the fused and world maps keep the band the
-    models were fitted for).
+    models were fitted for). ``jobs`` and ``scheduler`` draw the navigation maps and the
+    raster there, as for :func:`map_log`.
     """
     check_outputs(output, nav2_mode=nav2_mode, overwrite=overwrite)
     fused, fitted, positions = fuse_model_set(models, combination=combination, threshold=threshold)
-    run = map_of_run(fused, fitted, positions, resolution=resolution,
-                     navigation={"max_range": max_range, "threshold": threshold},
-                     robot_overrides=robot_overrides)
+    with make_executor(jobs, scheduler) as executor:
+        run = map_of_run(fused, fitted, positions, resolution=resolution,
+                         navigation={"max_range": max_range, "threshold": threshold},
+                         robot_overrides=robot_overrides, executor=executor,
+                         occupancy=nav2_mode == "scale")
     extra: dict[str, Any] = {"source": str(models), "fitted_here": False}
     written, summary = _write(run, output, extra, None, overwrite=overwrite, simplify=simplify, precision=precision,
                               mcap=mcap, georeference=georeference, nav2_mode=nav2_mode)

@@ -6,10 +6,11 @@ What a run holds at its peak grows with two things a log says up front:
 * its **positions** (scans): each one's features while it is fitted, its keyframe model,
   its returns per pan bin (:class:`occtool.fuse.RunReturns`), its navigation map and its
   share of the navigation region;
-* the **raster** of its extent: the world map's Nav2 cells (one byte), their occupancy
-  (float32) and explored flags, held whole, with the frontier search's labels and the MCAP
-  grid beside them at the peak. The world map's walls reach :data:`WALL_REACH` from each
-  position, so the extent is the box of every position and of its features within that reach.
+* the **raster** of its extent: the world map's Nav2 cells and explored flags (a byte
+  each), held whole, with the MCAP grid (at most 2**25 cells) and the strips' temporaries
+  beside them at the peak (a ``scale`` map's and a 3D map's raster hold their occupancy
+  too). The world map's walls reach :data:`WALL_REACH` from each position, so the extent
+  is the box of every position and of its features within that reach.
 
 The figures are from runs on the project's 2-core machine (:data:`BASE_BYTES`, ...); the
 estimate errs high, so a run it passes fits.
@@ -36,11 +37,21 @@ POSITION_BYTES = 120 * 10**3
 #: times their measured peaks (Intel 226 MB for 153, FR-079 388 for 246, the Freiburg campus
 #: 651 for 586, the MIT corridor 670 for 576).
 FEATURE_BYTES = 60
-#: Per cell of a trinary raster at the peak: the cells (1 byte), occupancy (4), explored (1),
+#: Per cell of a 3D map's trinary raster at the peak: the cells (1 byte), occupancy (4), explored (1),
 #: then the frontier labels (4) and flags or the MCAP grid's copies (int8 values, bytes, message).
 RASTER_CELL_BYTES = 14
 #: ... and of a ``scale`` raster, whose PNG is made from the graded occupancy (float32 and RGBA copies).
 SCALE_CELL_BYTES = 28
+#: Per cell of a 2D map's trinary raster, which keeps no occupancy (:func:`occtool.fuse.map_log`):
+#: its cells and explored flags, held whole ...
+TRINARY_CELL_BYTES = 2
+#: ... per cell of its MCAP grid (at most :data:`occtool.formats.foxglove.MAX_GRID_CELLS`):
+#: the int8 values, their bytes, the message and the MCAP's buffer ...
+GRID_CELL_BYTES = 4
+#: ... and the temporaries of the strips the raster is drawn, searched and written in: about
+#: 200 bytes a cell of a strip, strips of up to 2**19 cells and a share for the others.
+STRIP_CELL_BYTES = 200
+STRIP_BYTES = 150 * 10**6
 #: Per ray of a 3D world map's build (:func:`occtool.fuse.map_log_3d`): its origin, end and
 #: direction, its samples' cell keys and the free cells' keys. Seosan's whole run, 1.22 M
 #: rays, built its map in 730 MB over what reading it held (963 MB peak for the whole map).
@@ -104,9 +115,18 @@ def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = 
         lower, upper = extent
         origin = np.floor(lower / resolution) * resolution
         columns, rows = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
-    per_cell = SCALE_CELL_BYTES if nav2_mode == "scale" else RASTER_CELL_BYTES
+    from occtool.formats.foxglove import MAX_GRID_CELLS
+
+    cells = int(rows) * int(columns)
+    if nav2_mode == "scale":
+        raster = cells * SCALE_CELL_BYTES
+    elif world3d:
+        raster = cells * RASTER_CELL_BYTES
+    else:
+        raster = (cells * TRINARY_CELL_BYTES + min(cells, MAX_GRID_CELLS) * GRID_CELL_BYTES
+                  + min(cells * STRIP_CELL_BYTES, STRIP_BYTES))
     parts = {"base": BASE_BYTES, "positions": positions * POSITION_BYTES + features * FEATURE_BYTES,
-             "raster": int(rows) * int(columns) * per_cell}
+             "raster": raster}
     if world3d:
         parts["world3d"] = features * RAY_BYTES
     return MemoryEstimate(sum(parts.values()), parts, (int(rows), int(columns)), float(resolution))

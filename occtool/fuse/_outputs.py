@@ -145,8 +145,11 @@ def _write_files(run: RunMap, staging: Path, world_bytes: bytes, mcap_bytes: byt
         handle.write(world_bytes)
     written = [staging / "world.occmap"]
     if nav2_mode == "scale":
-        written += list(write_nav2_scale(run.raster.graded(), run.raster.resolution, run.raster.origin,
-                                         staging / "map.yaml"))
+        raster = run.raster
+        if raster.probability is None and isinstance(run.world, WorldMap):
+            # Drawn for a trinary map, without its occupancy: drawn again with it (the same cells).
+            raster = run.world.rasterise(raster.resolution, occupancy=True)
+        written += list(write_nav2_scale(raster.graded(), raster.resolution, raster.origin, staging / "map.yaml"))
     else:
         written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, staging / "map.yaml"))
     if mcap_bytes is not None:

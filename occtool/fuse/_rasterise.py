@@ -50,15 +50,64 @@ def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], in
 
 def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
               within: float, doubted_trust: float, *, tile: int = TILE,
-              strip_cells: int = STRIP_CELLS) -> Raster:
+              strip_cells: int = STRIP_CELLS, executor: Any = None, occupancy: bool = True) -> Raster:
     """The raster of ``world`` (a :class:`WorldMap`), ``ny`` rows of ``nx`` cells from
     ``origin``, strip by strip; ``within`` is the widest wall band or rim the cells ask
-    about and ``doubted_trust`` the least trust of a doubted wall (:meth:`WorldMap.rasterise`)."""
+    about and ``doubted_trust`` the least trust of a doubted wall (:meth:`WorldMap.rasterise`).
+    ``executor`` (an :class:`occtool.executor.Executor`; ``None``: this process) computes
+    the bands of rows (:func:`tile_rows`); the raster is the same wherever they ran.
+    Without ``occupancy`` the raster keeps no float32 occupancy (``probability`` ``None``):
+    two bytes a cell held, not six."""
+    cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
+    probability = np.empty((ny, nx), dtype=np.float32) if occupancy else None
+    explored = np.zeros((ny, nx), dtype=bool)
+    for low, high, strip in raster_bands(world, resolution, nx, ny, origin, within, doubted_trust, tile=tile,
+                                         strip_cells=strip_cells, executor=executor):
+        cells[low:high], explored[low:high] = strip[0], strip[2]
+        if probability is not None:
+            probability[low:high] = strip[1]
+        del strip
+    from occtool.limits import release_free_memory
+
+    release_free_memory()  # the strips' freed temporaries
+    # No cell of a world map's raster holds contradicting positions: one False seen everywhere.
+    conflict = np.broadcast_to(np.zeros(1, dtype=bool), (ny, nx))
+    return Raster(cells, float(resolution), origin, probability, conflict, explored=explored)
+
+
+#: Rows of tiles a task of :func:`raster_bands` computes at most: a band of about this many
+#: strips' cells, so that a cluster's cost per task (the world map sent, its segment tree
+#: built) is shared by many tiles.
+BAND_STRIPS = 4
+
+
+def raster_bands(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
+                 within: float, doubted_trust: float, *, tile: int = TILE, strip_cells: int = STRIP_CELLS,
+                 executor: Any = None) -> Any:
+    """``(low, high, (cells, probability, explored))`` of each band of rows of the raster
+    :func:`rasterise` computes, bottom to top, each band :func:`tile_rows` on ``executor``
+    (``None``: this process), yielded in order as they finish."""
+    from occtool.executor import in_order
+
+    rows = max(tile, (BAND_STRIPS * strip_cells // max(nx * tile, 1)) * tile)
+    bands = [(low, min(low + rows, ny)) for low in range(0, ny, rows)]
+    arguments = ((world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells)
+                 for low, high in bands)
+    for (low, high), strip in zip(bands, in_order(executor, "drawing the raster", tile_rows, arguments)):
+        yield low, high, strip
+
+
+def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float], low: int, high: int,
+              within: float, doubted_trust: float, tile: int = TILE,
+              strip_cells: int = STRIP_CELLS) -> tuple[NDArray[np.uint8], NDArray[np.float32], NDArray[np.bool_]]:
+    """Rows ``low`` to ``high`` (``low`` a whole number of tiles) of :func:`rasterise`'s cells,
+    occupancy and explored flags, a row of tiles at a time, at most ``strip_cells`` cells
+    at once (runs in this process or on a worker)."""
     import shapely
 
-    cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
-    probability = np.empty((ny, nx), dtype=np.float32)
-    explored = np.zeros((ny, nx), dtype=bool)
+    cells = np.full((high - low, nx), UNKNOWN, dtype=np.uint8)
+    probability = np.empty((high - low, nx), dtype=np.float32)
+    explored = np.zeros((high - low, nx), dtype=bool)
     xs = origin[0] + (np.arange(nx) + 0.5) * resolution
     first = np.arange(0, nx, tile)
     last = np.minimum(first + tile, nx) - 1
@@ -70,8 +119,8 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
     # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
     chunk = max(1, strip_cells // (tile * tile))
     pad = 0.25 * resolution
-    for t0 in range(0, ny, tile):
-        t1 = min(t0 + tile, ny)
+    for t0 in range(low, high, tile):
+        t1 = min(t0 + tile, high)
         ys = origin[1] + (np.arange(t0, t1) + 0.5) * resolution
         for k0 in range(0, first.size, chunk):
             lo, hi = first[k0:k0 + chunk], last[k0:k0 + chunk]
@@ -90,12 +139,10 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
                 near = [np.asarray(tree.query_ball_point(middles, reach + half + _SLACK, return_length=True)) > 0
                         for reach in reaches]
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
-            _strip(world, cells[t0:t1, c0:c1], probability[t0:t1, c0:c1], explored[t0:t1, c0:c1], xs[c0:c1], ys,
+            r0, r1 = t0 - low, t1 - low
+            _strip(world, cells[r0:r1, c0:c1], probability[r0:r1, c0:c1], explored[r0:r1, c0:c1], xs[c0:c1], ys,
                    lo - c0, hi - c0, inside, outside, near, within, doubted_trust)
-    from occtool.limits import release_free_memory
-
-    release_free_memory()  # the strips' freed temporaries
-    return Raster(cells, float(resolution), origin, probability, np.zeros((ny, nx), dtype=bool), explored=explored)
+    return cells, probability, explored
 
 
 def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
@@ -145,4 +192,4 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
     explored[...] = (observed | rim | wall).reshape(shape)
 
 
-__all__ = ["STRIP_CELLS", "TILE", "raster_shape", "rasterise"]
+__all__ = ["BAND_STRIPS", "STRIP_CELLS", "TILE", "raster_bands", "raster_shape", "rasterise", "tile_rows"]

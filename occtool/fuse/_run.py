@@ -19,6 +19,7 @@ import shapely
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
+from occtool.executor import in_order
 from occtool.features import Pose
 from occtool.fuse._frontiers import frontier_points, frontiers_in_strips
 from occtool.fuse._map import FusedMap
@@ -115,11 +116,26 @@ def frontiers_of(raster: Raster, min_length: float = FRONTIER_MIN_LENGTH) -> Flo
     return frontier_points(raster, rows, cols, labels[rows, cols] - 1, count, min_length)
 
 
+#: Navigation maps placed by one task (about 25 ms each).
+NAVIGATION_CHUNK = 32
+
+
+def _placed_navigation(models: list[Any], options: list[dict[str, Any]], poses: list[Pose]) -> list[Any]:
+    """Each model's navigation map with its options, placed at its pose in the world (runs
+    in this process or on a worker)."""
+    from occtool.navigation import NavigationWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NavigationWarning)
+        return [model.navigation_map(**option).in_world(pose) for model, option, pose in zip(models, options, poses)]
+
+
 def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                resolution: float = 0.05, navigation: dict[str, Any] | None = None,
                frontier_min_length: float = FRONTIER_MIN_LENGTH, sightings: RunReturns | None = None,
                robot_overrides: Mapping[str, float] | None = None, world3d: Any | None = None,
-               sensor_positions: Any | None = None) -> RunMap:
+               sensor_positions: Any | None = None, executor: Any = None,
+               occupancy: bool | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -149,9 +165,14 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         (:func:`occtool.fuse._projection.project_band`, for the first model's robot), the
         ground implied by ``sensor_positions`` ``(N, 3)``, every position's sensor in the
         3D map's frame.
+    executor
+        An :class:`occtool.executor.Executor` (local processes, a Dask cluster) that draws
+        the 2D raster's bands of rows and the navigation maps, a few at a time; ``None``:
+        this process. The map is the same, byte for byte, wherever they ran.
+    occupancy
+        Keep the 2D raster's float32 occupancy (a ``scale`` Nav2 map needs it); ``None``: for
+        a raster of at most :data:`occtool.fuse._world.OCCUPANCY_CELLS` cells (:meth:`WorldMap.rasterise`).
     """
-    from occtool.navigation import NavigationWarning
-
     if len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
     unknown = sorted(set(robot_overrides or {}) - {f.name for f in fields(Robot)})
@@ -163,7 +184,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         world: WorldMap | Any = build_world_map(fused, sightings=sightings)
         seconds["world_map"] = time.perf_counter() - started
         started = time.perf_counter()
-        raster = world.rasterise(resolution)
+        raster = world.rasterise(resolution, executor=executor, occupancy=occupancy)
     else:
         from occtool.fuse._projection import project_band
 
@@ -175,15 +196,18 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                               ground_clearance=robot.ground_clearance, radius=robot.radius, resolution=resolution)
     seconds["raster"] = time.perf_counter() - started
     started = time.perf_counter()
-    placed = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NavigationWarning)
-        for model, (index, pose, stamp) in zip(models, positions):
-            options = dict(navigation or {})
-            if robot_overrides:
-                options["robot"] = replace(options.get("robot", model.robot_), **robot_overrides)
-            nav = model.navigation_map(**options).in_world(pose)
-            placed.append(PlacedMap(index, pose, stamp, nav))
+    options = []
+    for model in models:
+        option = dict(navigation or {})
+        if robot_overrides:
+            option["robot"] = replace(option.get("robot", model.robot_), **robot_overrides)
+        options.append(option)
+    chunks = in_order(executor, "placing the navigation maps", _placed_navigation,
+                      ((models[k:k + NAVIGATION_CHUNK], options[k:k + NAVIGATION_CHUNK],
+                        [pose for _, pose, _ in positions[k:k + NAVIGATION_CHUNK]])
+                       for k in range(0, len(models), NAVIGATION_CHUNK)))
+    navs = [nav for chunk in chunks for nav in chunk]
+    placed = [PlacedMap(index, pose, stamp, nav) for (index, pose, stamp), nav in zip(positions, navs)]
     seconds["navigation"] = time.perf_counter() - started
     started = time.perf_counter()
     region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])

@@ -90,6 +90,10 @@ DOUBTED_TRUST = 0.3
 WALL_SHARE = 0.5
 #: Segment middles searched around a query point (the ridges of more never overlap there).
 NEIGHBOURS = 12
+#: A raster of at most this many cells keeps its float32 occupancy by default
+#: (:meth:`WorldMap.rasterise`); a larger one holds two bytes a cell (cells, explored): the
+#: Freiburg campus at 0.02 m (129 M cells) would need 0.5 GB more for it.
+OCCUPANCY_CELLS = 50_000_000
 
 
 class WorldMap:
@@ -375,7 +379,8 @@ class WorldMap:
         out[band] = np.clip(np.maximum(base, self.wall_value(xy)), 0.0, 1.0)
         return out
 
-    def rasterise(self, resolution: float = 0.05, *, max_cells: int = 50_000_000) -> Raster:
+    def rasterise(self, resolution: float = 0.05, *, max_cells: int | None = None, executor: Any = None,
+                  occupancy: bool | None = None) -> Raster:
         """Free / occupied / unknown cells, as Nav2 loads them, from the occupancy of the
         trusted walls (:meth:`predict` without the walls most positions saw through, which the
         trinary map does not draw) at the cell's centre: occupied where it reaches
@@ -386,19 +391,27 @@ class WorldMap:
         unknown elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the
         bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks
         the cells the run observed or placed a wall near (within those rims: the unknown
-        among them are uncertain, not unexplored: no frontier lies there)."""
+        among them are uncertain, not unexplored: no frontier lies there). ``executor`` (an
+        :class:`occtool.executor.Executor`, e.g. a Dask cluster's) computes its bands of rows;
+        the raster is the same wherever they ran. ``occupancy``: keep ``probability`` (four
+        bytes a cell); ``None``: when the raster has at most :data:`OCCUPANCY_CELLS` cells.
+        ``max_cells``: refuse a larger raster (``None``: any; a run's memory is checked
+        before it starts, :func:`occtool.fuse.check_map_memory`)."""
         from occtool.fuse._rasterise import raster_shape
         from occtool.fuse._rasterise import rasterise as rasterise_strips
 
         if not (math.isfinite(resolution) and resolution > 0):
             raise InputError(f"resolution must be a positive number of metres, got {resolution}")
         origin, nx, ny = raster_shape(self, resolution)
-        if nx * ny > max_cells:
+        if max_cells is not None and nx * ny > max_cells:
             raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
+        if occupancy is None:
+            occupancy = nx * ny <= OCCUPANCY_CELLS
         # Cell by cell as described above, a strip of rows at a time (occtool.fuse._rasterise):
         # one query for the bands round the trusted and the doubted walls (exact up to the widest).
         return rasterise_strips(self, float(resolution), nx, ny, origin,
-                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST)
+                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST,
+                                executor=executor, occupancy=occupancy)
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays)."""
@@ -437,4 +450,4 @@ def _from_file(arrays: MapArrays, name: str) -> WorldMap:
         raise unreadable(name, str(exc)) from None
 
 
-__all__ = ["UNIT", "WorldMap", "decode_map"]
+__all__ = ["OCCUPANCY_CELLS", "UNIT", "WorldMap", "decode_map"]
