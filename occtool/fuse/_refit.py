@@ -113,7 +113,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     own = returns_of_fused(fused)
     run = own if sightings is None else sightings
     one_sided = run.scanning_laser if one_sided is None else one_sided
-    fit = {"cell": cell, "max_thickness": max_thickness, "min_returns": min_returns}
+    fit: dict[str, Any] = {"cell": cell, "max_thickness": max_thickness, "min_returns": min_returns}
     points, owner = run.return_points(reach)
     segments: Segments = fit_segments(points, owner, viewpoints=run.poses[owner, :2] if one_sided else None, **fit)
     if far_reach > reach:
