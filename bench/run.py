@@ -997,7 +997,9 @@ def main(argv: list[str] | None = None) -> int:
     if data.is_dir() and not args.quick:
         results["log_map_markdown"], results["log_map"] = log_map_section(data)
         # Issues 20 and 35: every CARMEN log on three held-out splits (seeds 0-2; ACES's and
-        # CSAIL's 11 blocks give seeds 0 and 2 the same one).
+        # CSAIL's 11 blocks give seeds 0 and 2 the same one). About an hour of CPU: a split of
+        # the Freiburg campus 12 min (peak RSS 9.7 GB, its grids' 8.6 M free points), of the
+        # corridor 4 min, of ACES 40 s (bench/heldout.py alone, docs/figures.md).
         results["heldout_markdown"], results["heldout"] = heldout_section(data, HELDOUT_LOGS, seeds=(0, 1, 2))
         # Issue 35: the map of a run in 3D, on two held-out splits (about 4.5 min of CPU each).
         results["heldout3d"] = [heldout3d_section(data, seed=seed) for seed in (0, 1)]
