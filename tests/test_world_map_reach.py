@@ -48,11 +48,19 @@ def test_far_observed_space_is_graded_in_the_map_and_unknown_in_the_raster(tmp_p
     assert np.array_equal(narrow.probability, raster.probability)
 
 
-def test_a_map_without_a_free_reach_writes_the_header_it_wrote_before():
-    world = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, positions=[[0.0, 0.0]])
-    assert "free_reach" not in world.params()
-    assert _cell(world.rasterise(0.1), 12.0, 0.0) == (FREE, True)
-    with pytest.raises(Exception, match="free_reach"):
+def test_a_map_without_a_free_reach_frees_its_whole_region_and_merges_only_with_its_kind():
+    from occtool.errors import InputError
+    from occtool.fuse import merge_maps
+
+    old = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, positions=[[0.0, 0.0]])
+    assert old.params()["free_reach"] == 0.0
+    assert _cell(old.rasterise(0.1), 12.0, 0.0) == (FREE, True)
+    new = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, positions=[[0.0, 0.0]],
+                   free_reach=8.0)
+    for maps in ([old, new], [new, old]):
+        with pytest.raises(InputError, match="differ in free_reach"):
+            merge_maps(maps)
+    with pytest.raises(InputError, match="free_reach"):
         WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, free_reach=-1.0)
 
 

@@ -429,16 +429,15 @@ class WorldMap:
                                 max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST)
 
     def params(self) -> dict[str, Any]:
-        """The map's scalar settings (what the file's header holds besides the arrays; a map
-        without a :attr:`free_reach` writes the header maps before it wrote)."""
-        out = {"band": list(self.band), "width": self.width, "front_width": self.front_width,
-               "back_width": self.back_width, "free_level": self.free_level,
-               "free_slope": self.free_slope,
-               "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
-               "wall_share": self.wall_share, "wall_rim": self.wall_rim, "doubted_wall_rim": self.doubted_wall_rim}
-        if self.free_reach > 0.0:
-            out["free_reach"] = self.free_reach
-        return out
+        """The map's scalar settings (what the file's header holds besides the arrays; a file
+        written before :attr:`free_reach` reads as 0, so that merging it with a later map is
+        refused as merging maps of other settings is)."""
+        return {"band": list(self.band), "width": self.width, "front_width": self.front_width,
+                "back_width": self.back_width, "free_level": self.free_level,
+                "free_slope": self.free_slope,
+                "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
+                "wall_share": self.wall_share, "wall_rim": self.wall_rim, "doubted_wall_rim": self.doubted_wall_rim,
+                "free_reach": self.free_reach}
 
     def save(self, path: Any, *, overwrite: bool = True) -> int:
         """Write the map to ``path`` (:mod:`occtool.formats.occmap`, atomically); returns its bytes."""
