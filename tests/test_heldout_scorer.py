@@ -140,3 +140,26 @@ def test_fused_row_says_not_available_without_the_map(tmp_path):
     row = heldout.fused_row(tmp_path, np.zeros((3, 2)), 1)
     assert row["auc"] is None and row["note"].startswith("not available")
     assert heldout.nav2_row(tmp_path, np.zeros((3, 2)), 1)["note"].startswith("not available")
+
+
+def _split(log, seed, world, best, world_bytes=40_000, grid_bytes=100_000):
+    grids = [{"model": f"{family} 0.1 m, tuned on the training scans", "resolution": 0.1, "auc": auc,
+              "bytes": grid_bytes, "family": family} for family, auc in (("log-odds", best), ("counting", best - 0.01))]
+    return {"log": log, "seed": seed, "rows": [{"model": "fused map (world.occmap)", "auc": world,
+                                                "bytes": world_bytes}, *grids]}
+
+
+def test_the_every_split_target_fails_on_any_log_and_split():
+    good = [_split("a-corrected.log.gz", s, 0.99, 0.98) for s in (0, 1, 2)]
+    [(label, value, passed)] = heldout.every_split_target({"logs": good})
+    assert passed and "3 splits of 1 logs" in value and "+0.0100" in value
+    lost = good + [_split("b-corrected.log.gz", 1, 0.97, 0.98)]
+    [(_, value, passed)] = heldout.every_split_target({"logs": lost})
+    assert not passed and "b 1: 0.9700 < 0.9800" in value
+    big = good + [_split("c-corrected.log.gz", 2, 0.99, 0.98, world_bytes=200_000)]
+    [(_, value, passed)] = heldout.every_split_target({"logs": big})
+    assert not passed and "c 2: 200 KB > 100 KB" in value
+    # Issue 20's per-log targets stay the bench split's (seed 0).
+    rows = heldout.heldout_targets({"logs": good})
+    assert [row[0] for row in rows].count("a-corrected.log.gz: world.occmap and the Nav2 map scored") == 1
+    assert heldout.every_split_target(None) == []

@@ -168,7 +168,10 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
     base = np.full(h * nx, world.unknown_level)
     if observed.any():
         seen = np.flatnonzero(observed)
-        base[seen] = world.free_value(np.column_stack([x[seen], y[seen]]))
+        xy = np.column_stack([x[seen], y[seen]])
+        base[seen] = world.free_value(xy)
+        # Only the part of it the raster may call free counts as observed (WorldMap.rasterise).
+        observed[seen] = world.free_space(xy)
     every = np.full(h * nx, -np.inf)
     of_trusted = every.copy()
     wall = np.zeros(h * nx, dtype=bool)

@@ -24,9 +24,22 @@ THROUGH_MARGIN = 0.1
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
 
-#: Beams sweep the observed region and see through walls no farther than this from their
-#: position (metres): a far beam's angle and its pose's error place it less surely.
+#: Returns up to this far from their position place walls too (metres; the Freiburg campus's
+#: held-out returns off its map lay by walls seen from 30-50 m, docs/figures.md) ...
+FAR_WALL_REACH = 50.0
+#: ... where no return within WALL_REACH of its position lies this near (metres): walls the
+#: run saw only from afar (ACES seed 1, docs/figures.md), fitted on their own so that the
+#: nearer walls stay as they were (at 0.3 m they lowered ACES seed 0's held-out AUC).
+FAR_WALL_GAP = 2.0
+
+#: Beams see through walls no farther than this from their position, and the Nav2 raster
+#: calls observed space free no farther than this from a position (metres): a far beam's
+#: angle and its pose's error place it less surely.
 REGION_REACH = 8.0
+
+#: Beams sweep the world map's observed region this far from their position (metres): its
+#: free level, rising away from the positions, grades what lies past REGION_REACH.
+OBSERVED_REACH = 16.0
 
 
 def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> Any:
@@ -45,9 +58,30 @@ def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> 
     return shapely.union_all(shapely.make_valid(shapely.polygons(rings)))
 
 
+def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach: float, far_reach: float,
+                    one_sided: bool, fit: dict[str, Any]) -> Segments:
+    """``segments`` (fitted to the returns within ``reach``, ``near``) and the walls of the
+    returns between ``reach`` and ``far_reach`` that lie farther than :data:`FAR_WALL_GAP`
+    from every near return: walls only far positions saw, fitted on their own so that the
+    near walls stay as they were."""
+    from scipy.spatial import cKDTree
+
+    points, owner = run.return_points(far_reach)
+    far = np.hypot(*(points - run.poses[owner, :2]).T) > reach
+    if far.any() and near.shape[0]:
+        far[far] = np.isinf(cKDTree(near).query(points[far], distance_upper_bound=FAR_WALL_GAP)[0])
+    if not far.any():
+        return segments
+    points, owner = points[far], owner[far]
+    extra = fit_segments(points, owner, viewpoints=run.poses[owner, :2] if one_sided else None, **fit)
+    return Segments(*(np.concatenate([getattr(segments, f), getattr(extra, f)])
+                      for f in ("start", "end", "thickness", "hits", "facing")))
+
+
 def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: float = CELL,
                     max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS, reach: float = WALL_REACH,
-                    region_reach: float = REGION_REACH, simplify: float = 0.03, one_sided: bool | None = None,
+                    far_reach: float = FAR_WALL_REACH, region_reach: float = REGION_REACH,
+                    observed_reach: float = OBSERVED_REACH, simplify: float = 0.03, one_sided: bool | None = None,
                     **params: Any) -> WorldMap:
     """Refit a run into a :class:`WorldMap`, rounded to the precision of its file
     (:meth:`WorldMap.quantised`).
@@ -58,9 +92,13 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     positions (a :class:`FusedMap`), which hold the run's local models.
     The walls are fitted to the returns no farther than ``reach`` from their position
     (:func:`occtool.fuse._walls.fit_segments`
-    with ``cell``, ``max_thickness`` and ``min_returns``); the beams up to ``region_reach``
-    see through them and sweep the observed region, which is
-    simplified by ``simplify`` metres (Douglas-Peucker, topology kept). ``one_sided``: let
+    with ``cell``, ``max_thickness`` and ``min_returns``), and apart from them to the returns
+    up to ``far_reach`` that lie farther than :data:`FAR_WALL_GAP` from all of those (walls
+    the run saw only from afar); the beams up to ``region_reach`` see through them. The
+    beams up to ``observed_reach`` sweep the observed region, those up to ``region_reach``
+    the part of it the Nav2 raster may call free (:attr:`WorldMap.free_region`, kept in
+    memory, not in the file; the file keeps ``region_reach`` as :attr:`WorldMap.free_reach`);
+    both are simplified by ``simplify`` metres (Douglas-Peucker, topology kept). ``one_sided``: let
     walls seen from one side face it (``None``: when ``sightings`` are a scanning laser's;
     on the noisy clouds of fixtures/tum-fr3-cabinet facing walls lowered the world map's
     AUC on each of five splits, docs/map.md). The map speaks for
@@ -70,28 +108,35 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     """
     import shapely
 
-    for name, value in (("reach", reach), ("region_reach", region_reach)):
+    for name, value in (("reach", reach), ("region_reach", region_reach), ("observed_reach", observed_reach)):
         if not value > 0:
             raise InputError(f"{name} must be a positive number of metres, got {value}")
     own = returns_of_fused(fused)
     run = own if sightings is None else sightings
-    points, owner = run.return_points(reach)
     one_sided = run.scanning_laser if one_sided is None else one_sided
-    segments: Segments = fit_segments(points, owner, viewpoints=run.poses[owner, :2] if one_sided else None,
-                                      cell=cell, max_thickness=max_thickness, min_returns=min_returns)
+    fit: dict[str, Any] = {"cell": cell, "max_thickness": max_thickness, "min_returns": min_returns}
+    points, owner = run.return_points(reach)
+    segments: Segments = fit_segments(points, owner, viewpoints=run.poses[owner, :2] if one_sided else None, **fit)
+    if far_reach > reach:
+        segments = _with_far_walls(segments, run, points, reach, far_reach, one_sided, fit)
     through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
     trust = segments.hits / np.maximum(segments.hits + through, 1)
-    region = _observed_region(own.ranges, own.poses, region_reach)
-    if simplify > 0 and not region.is_empty:
-        region = shapely.simplify(region, simplify, preserve_topology=True)
+    regions = [_observed_region(own.ranges, own.poses, r) for r in (observed_reach, min(region_reach, observed_reach))]
+    if simplify > 0:
+        regions = [g if g.is_empty else shapely.simplify(g, simplify, preserve_topology=True) for g in regions]
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
-    world = WorldMap(segments.start, segments.end, segments.thickness, trust, region, band=(z0 + low, z0 + high),
-                     positions=own.poses[:, :2], facing=segments.facing, **params)
-    # Rounded to the file's precision now, so that the map written is the map used.
-    world = world.quantised()
+    maps = [WorldMap(segments.start, segments.end, segments.thickness, trust, g, band=(z0 + low, z0 + high),
+                     positions=own.poses[:, :2], facing=segments.facing, **{"free_reach": region_reach, **params})
+            # Rounded to the file's precision now, so that the map written is the map used.
+            .quantised() for g in regions]
+    world = maps[0]
+    # The Nav2 raster's free space: the region the beams swept within region_reach, as
+    # before the region reached farther (its returns on free cells, docs/figures.md).
+    world.free_region = maps[1].region
     release_free_memory()  # the unions' GEOS garbage, before the raster
     return world
 
 
-__all__ = ["REGION_REACH", "THROUGH_MARGIN", "WALL_REACH", "build_world_map"]
+__all__ = ["FAR_WALL_GAP", "FAR_WALL_REACH", "OBSERVED_REACH", "REGION_REACH", "THROUGH_MARGIN", "WALL_REACH",
+           "build_world_map"]

@@ -16,7 +16,9 @@ models observed into one world-frame function of a few kilobytes:
   :data:`FRONT_WIDTH` on that side and :data:`BACK_WIDTH` behind: every free beam near it
   came from the front, and the returns its positions' pose errors scatter lie on both;
 * **the observed region**: the union of what each local model saw (its rays up to its
-  nearest return per degree, or its reach where it had none), one shapely geometry;
+  nearest return per degree, or its reach where it had none, up to
+  :data:`occtool.fuse._refit.OBSERVED_REACH`), one shapely geometry; the Nav2 raster calls
+  free only the part of it nearer to the positions (:meth:`WorldMap.free_space`);
 * ``F = MAX(base, MAX over segments)``, ``base`` inside the observed region
   :data:`FREE_LEVEL` at the run's positions rising by :data:`FREE_SLOPE` a metre away from
   the nearest (a far beam's angle and its pose's error clear space less surely), below
@@ -123,6 +125,9 @@ class WorldMap:
         :data:`FREE_SLOPE`, :data:`UNKNOWN_LEVEL`.
     wall_half_width, wall_share, wall_rim, doubted_wall_rim
         The Nav2 raster's walls and their uncertain edges (:meth:`rasterise`).
+    free_reach
+        The Nav2 raster calls observed space free no farther than this from a position
+        (metres; 0: anywhere), unless :attr:`free_region` says where (:meth:`free_space`).
     """
 
     def __init__(self, start: ArrayLike, end: ArrayLike, thickness: ArrayLike, trust: ArrayLike, region: Any, *,
@@ -131,7 +136,7 @@ class WorldMap:
                  free_level: float = FREE_LEVEL, free_slope: float = FREE_SLOPE,
                  unknown_level: float = UNKNOWN_LEVEL, wall_half_width: float = WALL_HALF_WIDTH,
                  wall_share: float = WALL_SHARE, wall_rim: float = WALL_RIM,
-                 doubted_wall_rim: float = DOUBTED_WALL_RIM) -> None:
+                 doubted_wall_rim: float = DOUBTED_WALL_RIM, free_reach: float = 0.0) -> None:
         import shapely
 
         self.start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
@@ -149,7 +154,8 @@ class WorldMap:
                             ("wall_half_width", wall_half_width)):
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"{name} must be a positive number of metres, got {value}")
-        for name, value in (("wall_rim", wall_rim), ("doubted_wall_rim", doubted_wall_rim)):
+        for name, value in (("wall_rim", wall_rim), ("doubted_wall_rim", doubted_wall_rim),
+                            ("free_reach", free_reach)):
             if not (math.isfinite(value) and value >= 0):
                 raise InputError(f"{name} must be a number of metres >= 0, got {value}")
         if not (math.isfinite(free_slope) and free_slope >= 0):
@@ -177,6 +183,10 @@ class WorldMap:
         self.wall_share = float(wall_share)
         self.wall_rim = float(wall_rim)
         self.doubted_wall_rim = float(doubted_wall_rim)
+        self.free_reach = float(free_reach)
+        #: Where the Nav2 raster may call observed space free (a shapely geometry inside the
+        #: region, or ``None``: :meth:`free_space` says what then); not written to the file.
+        self.free_region: Any = None
         #: The file's grid (:meth:`quantised` and :func:`load_map` set them): unit, metres, and
         #: origin; the unit of segments' half-lengths (``None`` in a version 1 file).
         self.unit: float | None = None
@@ -345,12 +355,28 @@ class WorldMap:
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         if not self.positions.shape[0] or self.free_slope == 0.0 or not xy.shape[0]:
             return np.full(xy.shape[0], min(self.free_level, FREE_CAP))
+        return np.minimum(self.free_level + self.free_slope * self._position_distance(xy), FREE_CAP)
+
+    def _position_distance(self, xy: FloatArray) -> FloatArray:
         from scipy.spatial import cKDTree
 
         if self._position_index is None:
             self._position_index = cKDTree(self.positions)
-        distance, _ = self._position_index.query(xy)
-        return np.minimum(self.free_level + self.free_slope * np.asarray(distance), FREE_CAP)
+        return np.asarray(self._position_index.query(xy)[0], dtype=np.float64)
+
+    def free_space(self, xy: ArrayLike) -> NDArray[np.bool_]:
+        """Whether the Nav2 raster may call observed space free at world ``(K, 2)`` points
+        (:meth:`rasterise`): inside :attr:`free_region` when the map holds one (the map
+        built by :func:`build_world_map` does; its file does not keep it), else within
+        :attr:`free_reach` of a position (everywhere when that is 0 or no position is kept)."""
+        import shapely
+
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        if self.free_region is not None:
+            return np.asarray(shapely.contains_xy(self.free_region, xy[:, 0], xy[:, 1]), dtype=bool)
+        if self.free_reach > 0.0 and self.positions.shape[0] and xy.shape[0]:
+            return self._position_distance(xy) <= self.free_reach
+        return np.ones(xy.shape[0], dtype=bool)
 
     def observed(self, xy: ArrayLike) -> NDArray[np.bool_]:
         """Whether world ``(K, 2)`` points lie in the observed region."""
@@ -385,8 +411,10 @@ class WorldMap:
         trusted walls (:meth:`predict` without the walls most positions saw through, which the
         trinary map does not draw) at the cell's centre: occupied where it reaches
         :data:`occtool.raster.RASTER_OCCUPIED` or within :attr:`wall_half_width` of a trusted wall's band;
-        free where the run observed the cell, it is at most :data:`occtool.raster.RASTER_FREE` and the cell
-        lies farther than :attr:`wall_rim` from a trusted wall's band and than
+        free where the run observed the cell near a position (:meth:`free_space`: a far beam's
+        angle and its pose's error clear space less surely), it is at most
+        :data:`occtool.raster.RASTER_FREE` and the cell lies farther than :attr:`wall_rim` from a
+        trusted wall's band and than
         :attr:`doubted_wall_rim` from a doubted one's (trust >= :data:`DOUBTED_TRUST`);
         unknown elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the
         bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks
@@ -414,12 +442,15 @@ class WorldMap:
                                 executor=executor, occupancy=occupancy)
 
     def params(self) -> dict[str, Any]:
-        """The map's scalar settings (what the file's header holds besides the arrays)."""
+        """The map's scalar settings (what the file's header holds besides the arrays; a file
+        written before :attr:`free_reach` reads as 0, so that merging it with a later map is
+        refused as merging maps of other settings is)."""
         return {"band": list(self.band), "width": self.width, "front_width": self.front_width,
                 "back_width": self.back_width, "free_level": self.free_level,
                 "free_slope": self.free_slope,
                 "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
-                "wall_share": self.wall_share, "wall_rim": self.wall_rim, "doubted_wall_rim": self.doubted_wall_rim}
+                "wall_share": self.wall_share, "wall_rim": self.wall_rim, "doubted_wall_rim": self.doubted_wall_rim,
+                "free_reach": self.free_reach}
 
     def save(self, path: Any, *, overwrite: bool = True) -> int:
         """Write the map to ``path`` (:mod:`occtool.formats.occmap`, atomically); returns its bytes."""

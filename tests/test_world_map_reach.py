@@ -1,0 +1,95 @@
+"""How far the 2D world map's observed region and walls reach, and how far its Nav2 raster's
+free cells do (issue 35: ACES seed 1's held-out block looks at walls seen from ~20 m)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from occtool.fuse import FREE, UNKNOWN, WorldMap, load_map
+from occtool.fuse._refit import _with_far_walls
+from occtool.fuse._sightings import RunReturns
+from occtool.fuse._walls import fit_segments
+from occtool.observation import BIN_CENTRE
+
+BAND = (-0.25, 0.2)
+CORRIDOR = shapely.MultiPolygon([shapely.box(-20.0, -1.0, 20.0, 1.0)])
+
+
+def _cell(raster, x, y):
+    row, col, inside = raster.cell_of([[x, y]])
+    assert inside[0]
+    return int(raster.cells[row[0], col[0]]), bool(raster.explored[row[0], col[0]])
+
+
+def test_far_observed_space_is_graded_in_the_map_and_unknown_in_the_raster(tmp_path):
+    world = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, positions=[[0.0, 0.0]],
+                     free_reach=8.0).quantised()
+    # The map grades the whole region (0.1 + 0.01 a metre) ...
+    assert np.allclose(world.predict([[5.0, 0.0, 0.0], [12.0, 0.0, 0.0]]), [0.15, 0.22], atol=1e-6)
+    # ... the raster calls it free only within 8 m of a position; farther it is unknown and
+    # unexplored (a frontier may still lead there).
+    raster = world.rasterise(0.1)
+    assert _cell(raster, 5.0, 0.0) == (FREE, True)
+    assert _cell(raster, 12.0, 0.0) == (UNKNOWN, False)
+    # The file keeps the reach, so a loaded map draws the same raster.
+    world.save(tmp_path / "w.occmap")
+    loaded = load_map(tmp_path / "w.occmap")
+    assert loaded.free_reach == 8.0
+    assert np.array_equal(loaded.rasterise(0.1).cells, raster.cells)
+    # The map build_world_map returns holds the region its raster may free, which the file does not.
+    world.free_region = shapely.MultiPolygon([shapely.box(-3.0, -1.0, 3.0, 1.0)])
+    shapely.prepare(world.free_region)
+    narrow = world.rasterise(0.1)
+    assert _cell(narrow, 2.0, 0.0) == (FREE, True) and _cell(narrow, 5.0, 0.0) == (UNKNOWN, False)
+    assert np.array_equal(narrow.probability, raster.probability)
+
+
+def test_a_map_without_a_free_reach_frees_its_whole_region_and_merges_only_with_its_kind():
+    from occtool.errors import InputError
+    from occtool.fuse import merge_maps
+
+    old = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, positions=[[0.0, 0.0]])
+    assert old.params()["free_reach"] == 0.0
+    assert _cell(old.rasterise(0.1), 12.0, 0.0) == (FREE, True)
+    new = WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, positions=[[0.0, 0.0]],
+                   free_reach=8.0)
+    for maps in ([old, new], [new, old]):
+        with pytest.raises(InputError, match="differ in free_reach"):
+            merge_maps(maps)
+    with pytest.raises(InputError, match="free_reach"):
+        WorldMap(np.zeros((0, 2)), np.zeros((0, 2)), [], [], CORRIDOR, band=BAND, free_reach=-1.0)
+
+
+def _wall_returns(poses, wall_x, bins=720):
+    """Each position's nearest return per bin on a wall across x = ``wall_x`` (|y| < 6 m)."""
+    ranges = np.zeros((len(poses), bins))
+    angles = -math.pi + (np.arange(bins) + 0.5) * (2.0 * math.pi / bins)
+    for k, (x, y, _, yaw) in enumerate(poses):
+        a = angles + yaw
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = (wall_x - x) / np.cos(a)
+        hit = (r > 0) & (np.abs(y + r * np.sin(a)) < 6.0)
+        ranges[k, hit] = r[hit]
+    return RunReturns(np.asarray(poses, dtype=np.float64), ranges, ranges > 0,
+                      np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8), scanning_laser=True)
+
+
+def test_walls_seen_only_from_afar_are_added_and_nearer_walls_kept():
+    fit = {"cell": 0.64, "max_thickness": 0.03, "min_returns": 3}
+    run = _wall_returns([[0.0, 0.0, 0.0, 0.0]], 20.0)
+    near, owner = run.return_points(16.0)
+    assert near.shape[0] == 0  # the wall is 20 m away: no wall within the walls' reach
+    none = fit_segments(near, owner, **fit)
+    far = _with_far_walls(none, run, near, 16.0, 30.0, True, fit)
+    middle = far.middle
+    assert len(far) > 0 and np.allclose(middle[:, 0], 20.0, atol=0.05)
+    # A position 2 m from the wall places it itself: the far returns add nothing there.
+    run = _wall_returns([[0.0, 0.0, 0.0, 0.0], [18.0, 0.0, 0.0, 0.0]], 20.0)
+    near, owner = run.return_points(16.0)
+    segments = fit_segments(near, owner, viewpoints=run.poses[owner, :2], **fit)
+    assert len(segments) > 0
+    assert _with_far_walls(segments, run, near, 16.0, 30.0, True, fit) is segments
