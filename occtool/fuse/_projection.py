@@ -161,17 +161,16 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     if tile is None:
         tile = max(4.0 * world.resolution, 1.0)
     ground = TileGround(world, places, sensor_height, tile)
-    # Free: the columns of the map's cells whose band cells were all crossed.
-    r = world.resolution
-    shape = world.shape
+    # Free: the columns of the free space's cells whose band cells were all crossed.
+    free_lo, shape, r = world.free_box
     keys = world.free_keys
     i, rest = np.divmod(keys, shape[1] * shape[2])
     j, k = np.divmod(rest, shape[2])
     column_xy = (np.column_stack([np.arange(shape[0] * shape[1]) // shape[1],
-                                  np.arange(shape[0] * shape[1]) % shape[1]]) + world.lo[:2] + 0.5) * r
+                                  np.arange(shape[0] * shape[1]) % shape[1]]) + free_lo[:2] + 0.5) * r
     column_ground = ground(column_xy)
-    low = np.floor((column_ground + ground_clearance) / r).astype(np.int64) - world.lo[2]
-    high = np.floor((column_ground + body_height) / r).astype(np.int64) - world.lo[2]
+    low = np.floor((column_ground + ground_clearance) / r).astype(np.int64) - free_lo[2]
+    high = np.floor((column_ground + body_height) / r).astype(np.int64) - free_lo[2]
     column = i * shape[1] + j
     in_band = (k >= low[column]) & (k <= high[column])
     seen = np.bincount(column[in_band], minlength=shape[0] * shape[1])
@@ -186,7 +185,7 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
                              & (above + reach >= ground_clearance) & (above - reach <= body_height))
     # The raster covers what the band holds (a lidar's rays reach far above it): the columns
     # whose band was seen, the obstacles in it and the robot's footprint.
-    seen_ij = np.column_stack(np.divmod(np.flatnonzero(band_seen), shape[1])) + world.lo[:2]
+    seen_ij = np.column_stack(np.divmod(np.flatnonzero(band_seen), shape[1])) + free_lo[:2]
     corners = [seen_ij * r, (seen_ij + 1) * r, g.centres[members, :2] - reach[members, None],
                g.centres[members, :2] + reach[members, None], places[:, :2] - radius, places[:, :2] + radius]
     every = np.concatenate([c.reshape(-1, 2) for c in corners])
@@ -198,8 +197,8 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
     # A raster cell's map column is separable: its x picks i, its y picks j. Rows are
     # filled in strips (memory of a strip, not of the raster, beyond the output itself).
-    ci = np.floor((origin[0] + (np.arange(nx) + 0.5) * resolution) / r).astype(np.int64) - world.lo[0]
-    cj = np.floor((origin[1] + (np.arange(ny) + 0.5) * resolution) / r).astype(np.int64) - world.lo[1]
+    ci = np.floor((origin[0] + (np.arange(nx) + 0.5) * resolution) / r).astype(np.int64) - free_lo[0]
+    cj = np.floor((origin[1] + (np.arange(ny) + 0.5) * resolution) / r).astype(np.int64) - free_lo[1]
     ci_in, cj_in = (ci >= 0) & (ci < shape[0]), (cj >= 0) & (cj < shape[1])
     ci, cj = np.clip(ci, 0, shape[0] - 1), np.clip(cj, 0, shape[1] - 1)
     cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
