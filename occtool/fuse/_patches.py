@@ -40,16 +40,22 @@ MIN_EXTENT = 0.25
 #: ridges. On the TUM cabinet's splits (bench/heldout3d.py, seeds 0 and 1, 0.2 m cells)
 #: leaving out the cells of fewer than 8 returns took the patches from 2175 to 1253 and
 #: 1859 to 1037 and the held-out AUC by at most 0.0009.
-MIN_RETURNS = 8
+MIN_RETURNS = 16
 #: Levels each number of a version-5 patch was rounded to (its file is still read): the
 #: centre's offset in its cell per axis, the normal's polar angle and azimuth, the in-plane
 #: axis, the two extents and the trust.
 LEVELS = {"offset": 16, "polar": 33, "azimuth": 64, "axis": 16, "extent": 16, "trust": 16}
+#: Most distance (metres) between the planes of neighbouring cells, and from a group's plane
+#: to a member's returns, for the cells to share one plane: about a depth camera's range
+#: noise at 2-3 m.
+MERGE_DISTANCE = 0.03
+#: Neighbouring cells' own normals within this angle's cosine may share a plane (20 degrees).
+MERGE_COSINE = math.cos(math.radians(20.0))
 #: Levels of a version-6 patch's trust and of its plane's distance from the cell's centre
 #: (over [-cell, cell]): a ridge falls over half a cell, so a plane a 64th of a cell off
 #: costs little, and its position along the normal is what the held-out score feels most.
 TRUST_LEVELS = 8
-OFFSET_STEPS = 64
+OFFSET_STEPS = 32
 #: A version-6 patch's half-extent along its plane, as a share of its cell: a patch covers
 #: its cell's part of the plane and reaches half a cell into its neighbours' (the returns of
 #: a surface rarely stop where the cell does).
@@ -131,12 +137,37 @@ def geometry(codes: PatchCodes | PatchCodesV5, lo: NDArray[np.int64], shape: tup
     """The floats a map answers with, from its codes alone (so a file read back answers the same)."""
     if isinstance(codes, PatchCodesV5):
         return _geometry_v5(codes, lo, shape, resolution)
-    normals = normal_of(codes.normals)
-    centres = key_corners(codes.keys, lo, shape, resolution) + 0.5 * resolution + (
-        (codes.offsets.astype(np.float64) - 128.0) * (resolution / OFFSET_STEPS))[:, None] * normals
+    root = plane_roots(codes.keys, codes.refs, shape)
+    normals = normal_of(codes.normals[root])
+    middle = key_corners(codes.keys, lo, shape, resolution) + 0.5 * resolution
+    on_plane = middle[root] + ((codes.offsets[root].astype(np.float64) - 128.0)
+                               * (resolution / OFFSET_STEPS))[:, None] * normals
+    # A merged cell's patch is its root's plane through this cell: the cell's middle moved
+    # onto that plane along the normal.
+    centres = np.where((codes.refs == 0)[:, None], on_plane,
+                       middle - np.sum((middle - on_plane) * normals, axis=1, keepdims=True) * normals)
     u, v = _frame(normals)
     return PatchGeometry(centres, normals, u, v, np.full((len(codes), 2), extent * resolution),
                          codes.thickness.astype(np.float64) * 0.001, codes.trust.astype(np.float64) / 255.0)
+
+
+def ref_steps(shape: tuple[int, int, int]) -> NDArray[np.int64]:
+    """Key differences of a patch's reference codes: 0 its own plane, 1-3 the plane of the
+    cell before it along z, y, x."""
+    return np.array([0, 1, shape[2], shape[1] * shape[2]], dtype=np.int64)
+
+
+def plane_roots(keys: NDArray[np.int64], refs: NDArray[np.uint8], shape: tuple[int, int, int]) -> NDArray[np.intp]:
+    """The index of the patch whose plane each patch takes (itself, or by its reference the
+    root of the neighbour before it, :func:`ref_steps`); ``refs`` checked by the file's reader."""
+    parent = np.arange(keys.size)
+    linked = np.flatnonzero(refs > 0)
+    parent[linked] = np.searchsorted(keys, keys[linked] - ref_steps(shape)[refs[linked]])
+    while True:  # pointer jumping: every parent has a smaller key, so this ends
+        jumped = parent[parent]
+        if np.array_equal(jumped, parent):
+            return parent
+        parent = jumped
 
 
 def _geometry_v5(codes: PatchCodesV5, lo: NDArray[np.int64], shape: tuple[int, int, int],
@@ -183,29 +214,108 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
         seen = np.add.reduceat(directions, starts, axis=0)[few]
         seen /= np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-12)
         normals[few] = seen
-    codes = normal_codes(normals)
-    quantised = normal_of(codes)
-    # The plane through the returns' mean with the stored normal, as a distance from the
-    # cell's centre; the thickness is measured from that stored plane.
-    distance = np.sum((mean - 0.5 * resolution) * quantised, axis=1)
-    offsets = np.clip(np.round(distance / resolution * OFFSET_STEPS) + 128, 1, 255).astype(np.uint8)
-    step = resolution / OFFSET_STEPS
-    centre = 0.5 * resolution + ((offsets.astype(np.float64) - 128.0) * step)[:, None] * quantised
-    depth = np.sum((local - np.repeat(centre, counts, axis=0)) * np.repeat(quantised, counts, axis=0), axis=1)
-    # Half-thickness: the RMS distance of the returns from the stored plane (one sigma, not
-    # two: on seed 0's split of the bench, free points just before a return then rank lower).
-    rms = np.sqrt(np.add.reduceat(depth * depth, starts) / n)
-    thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), rms), MIN_THICKNESS)
-    table = np.asarray(THICKNESS_MM)
-    thickness_codes = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
     # Flatness is judged about the returns' own plane, before rounding.
     keep = (counts >= min_returns) if flat is None else (
         (np.sqrt(values[:, 0]) <= flat) & (counts >= max(MIN_FLAT_POINTS, min_returns)))
+    corner = corner[keep]
+    world_mean = corner + mean[keep]
+    world_outer = covariance[keep] + world_mean[:, :, None] * world_mean[:, None, :]
+    refs, plane_codes, plane_points = merge_planes(cells[keep], counts[keep], world_mean, world_outer, normals[keep],
+                                                   shape)
+    quantised = normal_of(plane_codes)
+    middle = corner + 0.5 * resolution
+    explicit = refs == 0
+    offsets = np.where(explicit, np.clip(np.round(np.sum((plane_points - middle) * quantised, axis=1)
+                                                  / resolution * OFFSET_STEPS) + 128, 1, 255), 0).astype(np.uint8)
+    codes = PatchCodes(cells[keep].astype(np.int64), refs, np.where(explicit, plane_codes, 0).astype(np.uint8),
+                       offsets, np.zeros(int(keep.sum()), dtype=np.uint8),
+                       np.full(int(keep.sum()), 255, dtype=np.uint8))
+    # Half-thickness: the RMS distance of the returns from the stored plane (one sigma, not
+    # two: on seed 0's split of the bench, free points just before a return then rank lower).
+    g = geometry(codes, lo, shape, resolution)
+    kept_counts = counts[keep]
     taken = np.zeros(returns.shape[0], dtype=bool)
     taken[order] = np.repeat(keep, counts)
-    return (PatchCodes(cells[keep].astype(np.int64), codes[keep], offsets[keep], thickness_codes[keep],
-                       np.full(int(keep.sum()), 255, dtype=np.uint8)),
-            taken, counts[keep].astype(np.int64))
+    mine = points[np.repeat(keep, counts)]
+    depth = np.sum((mine - np.repeat(g.centres, kept_counts, axis=0)) * np.repeat(g.normals, kept_counts, axis=0),
+                   axis=1)
+    kept_starts = np.r_[0, np.cumsum(kept_counts)[:-1]] if kept_counts.size else np.zeros(0, dtype=np.int64)
+    few_kept = kept_counts < MIN_PLANE_POINTS
+    if kept_counts.size:
+        rms = np.sqrt(np.add.reduceat(depth * depth, kept_starts) / kept_counts)
+        thickness = np.maximum(np.where(few_kept, np.abs(np.add.reduceat(depth, kept_starts) / kept_counts), rms),
+                               MIN_THICKNESS)
+        table = np.asarray(THICKNESS_MM)
+        codes.thickness = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
+    return codes, taken, kept_counts.astype(np.int64)
+
+
+def merge_planes(cells: NDArray[np.int64], counts: NDArray[np.int64], means: FloatArray, outers: FloatArray,
+                 normals: FloatArray, shape: tuple[int, int, int]
+                 ) -> tuple[NDArray[np.uint8], NDArray[np.uint8], FloatArray]:
+    """One plane over neighbouring cells whose returns lie on it: each cell's reference code
+    (:func:`ref_steps`; 0 where it keeps its own plane), each cell's plane's direction code
+    and a point on that plane.
+
+    Face neighbours whose own planes have the same direction code and lie within
+    :data:`MERGE_DISTANCE` of each other are joined; each group's plane is fitted to all its
+    returns (their summed second moments); a cell whose mean lies farther than
+    :data:`MERGE_DISTANCE` from it keeps its own. A grouped cell refers to a grouped neighbour
+    before it in key order where it has one, so that its plane costs the file a few bits.
+    """
+    size = cells.size
+    if size == 0:
+        return np.zeros(0, dtype=np.uint8), np.zeros(0, dtype=np.uint8), np.zeros((0, 3))
+    own = normal_codes(normals)
+    own_normal = normal_of(own)
+    label = np.arange(size)
+    steps = ref_steps(shape)
+    wrap = [np.zeros(size, dtype=bool), cells % shape[2] == 0, (cells // shape[2]) % shape[1] == 0,
+            cells // (shape[1] * shape[2]) == 0]
+    before = np.full((4, size), -1, dtype=np.int64)
+    for ref in (1, 2, 3):
+        at = np.clip(np.searchsorted(cells, cells - steps[ref]), 0, max(size - 1, 0))
+        there = (~wrap[ref]) & (cells[at] == cells - steps[ref]) if size else np.zeros(0, dtype=bool)
+        near = there & (np.abs(np.sum(normals * normals[at], axis=1)) >= MERGE_COSINE) & (
+            np.abs(np.sum((means - means[at]) * own_normal, axis=1)) <= MERGE_DISTANCE)
+        before[ref] = np.where(near, at, -1)
+    pairs = [(np.flatnonzero(before[ref] >= 0), before[ref][before[ref] >= 0]) for ref in (1, 2, 3)]
+    a = np.concatenate([p for p, _ in pairs]) if size else np.zeros(0, dtype=np.int64)
+    b = np.concatenate([q for _, q in pairs]) if size else np.zeros(0, dtype=np.int64)
+    while a.size:  # connected groups: the smallest index of each, spread along the links
+        lowest = np.minimum(label[a], label[b])
+        changed = (label[a] != lowest) | (label[b] != lowest)
+        if not changed.any():
+            break
+        np.minimum.at(label, a, lowest)
+        np.minimum.at(label, b, lowest)
+        label = label[label]
+    group_size = np.bincount(label, minlength=size)
+    n = counts.astype(np.float64)
+    total = np.bincount(label, weights=n, minlength=size)
+    weight = np.maximum(total, 1.0)
+    centroid = np.column_stack([np.bincount(label, weights=n * means[:, k], minlength=size) / weight
+                                for k in range(3)])
+    second = np.stack([np.column_stack([np.bincount(label, weights=n * outers[:, r, c], minlength=size) / weight
+                                        for c in range(3)]) for r in range(3)], axis=1)
+    grouped = group_size[label] > 1
+    codes, points = own.copy(), means.copy()
+    if grouped.any():
+        roots = np.unique(label[grouped])
+        _, vectors = np.linalg.eigh(second[roots] - centroid[roots][:, :, None] * centroid[roots][:, None, :])
+        group_code = np.zeros(size, dtype=np.uint8)
+        group_code[roots] = normal_codes(vectors[:, :, 0])
+        normal = normal_of(group_code[label])
+        fits = grouped & (np.abs(np.sum((means - centroid[label]) * normal, axis=1)) <= MERGE_DISTANCE)
+        codes = np.where(fits, group_code[label], own).astype(np.uint8)
+        points = np.where(fits[:, None], centroid[label], means)
+        grouped = fits
+    refs = np.zeros(size, dtype=np.uint8)
+    for ref in (3, 2, 1):  # the last written wins: z before y before x
+        at = before[ref]
+        ok = grouped & (at >= 0) & grouped[np.maximum(at, 0)] & (label[np.maximum(at, 0)] == label)
+        refs[ok] = ref
+    return refs, codes.astype(np.uint8), points
 
 
 def concatenate(parts: list[PatchGeometry]) -> PatchGeometry:
