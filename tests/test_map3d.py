@@ -86,7 +86,10 @@ def test_the_band_makes_a_table_top_an_obstacle_and_leaves_the_floor_free() -> N
     world = _world(origins, ends, hits)
     raster = project_band(world, np.array(origins), sensor_height=1.0, body_height=1.0, radius=0.25)
     under = np.array([_cell(raster, x, y) for x in np.arange(2.6, 3.41, 0.1) for y in np.arange(2.6, 3.41, 0.1)])
-    assert (under == OCCUPIED).mean() > 0.8  # under the table top, 0.75 m up: in the band
+    # Under the table top, 0.75 m up: in the band. Its patches are bounded by their cells, so
+    # the edge cells' are crossed by rays passing beside the table (trust under the occupied
+    # level): unknown there, never free.
+    assert (under == OCCUPIED).mean() > 0.6
     assert not (under == FREE).any()
     assert _cell(raster, 0.03, 3.0) == OCCUPIED  # a wall
     assert _cell(raster, 2.0, 3.0) == FREE  # the floor beside the table, seen free up to the body's top

@@ -138,7 +138,8 @@ def free_table(resolution: float, free_level: float, saturation: float, classes:
     ``saturation`` times the cell's face (``resolution`` its edge)."""
     typical = 2.0 ** (np.arange(classes) + 0.5)
     scale = saturation * resolution * resolution
-    return np.asarray(0.5 - (0.5 - free_level) * (1.0 - np.exp(-typical / scale)), dtype=np.float64)
+    with np.errstate(divide="ignore", over="ignore"):  # a tiny saturation: every class at the free level
+        return np.asarray(0.5 - (0.5 - free_level) * (1.0 - np.exp(-typical / scale)), dtype=np.float64)
 
 
 def level_box(lo: NDArray[np.int64], shape: tuple[int, int, int], level: int) -> tuple[NDArray[np.int64],

@@ -35,12 +35,15 @@ MIN_PLANE_POINTS = 4
 MIN_FLAT_POINTS = 8
 #: Smallest half-extent of a patch along the plane, as a share of the cell.
 MIN_EXTENT = 0.25
-#: A level-0 patch holds at least this many returns: a cell with fewer (a flying pixel, the
-#: edge of a surface, a surface far away) is left to the free space and its neighbours'
-#: ridges. On the TUM cabinet's splits (bench/heldout3d.py, seeds 0 and 1, 0.2 m cells)
-#: leaving out the cells of fewer than 8 returns took the patches from 2175 to 1253 and
-#: 1859 to 1037 and the held-out AUC by at most 0.0009.
-MIN_RETURNS = 16
+#: A patch of the finest level holds at least this share of the mean returns of the cells
+#: holding any, within :data:`MIN_RETURNS`: a cell with fewer (a flying pixel, the edge of a
+#: surface) is left to the free space and its neighbours' ridges. Dense depth frames (the
+#: TUM cabinet: 64 returns a 0.2 m cell) leave out the cells of fewer than 24, which took its
+#: patches from about 2000 to 650 and the held-out AUC (bench/heldout3d.py, seeds 0-2) by at
+#: most 0.003; a sparse lidar (the Livox run: 18 a 0.4 m cell) keeps those of 8 or more (24
+#: took its band AUC from 0.944 to 0.923).
+MIN_RETURNS_SHARE = 0.4
+MIN_RETURNS = (8, 24)
 #: Levels each number of a version-5 patch was rounded to (its file is still read): the
 #: centre's offset in its cell per axis, the normal's polar angle and azimuth, the in-plane
 #: axis, the two extents and the trust.
@@ -59,7 +62,7 @@ OFFSET_STEPS = 32
 #: A version-6 patch's half-extent along its plane, as a share of its cell: a patch covers
 #: its cell's part of the plane and reaches half a cell into its neighbours' (the returns of
 #: a surface rarely stop where the cell does).
-EXTENT = 1.0
+EXTENT = 0.5
 #: Half-thicknesses a patch may take (mm): rounded up to the next.
 THICKNESS_MM = (10, 14, 20, 28, 40, 56, 80, 113, 160, 226, 255)
 #: Normal angle steps: polar over [0, pi/2] (a normal is kept in the upper half-sphere),
@@ -184,7 +187,7 @@ def _geometry_v5(codes: PatchCodesV5, lo: NDArray[np.int64], shape: tuple[int, i
 
 
 def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int64], shape: tuple[int, int, int],
-                resolution: float, flat: float | None = None, min_returns: int = MIN_RETURNS
+                resolution: float, flat: float | None = None, min_returns: int = MIN_RETURNS[0]
                 ) -> tuple[PatchCodes, NDArray[np.bool_], NDArray[np.int64]]:
     """One plane per cell holding returns, from their second moments, quantised (trust 1 for now).
 
@@ -248,6 +251,16 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
         table = np.asarray(THICKNESS_MM)
         codes.thickness = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
     return codes, taken, kept_counts.astype(np.int64)
+
+
+def fewest_returns(returns: FloatArray, resolution: float) -> int:
+    """The fewest returns a finest-level cell needs for a patch (:data:`MIN_RETURNS_SHARE`)."""
+    if not returns.shape[0]:
+        return MIN_RETURNS[0]
+    cells = sorted_unique(index_keys(np.floor(returns / resolution).astype(np.int64) - np.floor(
+        returns.min(axis=0) / resolution).astype(np.int64), np.zeros(3, dtype=np.int64), (1 << 20, 1 << 20, 1 << 20)))
+    mean = returns.shape[0] / max(cells.size, 1)
+    return int(np.clip(math.ceil(MIN_RETURNS_SHARE * mean), *MIN_RETURNS))
 
 
 def merge_planes(cells: NDArray[np.int64], counts: NDArray[np.int64], means: FloatArray, outers: FloatArray,
@@ -426,5 +439,5 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     return keys, counts, crossings
 
 
-__all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
+__all__ = ["LEVELS", "fewest_returns", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
            "free_cells_and_crossings", "geometry", "index_keys", "key_corners", "level_box", "trust_codes"]

@@ -39,6 +39,12 @@ GROUND_WINDOW = 0.3
 #: seed-0 split (bench/heldout3d.py) it took the held-out returns 0.6-2 m up that land on
 #: free cells from 1.5 % to 0.2 % (0.3-0.6 m: 4.3 to 0.5 %).
 FREE_RIM = 0.1
+#: A patch in the band whose trust reaches this (more of the rays reaching it returned than
+#: passed) is not drawn occupied below the occupied level, but the cells under it and within
+#: :data:`FREE_RIM` are never free: the free space is kept in cells four times the patches'
+#: (:data:`occtool.fuse._world3d.FREE_SHIFT`), so a column can be crossed beside an obstacle
+#: whose edge cells' patches were crossed beside it too.
+BLOCKS_FREE = 0.5
 #: Most raster cells drawn (memory: a few bytes each).
 MAX_CELLS = 50_000_000
 #: Raster cells filled at once, and patch samples drawn at once (memory, not speed).
@@ -181,7 +187,7 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     g = world.geometry
     reach = np.sqrt(np.sum(g.extents ** 2, axis=1)) + g.thickness
     above = g.centres[:, 2] - ground(g.centres[:, :2])
-    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED)
+    members = np.flatnonzero(~ground.ground_patch & (g.trust >= BLOCKS_FREE)
                              & (above + reach >= ground_clearance) & (above - reach <= body_height))
     # The raster covers what the band holds (a lidar's rays reach far above it): the columns
     # whose band was seen, the obstacles in it and the robot's footprint.
@@ -238,8 +244,9 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         ok = (height >= ground_clearance) & (height <= body_height) & (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
         flat = row[ok] * nx + col[ok]
         near_surface[flat] = True
-        cells[flat] = OCCUPIED
         explored[flat] = True
+        solid = g.trust[index[ok]] >= RASTER_OCCUPIED
+        cells[flat[solid]] = OCCUPIED
         np.maximum.at(probability, flat, g.trust[index[ok]].astype(np.float32))
     if near_surface.any():
         from scipy import ndimage  # lazy: scipy's import is slow

@@ -28,12 +28,12 @@ from occtool.errors import InputError
 from occtool.formats.occmap3d import free_table, rigid
 from occtool.fuse._patches import (
     EXTENT,
-    MIN_RETURNS,
     PatchCodes,
     PatchGeometry,
     cell_keys,
     concatenate,
     counted_unique,
+    fewest_returns,
     fit_patches,
     free_cells_and_crossings,
     geometry,
@@ -192,7 +192,12 @@ class WorldMap3D:
         points = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
         if self.to_map is not None:
             points = points @ self.to_map[:3, :3].T + self.to_map[:3, 3]
-        out = self.background(points)
+        return np.maximum(self.background(points), self.ridges(points))
+
+    def ridges(self, points: FloatArray) -> FloatArray:
+        """The MAX of the patches' ridges at ``(K, 3)`` points of the map's own frame (0 where
+        none reaches): the nearest :data:`NEIGHBOURS` patches of each level."""
+        out = np.zeros(points.shape[0])
         if self.patch_count == 0 or points.shape[0] == 0:
             return out
         g = self.geometry
@@ -268,7 +273,7 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
                        edge_falloff: float | None = None, margin: float | None = None, free_level: float = FREE_LEVEL,
                        coarse_levels: int = COARSE_LEVELS, flat: float | None = None,
                        saturation: float = FREE_SATURATION, free_shift: int = FREE_SHIFT,
-                       extent: float = EXTENT, min_returns: int = MIN_RETURNS) -> WorldMap3D:
+                       extent: float = EXTENT, min_returns: int | None = None) -> WorldMap3D:
     """A :class:`WorldMap3D` of world-frame rays.
 
     Parameters
@@ -300,7 +305,8 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     extent
         A patch's half-extent along its plane, as a share of its cell.
     min_returns
-        Fewest returns a cell of the finest level needs for a patch.
+        Fewest returns a cell of the finest level needs for a patch (default
+        :func:`~occtool.fuse._patches.fewest_returns`: a share of the mean of the cells').
     """
     end = np.asarray(ends, dtype=np.float64).reshape(-1, 3)
     origin = np.broadcast_to(np.asarray(origins, dtype=np.float64), end.shape).astype(np.float64)
@@ -327,6 +333,7 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     # Coarse levels first: a flat coarse cell (a stretch of wall or floor) is one patch; what
     # is left (corners, clutter) goes down a level, and the finest level takes everything.
     remaining = np.flatnonzero(hit)
+    min_returns = fewest_returns(end[remaining], resolution) if min_returns is None else int(min_returns)
     levels: list[PatchCodes] = []
     counts: list[NDArray[np.int64]] = []
     for level in range(coarse_levels, -1, -1):
