@@ -362,13 +362,16 @@ def counted_unique(keys: NDArray[np.int64], weights: NDArray[np.int64] | None = 
                    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The distinct keys, sorted, and how many times (or the summed ``weights``) each occurs
     (by a sort, as :func:`sorted_unique`)."""
+    if weights is None:  # a plain sort is several times faster than an argsort
+        ordered = np.sort(keys)
+        starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]]) if ordered.size else ordered[:0]
+        return ordered[starts], np.diff(np.r_[starts, ordered.size]).astype(np.int64)
     order = np.argsort(keys, kind="stable")
     ordered = keys[order]
     if not ordered.size:
         return ordered, np.zeros(0, dtype=np.int64)
     starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
-    counts = np.ones(ordered.size, dtype=np.int64) if weights is None else weights[order]
-    return ordered[starts], np.add.reduceat(counts, starts)
+    return ordered[starts], np.add.reduceat(weights[order], starts)
 
 
 def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
