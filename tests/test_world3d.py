@@ -190,3 +190,31 @@ def test_a_version_5_file_still_loads_and_answers_as_it_was_written() -> None:
     np.testing.assert_allclose(old.predict(points), [0.1, 0.1, 0.201875, 0.998125, 0.5, 0.1], atol=1e-9)
     # Saved again, it keeps its version-5 coding.
     assert occmap3d.decode(old.to_bytes()).patches[0].__class__ is occmap3d.PatchCodesV5
+
+
+def test_free_space_is_lower_where_more_rays_crossed(room: WorldMap3D) -> None:
+    """The free space is graded: a cell next to the four sensors (crossed by thousands of rays)
+    is freer than one near the room's top corner, which few rays reach."""
+    assert (np.diff(room.free_table) <= 0).all() and room.free_table[0] < 0.5
+    near, corner = room.predict([[2.0, 2.0, 1.3], [0.2, 0.2, 3.0]])
+    assert room.free_level <= near < corner < 0.5
+
+
+def test_a_flat_wall_is_a_few_planes_shared_by_its_cells(room: WorldMap3D) -> None:
+    """Coplanar neighbouring cells refer to one plane: the floor's patches of 0.2 m cells name
+    far fewer planes than cells, and every patch centre on it lies on the floor's plane."""
+    refs = np.concatenate([codes.refs for codes in room.patches])
+    assert (refs > 0).mean() > 0.3
+    g = room.geometry
+    on_floor = (np.abs(g.centres[:, 2]) < 0.05) & (g.normals[:, 2] > 0.99)
+    assert on_floor.sum() > 20 and np.abs(g.centres[on_floor, 2]).max() < 0.01
+
+
+@pytest.mark.parametrize("keys", [[], [0], [5, 6, 7, 300, 20_000, 20_001, 3_000_000]])
+def test_surface_keys_round_trip_as_varint_gaps(keys: list[int]) -> None:
+    coded = occmap3d.varint_gaps(np.array(keys, dtype=np.int64))
+    back = occmap3d.keys_of_varints(coded, len(keys), 4_000_000)
+    assert back is not None and back.tolist() == keys
+    assert occmap3d.keys_of_varints(coded, len(keys) + 1, 4_000_000) is None
+    if keys:
+        assert occmap3d.keys_of_varints(coded, len(keys), keys[-1]) is None  # beyond the box
