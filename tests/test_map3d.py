@@ -207,3 +207,17 @@ def test_a_depth_folder_map_answers_in_the_frame_of_its_poses(tmp_path: Path) ->
     described = CliRunner().invoke(cli, ["info", str(out / "world.occmap")])
     assert described.exit_code == 0 and "occmap version 6" in described.output
     assert "levelled on its floor" in described.output
+
+
+def test_cells_with_returns_but_no_patch_are_never_free_in_the_band() -> None:
+    """A cell whose few returns earned it no patch still holds something: the band under
+    the table top is not free even when no cell of it got a patch."""
+    origins, ends, hits = _scene(table=(2.5, 3.5, 0.75), n=12000)
+    world = build_world_map_3d(np.concatenate([np.broadcast_to(o, e.shape) for o, e in zip(origins, ends)]),
+                               np.concatenate(ends), np.concatenate(hits), resolution=0.2, coarse_levels=0,
+                               min_returns=10 ** 9)
+    assert world.patch_count == 0 and world.bare_points is not None and len(world.bare_points) > 0
+    raster = project_band(world, np.array(origins), sensor_height=1.0, body_height=1.0, radius=0.25)
+    under = [_cell(raster, x, y) for x in np.arange(2.6, 3.41, 0.1) for y in np.arange(2.6, 3.41, 0.1)]
+    assert FREE not in under
+    assert _cell(raster, 4.0, 2.0) == FREE  # the floor away from it still is

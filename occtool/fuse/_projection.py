@@ -167,9 +167,9 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     if tile is None:
         tile = max(4.0 * world.resolution, 1.0)
     ground = TileGround(world, places, sensor_height, tile)
-    # Free: the columns of the free space's cells whose band cells were all crossed.
-    free_lo, shape, r = world.free_box
-    keys = world.free_keys
+    # Free: the columns of the finest crossed cells known (the build's, where the map was
+    # built here) whose band cells were all crossed.
+    free_lo, shape, r, keys = world.band_free
     i, rest = np.divmod(keys, shape[1] * shape[2])
     j, k = np.divmod(rest, shape[2])
     column_xy = (np.column_stack([np.arange(shape[0] * shape[1]) // shape[1],
@@ -248,6 +248,24 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         solid = g.trust[index[ok]] >= RASTER_OCCUPIED
         cells[flat[solid]] = OCCUPIED
         np.maximum.at(probability, flat, g.trust[index[ok]].astype(np.float32))
+    bare = getattr(world, "bare_points", None)
+    if bare is not None and len(bare):
+        # The returns no patch took (their cells held too few) still mark something there:
+        # the footprint of each map cell holding one inside the band is not free (nor,
+        # through the rim, its neighbours). The build's rays are in the map's own frame.
+        inside = (bare[:, 2] - ground(bare[:, :2]) >= ground_clearance) & (
+            bare[:, 2] - ground(bare[:, :2]) <= body_height)
+        r = world.resolution
+        cells_xy = np.unique(np.floor(bare[inside, :2] / r).astype(np.int64), axis=0)
+        steps = np.minimum(np.arange(int(math.ceil(r / spacing)) + 1) * spacing, r * (1.0 - 1e-9))
+        du, dv = (a.reshape(-1) for a in np.meshgrid(steps, steps, indexing="ij"))
+        for part in np.array_split(cells_xy, cells_xy.shape[0] * du.size // SAMPLES_AT_ONCE + 1):
+            xy = (np.repeat(part * r, du.size, axis=0) + np.column_stack([np.tile(du, len(part)),
+                                                                           np.tile(dv, len(part))]))
+            col = np.floor((xy[:, 0] - origin[0]) / resolution).astype(np.int64)
+            row = np.floor((xy[:, 1] - origin[1]) / resolution).astype(np.int64)
+            ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+            near_surface[row[ok] * nx + col[ok]] = True
     if near_surface.any():
         from scipy import ndimage  # lazy: scipy's import is slow
 

@@ -116,6 +116,13 @@ class WorldMap3D:
     extent: float = 1.0
     #: The ``saturation`` the free table was made with (:func:`occtool.formats.occmap3d.free_table`).
     free_saturation: float = 0.0
+    #: The cells of ``resolution`` the training rays crossed (sorted keys into the map's box),
+    #: kept from the build for the Nav2 band (:func:`occtool.fuse.project_band`) and not
+    #: stored in the file: the free space the file holds is coarser (``free_shift``).
+    fine_free_keys: NDArray[np.int64] | None = field(default=None, repr=False, compare=False)
+    #: ``(B, 3)`` the training returns no patch took (their cells held too few), kept from
+    #: the build as ``fine_free_keys`` is: the Nav2 band never calls their cells free.
+    bare_points: FloatArray | None = field(default=None, repr=False, compare=False)
     #: How the resolution was chosen (:func:`map_log_3d`; not stored in the file).
     choice: dict[str, Any] | None = field(default=None, repr=False, compare=False)
     _geometry: PatchGeometry | None = field(default=None, repr=False)
@@ -143,6 +150,14 @@ class WorldMap3D:
         """The free space's box of cells: lowest cell index, shape, cell edge (metres)."""
         low, shape = level_box(self.lo, self.shape, self.free_shift)
         return low, shape, self.resolution * (1 << self.free_shift)
+
+    @property
+    def band_free(self) -> tuple[NDArray[np.int64], tuple[int, int, int], float, NDArray[np.int64]]:
+        """The finest crossed cells known: the build's cells of ``resolution`` where the map
+        was built here, else the file's free space (lowest cell, shape, edge, sorted keys)."""
+        if self.fine_free_keys is not None:
+            return self.lo, self.shape, self.resolution, self.fine_free_keys
+        return (*self.free_box, self.free_keys)
 
     @property
     def bounds(self) -> FloatArray:
@@ -361,7 +376,8 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     return WorldMap3D(float(resolution), lo, shape3, free, levels, falloff, edge_falloff, free_level,
                       free_codes=free_codes, free_table=free_table(resolution * (1 << free_shift), free_level,
                                                                    saturation, FREE_CLASSES),
-                      free_shift=free_shift, extent=extent, free_saturation=saturation)
+                      free_shift=free_shift, extent=extent, free_saturation=saturation, fine_free_keys=fine,
+                      bare_points=end[remaining])
 
 
 def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
