@@ -51,7 +51,7 @@ Protocol:
   test points (3D) and over the body band; and the share of held-out returns on unknown
   (0.5 or unseen) space of each map.
 * Rows: (a) ``world.occmap`` through ``occtool.fuse.load_map(path).predict(xyz)``: a 3D
-  map (version 5 in the file's own header, read here) at the world x, y, z of the test
+  map (version 5 or 6 in the file's own header, read here) at the world x, y, z of the test
   points (it stores and applies the transform to the frame it levelled); a 2D map (version
   4) at (x, y, height above the floor above), the datum it answers in, 0.5 outside its band.
   (b) ``map.yaml`` + PGM (own reader; occupied 1, free 0, unknown 0.5) looked
@@ -636,7 +636,7 @@ def map_frame(header: dict[str, Any], xyz: FloatArray) -> FloatArray:
 def occtool_rows(out: Path, command: dict[str, Any], xyz: FloatArray, xyz_floor: FloatArray, n_occupied: int,
                  band: NDArray[np.bool_]) -> list[dict[str, Any]]:
     """(a) and (b): ``world.occmap`` and the Nav2 map of ``occtool map``'s run. A 3D map
-    (version 5) is queried at the world x, y, z; a 2D one at x, y and the height above the
+    (version 5 or 6) is queried at the world x, y, z; a 2D one at x, y and the height above the
     floor (its datum)."""
     names = ("occtool world.occmap (load_map().predict)", "occtool Nav2 map (map.yaml + PGM, trinary)")
     if command["exit_status"]:
@@ -647,7 +647,7 @@ def occtool_rows(out: Path, command: dict[str, Any], xyz: FloatArray, xyz_floor:
         load_map = importlib.import_module("occtool.fuse").load_map
         started = time.process_time()
         header = occmap_header(path)
-        three_d = header.get("version") == 5
+        three_d = header.get("version") in (5, 6)
         p = np.asarray(load_map(path).predict(xyz if three_d else xyz_floor), dtype=np.float64)
         rows.append({"model": names[0], "bytes": path.stat().st_size, "cpu_s": command["cpu_s"],
                      "query_cpu_s": time.process_time() - started, "version": header.get("version"),
@@ -762,8 +762,8 @@ def markdown(result: dict[str, Any]) -> str:
                     f"{row['clamp'][1]:g}], inner AUC {_f(row['inner_auc'], '.3f')}; bytes: a byte a known voxel")
         elif row["model"].startswith("OctoMap"):
             note = "default sensor model; bytes: its .bt file"
-        elif "world.occmap" in row["model"] and row.get("version") == 5:
-            note = (f"3D (version 5, {row['resolution']:g} m cells, chosen by occtool); queried at world x, y, z; "
+        elif "world.occmap" in row["model"] and row.get("version") in (5, 6):
+            note = (f"3D (version {row['version']}, {row['resolution']:g} m cells, chosen by occtool); queried at world x, y, z; "
                     "CPU: the whole `occtool map`")
         elif "world.occmap" in row["model"]:
             note = "queried at height above the floor; 0.5 outside its 2D band; CPU: the whole `occtool map`"

@@ -4,6 +4,7 @@ of a 3D log's map, in the frame of the user's poses."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -85,7 +86,10 @@ def test_the_band_makes_a_table_top_an_obstacle_and_leaves_the_floor_free() -> N
     world = _world(origins, ends, hits)
     raster = project_band(world, np.array(origins), sensor_height=1.0, body_height=1.0, radius=0.25)
     under = np.array([_cell(raster, x, y) for x in np.arange(2.6, 3.41, 0.1) for y in np.arange(2.6, 3.41, 0.1)])
-    assert (under == OCCUPIED).mean() > 0.8  # under the table top, 0.75 m up: in the band
+    # Under the table top, 0.75 m up: in the band. Its patches are bounded by their cells, so
+    # the edge cells' are crossed by rays passing beside the table (trust under the occupied
+    # level): unknown there, never free.
+    assert (under == OCCUPIED).mean() > 0.6
     assert not (under == FREE).any()
     assert _cell(raster, 0.03, 3.0) == OCCUPIED  # a wall
     assert _cell(raster, 2.0, 3.0) == FREE  # the floor beside the table, seen free up to the body's top
@@ -160,7 +164,7 @@ def test_map_log_of_a_3d_log_writes_a_3d_world_map(tmp_path: Path) -> None:
     world = load_map(tmp_path / "map" / "world.occmap")
     assert isinstance(world, WorldMap3D) and world.resolution == 0.2
     assert world.predict([[0.0, 3.0, 0.5]])[0] > 0.65  # a wall
-    assert world.predict([[2.0, 2.0, 0.5]])[0] < 0.35  # crossed free
+    assert world.predict([[2.0, 2.0, 0.5]])[0] < 0.45  # crossed free (by a few hundred rays: not yet the free level)
     summary = json.loads((tmp_path / "map" / "summary.json").read_text())
     assert summary["world_map"]["kind"] == "3d" and summary["world_map"]["file_bytes"] == world.nbytes
     assert result.run.raster.cells.size > 0
@@ -192,8 +196,7 @@ def test_a_depth_folder_map_answers_in_the_frame_of_its_poses(tmp_path: Path) ->
     points = np.random.default_rng(0).uniform(world.bounds[0], world.bounds[1], size=(200, 3))
     inverse = np.linalg.inv(to_log)
     in_poses_frame = points @ inverse[:3, :3].T + inverse[:3, 3]
-    moved = WorldMap3D(world.resolution, world.lo, world.shape, world.free_keys, world.patches, world.falloff,
-                       world.edge_falloff, world.free_level)
+    moved = dataclasses.replace(world, to_map=None)
     np.testing.assert_allclose(world.predict(in_poses_frame), moved.predict(points), atol=1e-9)
     csv = tmp_path / "q.csv"
     csv.write_text("x,y,z\n" + "\n".join(",".join(f"{v:.9f}" for v in p) for p in in_poses_frame[:5]) + "\n")
@@ -202,5 +205,19 @@ def test_a_depth_folder_map_answers_in_the_frame_of_its_poses(tmp_path: Path) ->
     column = [float(line.split(",")[-1]) for line in answered.output.strip().splitlines()[1:]]
     np.testing.assert_allclose(column, moved.predict(points[:5]), atol=1e-4)
     described = CliRunner().invoke(cli, ["info", str(out / "world.occmap")])
-    assert described.exit_code == 0 and "occmap version 5" in described.output
+    assert described.exit_code == 0 and "occmap version 6" in described.output
     assert "levelled on its floor" in described.output
+
+
+def test_cells_with_returns_but_no_patch_are_never_free_in_the_band() -> None:
+    """A cell whose few returns earned it no patch still holds something: the band under
+    the table top is not free even when no cell of it got a patch."""
+    origins, ends, hits = _scene(table=(2.5, 3.5, 0.75), n=12000)
+    world = build_world_map_3d(np.concatenate([np.broadcast_to(o, e.shape) for o, e in zip(origins, ends)]),
+                               np.concatenate(ends), np.concatenate(hits), resolution=0.2, coarse_levels=0,
+                               min_returns=10 ** 9)
+    assert world.patch_count == 0 and world.bare_points is not None and len(world.bare_points) > 0
+    raster = project_band(world, np.array(origins), sensor_height=1.0, body_height=1.0, radius=0.25)
+    under = [_cell(raster, x, y) for x in np.arange(2.6, 3.41, 0.1) for y in np.arange(2.6, 3.41, 0.1)]
+    assert FREE not in under
+    assert _cell(raster, 4.0, 2.0) == FREE  # the floor away from it still is

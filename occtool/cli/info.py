@@ -154,7 +154,7 @@ def _world_map_summary(path):
     from occtool.fuse import WorldMap
 
     data = read_map_bytes(path)  # the file's bytes (one read), then the map built of them
-    if header_version(data) == 5:
+    if header_version(data) in (5, 6):
         return _world_map_3d_summary(path, data)
     arrays = decode(data, str(path))
     world = WorldMap.from_arrays(arrays)
@@ -182,17 +182,19 @@ def _world_map_summary(path):
 
 
 def _world_map_3d_summary(path, data):
-    """A 3D world map (version 5): its frame, box, cells, patches per level and bytes."""
+    """A 3D world map (version 5 or 6): its frame, box, cells, patches per level and bytes."""
     import numpy as np
 
-    from occtool.formats.occmap3d import decode
+    from occtool.formats.occmap import header_version
+    from occtool.formats.occmap3d import FORMAT_VERSION, decode
     from occtool.fuse._world3d import from_arrays
 
     world = from_arrays(decode(bytes(data), str(path)))
+    version = header_version(data)
     lower, upper = world.bounds
     table = _key_value_table(f"occtool world map (3D): {path}")
-    table.add_row("format", f"occmap version 5 (3D: this occtool writes it for depth cameras and 3D lidars), "
-                            f"{len(data):,} bytes")
+    table.add_row("format", f"occmap version {version} (3D: this occtool writes version {FORMAT_VERSION} for depth "
+                            f"cameras and 3D lidars), {len(data):,} bytes")
     if world.to_map is None:
         frame = "map: the frame of the log's poses (x, y, z in metres)"
     else:
@@ -209,8 +211,11 @@ def _world_map_3d_summary(path, data):
                        for level, codes in enumerate(world.patches) if len(codes))
     table.add_row("surfaces", f"{world.patch_count:,} planar patches (each a MIN over 7 linear pieces, under one "
                               f"MAX): {levels or 'none'}")
-    table.add_row("free space", f"{world.free_cells:,} cells of {world.resolution:g} m that training rays crossed "
-                                f"(occupancy {world.free_level:g}; 0.5 where no ray passed)")
+    free_size = world.free_box[2]
+    graded = (f"occupancy {world.free_table.min():.2f} to {world.free_table.max():.2f}, lower the more rays crossed"
+              if world.free_table is not None else f"occupancy {world.free_level:g}")
+    table.add_row("free space", f"{world.free_cells:,} cells of {free_size:g} m that training rays crossed "
+                                f"({graded}; 0.5 where no ray passed)")
     table.add_row("a byte grid at 0.1 m", f"{world.grid_bytes(0.1):,} bytes for the same known space")
     return table
 

@@ -100,7 +100,7 @@ def _model_set_robot(ctx: click.Context, kwargs: dict[str, Any]) -> dict[str, fl
               help="Write map.mcap for Foxglove (needs the protobuf extra).")
 @click.option("--world", "world", type=click.Choice(["auto", "2d", "3d"]), default="auto", show_default=True,
               help="The world map's kind. 3d: surfaces (planar patches) and the space the rays crossed, in x, y, z "
-                   "(world.occmap version 5; occtool query answers at x, y, z in the frame of the log's poses) and "
+                   "(world.occmap version 6; occtool query answers at x, y, z in the frame of the log's poses) and "
                    "map.pgm its body band over the ground found per tile (a ramp is ground, a table top an "
                    "obstacle). 2d: the body band's walls (version 4). auto: 3d for a depth camera or a 3D lidar "
                    "(returns above and below the sensor), 2d for a 2D laser.")

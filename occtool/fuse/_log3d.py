@@ -74,9 +74,9 @@ def map_log_3d(log: Any, resolution: float | None = None, *, to_map: ArrayLike |
     """The :class:`WorldMap3D` of a :class:`~occtool.features.RangeLog`, in the frame of its poses.
 
     ``resolution`` ``None``: chosen on an inner split of the log's own positions
-    (:func:`occtool.fuse._inner_split.choose_resolution`, seeded by ``seed``; the choice and
-    its scores in the map's :attr:`WorldMap3D.choice`). ``to_map`` ``(4, 4)``: where a
-    reader moved the poses (a depth folder levels its world on the floor it finds,
+    (:func:`occtool.fuse._inner_split.choose_resolution`, seeded by ``seed``, with the free
+    space's saturation; the choice and its scores in the map's :attr:`WorldMap3D.choice`).
+    ``to_map`` ``(4, 4)``: where a reader moved the poses (a depth folder levels its world on the floor it finds,
     :attr:`occtool.features.RangeLog.to_log_frame`), the rigid transform from the frame the
     user's poses are in to the log's; it is stored in the map and applied to every query.
     ``options`` are :func:`build_world_map_3d`'s.
@@ -85,6 +85,8 @@ def map_log_3d(log: Any, resolution: float | None = None, *, to_map: ArrayLike |
     choice: dict[str, Any] = {"chosen": resolution, "why": "given"}
     if resolution is None:
         resolution, choice = choose_resolution(origins, ends, hits, groups, seed=seed, **options)
+        if "saturation" in choice:
+            options = {**options, "saturation": choice["saturation"]}
     world = build_world_map_3d(origins, ends, hits, resolution=resolution, **options)
     world.choice = choice
     if to_map is not None:

@@ -115,7 +115,7 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     world
         The world map's kind: ``"2d"`` (:class:`occtool.fuse.WorldMap`, the body band's
         walls, ``world.occmap`` version 4), ``"3d"`` (:class:`occtool.fuse.WorldMap3D`:
-        surfaces and crossed free space in x, y, z, version 5; the Nav2 map its body band
+        surfaces and crossed free space in x, y, z, version 6; the Nav2 map its body band
         over the ground per tile) or ``"auto"``: 3D when the log's returns spread above and
         below the sensor (:func:`occtool.fuse.is_3d_log`: a depth camera, a 3D lidar).
     world_resolution

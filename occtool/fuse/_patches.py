@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.formats.occmap3d import PatchCodes, level_box
+from occtool.formats.occmap3d import AZIMUTH_STEPS, POLAR_STEPS, PatchCodes, PatchCodesV5, level_box
 
 FloatArray = NDArray[np.float64]
 
@@ -35,11 +35,35 @@ MIN_PLANE_POINTS = 4
 MIN_FLAT_POINTS = 8
 #: Smallest half-extent of a patch along the plane, as a share of the cell.
 MIN_EXTENT = 0.25
-#: Levels each patch number is rounded to before it is stored (zlib then spends about
-#: log2(levels) bits on it): the centre's offset in its cell per axis, the normal's polar
-#: angle and azimuth, the in-plane axis, the two extents and the trust. A ridge falls over
-#: half a cell, so a centre a 32nd of a cell off costs little.
+#: A patch of the finest level holds at least this share of the mean returns of the cells
+#: holding any, within :data:`MIN_RETURNS`: a cell with fewer (a flying pixel, the edge of a
+#: surface) is left to the free space and its neighbours' ridges. Dense depth frames (the
+#: TUM cabinet: 64 returns a 0.2 m cell) leave out the cells of fewer than 24, which took its
+#: patches from about 2000 to 650 and the held-out AUC (bench/heldout3d.py, seeds 0-2) by at
+#: most 0.003; a sparse lidar (the Livox run: 18 a 0.4 m cell) keeps those of 8 or more (24
+#: took its band AUC from 0.944 to 0.923), the sparser Seosan run those of 2 or more (8
+#: took its held-out AUC from 0.971 / 0.968 to 0.949 / 0.955).
+MIN_RETURNS_SHARE = 0.4
+MIN_RETURNS = (2, 24)
+#: Levels each number of a version-5 patch was rounded to (its file is still read): the
+#: centre's offset in its cell per axis, the normal's polar angle and azimuth, the in-plane
+#: axis, the two extents and the trust.
 LEVELS = {"offset": 16, "polar": 33, "azimuth": 64, "axis": 16, "extent": 16, "trust": 16}
+#: Most distance (metres) between the planes of neighbouring cells, and from a group's plane
+#: to a member's returns, for the cells to share one plane: about a depth camera's range
+#: noise at 2-3 m.
+MERGE_DISTANCE = 0.03
+#: Neighbouring cells' own normals within this angle's cosine may share a plane (20 degrees).
+MERGE_COSINE = math.cos(math.radians(20.0))
+#: Levels of a version-6 patch's trust and of its plane's distance from the cell's centre
+#: (over [-cell, cell]): a ridge falls over half a cell, so a plane a 64th of a cell off
+#: costs little, and its position along the normal is what the held-out score feels most.
+TRUST_LEVELS = 8
+OFFSET_STEPS = 32
+#: A version-6 patch's half-extent along its plane, as a share of its cell: a patch covers
+#: its cell's part of the plane and reaches half a cell into its neighbours' (the returns of
+#: a surface rarely stop where the cell does).
+EXTENT = 0.5
 #: Half-thicknesses a patch may take (mm): rounded up to the next.
 THICKNESS_MM = (10, 14, 20, 28, 40, 56, 80, 113, 160, 226, 255)
 #: Normal angle steps: polar over [0, pi/2] (a normal is kept in the upper half-sphere),
@@ -95,9 +119,63 @@ def _normal_of(codes: NDArray[np.uint8]) -> FloatArray:
     return np.column_stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)])
 
 
-def geometry(codes: PatchCodes, lo: NDArray[np.int64], shape: tuple[int, int, int],
-             resolution: float) -> PatchGeometry:
+def normal_of(codes: NDArray[np.uint8]) -> FloatArray:
+    """Unit normals of version-6 direction codes: ``polar * AZIMUTH_STEPS + azimuth``, the polar
+    angle on :data:`~occtool.formats.occmap3d.POLAR_STEPS` steps over [0, pi/2] (a normal is
+    kept in the upper half-sphere), the azimuth on ``AZIMUTH_STEPS`` over [0, 2 pi)."""
+    polar = (codes // AZIMUTH_STEPS).astype(np.float64) * (0.5 * math.pi / (POLAR_STEPS - 1))
+    azimuth = (codes % AZIMUTH_STEPS).astype(np.float64) * (2.0 * math.pi / AZIMUTH_STEPS)
+    return np.column_stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)])
+
+
+def normal_codes(normals: FloatArray) -> NDArray[np.uint8]:
+    """The version-6 direction codes of unit normals (flipped into the upper half-sphere)."""
+    normals = np.where((normals[:, 2] < 0.0)[:, None], -normals, normals)
+    polar = np.round(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)) / (0.5 * math.pi) * (POLAR_STEPS - 1))
+    azimuth = np.round(np.arctan2(normals[:, 1], normals[:, 0]) / (2.0 * math.pi) * AZIMUTH_STEPS) % AZIMUTH_STEPS
+    return (polar * AZIMUTH_STEPS + np.where(polar > 0, azimuth, 0)).astype(np.uint8)
+
+
+def geometry(codes: PatchCodes | PatchCodesV5, lo: NDArray[np.int64], shape: tuple[int, int, int],
+             resolution: float, extent: float = EXTENT) -> PatchGeometry:
     """The floats a map answers with, from its codes alone (so a file read back answers the same)."""
+    if isinstance(codes, PatchCodesV5):
+        return _geometry_v5(codes, lo, shape, resolution)
+    root = plane_roots(codes.keys, codes.refs, shape)
+    normals = normal_of(codes.normals[root])
+    middle = key_corners(codes.keys, lo, shape, resolution) + 0.5 * resolution
+    on_plane = middle[root] + ((codes.offsets[root].astype(np.float64) - 128.0)
+                               * (resolution / OFFSET_STEPS))[:, None] * normals
+    # A merged cell's patch is its root's plane through this cell: the cell's middle moved
+    # onto that plane along the normal.
+    centres = np.where((codes.refs == 0)[:, None], on_plane,
+                       middle - np.sum((middle - on_plane) * normals, axis=1, keepdims=True) * normals)
+    u, v = _frame(normals)
+    return PatchGeometry(centres, normals, u, v, np.full((len(codes), 2), extent * resolution),
+                         codes.thickness.astype(np.float64) * 0.001, codes.trust.astype(np.float64) / 255.0)
+
+
+def ref_steps(shape: tuple[int, int, int]) -> NDArray[np.int64]:
+    """Key differences of a patch's reference codes: 0 its own plane, 1-3 the plane of the
+    cell before it along z, y, x."""
+    return np.array([0, 1, shape[2], shape[1] * shape[2]], dtype=np.int64)
+
+
+def plane_roots(keys: NDArray[np.int64], refs: NDArray[np.uint8], shape: tuple[int, int, int]) -> NDArray[np.intp]:
+    """The index of the patch whose plane each patch takes (itself, or by its reference the
+    root of the neighbour before it, :func:`ref_steps`); ``refs`` checked by the file's reader."""
+    parent = np.arange(keys.size)
+    linked = np.flatnonzero(refs > 0)
+    parent[linked] = np.searchsorted(keys, keys[linked] - ref_steps(shape)[refs[linked]])
+    while True:  # pointer jumping: every parent has a smaller key, so this ends
+        jumped = parent[parent]
+        if np.array_equal(jumped, parent):
+            return parent
+        parent = jumped
+
+
+def _geometry_v5(codes: PatchCodesV5, lo: NDArray[np.int64], shape: tuple[int, int, int],
+                 resolution: float) -> PatchGeometry:
     centres = key_corners(codes.keys, lo, shape, resolution) + (codes.offsets.astype(np.float64) + 0.5) * (
         resolution / 256.0)
     normals = _normal_of(codes.normals)
@@ -110,7 +188,7 @@ def geometry(codes: PatchCodes, lo: NDArray[np.int64], shape: tuple[int, int, in
 
 
 def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int64], shape: tuple[int, int, int],
-                resolution: float, flat: float | None = None, level: int = 0
+                resolution: float, flat: float | None = None, min_returns: int = MIN_RETURNS[0]
                 ) -> tuple[PatchCodes, NDArray[np.bool_], NDArray[np.int64]]:
     """One plane per cell holding returns, from their second moments, quantised (trust 1 for now).
 
@@ -118,8 +196,8 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     with fewer than :data:`MIN_PLANE_POINTS` returns (a surface seen face on). With ``flat``
     (metres), only the cells whose returns lie within that RMS distance of their plane, and
     hold at least :data:`MIN_FLAT_POINTS`, get a patch (a coarse level: the rest is fitted
-    finer; ``level`` l: the centre is kept on ``2 ** l`` times as many steps, the same
-    distance as on level 0). Returns the patches, which returns they took, and how many each took.
+    finer); without, the cells of at least ``min_returns`` returns. Returns the patches,
+    which returns they took, and how many each took.
     """
     keys = cell_keys(returns, lo, shape, resolution)
     order = np.argsort(keys, kind="stable")
@@ -135,58 +213,123 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     values, vectors = np.linalg.eigh(covariance)  # ascending
     values = np.maximum(values, 0.0)
     normals = vectors[:, :, 0]
-    axis = vectors[:, :, 2]
     few = counts < MIN_PLANE_POINTS
     if few.any():
         seen = np.add.reduceat(directions, starts, axis=0)[few]
         seen /= np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-12)
         normals[few] = seen
-    normals = np.where((normals[:, 2] < 0.0)[:, None], -normals, normals)
-    normal_codes = np.column_stack([
-        _snap(np.arccos(np.clip(normals[:, 2], -1.0, 1.0)) / (0.5 * math.pi), LEVELS["polar"], closed=True),
-        _snap((np.arctan2(normals[:, 1], normals[:, 0]) % (2.0 * math.pi)) / (2.0 * math.pi), LEVELS["azimuth"])])
-    quantised = _normal_of(normal_codes)
-    a, b = _frame(quantised)
-    axis = axis - np.sum(axis * quantised, axis=1, keepdims=True) * quantised
-    axis_codes = _snap((np.arctan2(np.sum(axis * b, axis=1), np.sum(axis * a, axis=1)) % math.pi) / math.pi,
-                       LEVELS["axis"])
-    steps = min(LEVELS["offset"] << level, 256)
-    offset_step = 256 // steps
-    offsets = (np.clip(np.floor(mean / resolution * steps), 0, steps - 1) * offset_step
-               + offset_step // 2).astype(np.uint8)
-    # Extents and thickness are measured from the centre and axes as the file holds them, so
-    # that the coarse codes still cover the returns.
-    centre = (offsets.astype(np.float64) + 0.5) * (resolution / 256.0)
-    along = np.cos(axis_codes * (math.pi / ANGLE_STEPS))[:, None] * a + np.sin(
-        axis_codes * (math.pi / ANGLE_STEPS))[:, None] * b
-    across = np.cross(quantised, along)
-    centred = local - np.repeat(centre, counts, axis=0)
-
-    def farthest(direction: FloatArray) -> FloatArray:
-        return np.maximum.reduceat(np.abs(np.sum(centred * np.repeat(direction, counts, axis=0), axis=1)), starts)
-
-    # The farthest return along each in-plane axis, not a multiple of the spread: a square's
-    # eigen-axes may lie along its diagonals.
-    extents = np.column_stack([farthest(along), farthest(across)])
-    extents = np.clip(np.maximum(extents, MIN_EXTENT * resolution), 0.0, resolution)
-    extent_step = 256 // LEVELS["extent"]
-    extent_codes = np.clip(np.ceil(extents / resolution * 255.0 / extent_step) * extent_step, extent_step,
-                           255).astype(np.uint8)
+    # Flatness is judged about the returns' own plane, before rounding.
+    keep = (counts >= min_returns) if flat is None else (
+        (np.sqrt(values[:, 0]) <= flat) & (counts >= max(MIN_FLAT_POINTS, min_returns)))
+    corner = corner[keep]
+    world_mean = corner + mean[keep]
+    world_outer = covariance[keep] + world_mean[:, :, None] * world_mean[:, None, :]
+    refs, plane_codes, plane_points = merge_planes(cells[keep], counts[keep], world_mean, world_outer, normals[keep],
+                                                   shape)
+    quantised = normal_of(plane_codes)
+    middle = corner + 0.5 * resolution
+    explicit = refs == 0
+    offsets = np.where(explicit, np.clip(np.round(np.sum((plane_points - middle) * quantised, axis=1)
+                                                  / resolution * OFFSET_STEPS) + 128, 1, 255), 0).astype(np.uint8)
+    codes = PatchCodes(cells[keep].astype(np.int64), refs, np.where(explicit, plane_codes, 0).astype(np.uint8),
+                       offsets, np.zeros(int(keep.sum()), dtype=np.uint8),
+                       np.full(int(keep.sum()), 255, dtype=np.uint8))
     # Half-thickness: the RMS distance of the returns from the stored plane (one sigma, not
     # two: on seed 0's split of the bench, free points just before a return then rank lower).
-    depth = np.sum(centred * np.repeat(quantised, counts, axis=0), axis=1)
-    rms = np.sqrt(np.add.reduceat(depth * depth, starts) / n)
-    thickness = np.maximum(np.where(few, np.abs(np.add.reduceat(depth, starts) / n), rms), MIN_THICKNESS)
-    table = np.asarray(THICKNESS_MM)
-    thickness_codes = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
-    # Flatness is judged about the returns' own plane, before rounding.
-    keep = np.ones(cells.size, dtype=bool) if flat is None else (
-        (np.sqrt(values[:, 0]) <= flat) & (counts >= MIN_FLAT_POINTS))
+    g = geometry(codes, lo, shape, resolution)
+    kept_counts = counts[keep]
     taken = np.zeros(returns.shape[0], dtype=bool)
     taken[order] = np.repeat(keep, counts)
-    return (PatchCodes(cells[keep].astype(np.int64), offsets[keep], normal_codes[keep], axis_codes[keep],
-                       extent_codes[keep], thickness_codes[keep], np.full(int(keep.sum()), 255, dtype=np.uint8)),
-            taken, counts[keep].astype(np.int64))
+    mine = points[np.repeat(keep, counts)]
+    depth = np.sum((mine - np.repeat(g.centres, kept_counts, axis=0)) * np.repeat(g.normals, kept_counts, axis=0),
+                   axis=1)
+    kept_starts = np.r_[0, np.cumsum(kept_counts)[:-1]] if kept_counts.size else np.zeros(0, dtype=np.int64)
+    few_kept = kept_counts < MIN_PLANE_POINTS
+    if kept_counts.size:
+        rms = np.sqrt(np.add.reduceat(depth * depth, kept_starts) / kept_counts)
+        thickness = np.maximum(np.where(few_kept, np.abs(np.add.reduceat(depth, kept_starts) / kept_counts), rms),
+                               MIN_THICKNESS)
+        table = np.asarray(THICKNESS_MM)
+        codes.thickness = table[np.minimum(np.searchsorted(table, thickness * 1000.0), table.size - 1)].astype(np.uint8)
+    return codes, taken, kept_counts.astype(np.int64)
+
+
+def fewest_returns(returns: FloatArray, resolution: float) -> int:
+    """The fewest returns a finest-level cell needs for a patch (:data:`MIN_RETURNS_SHARE`)."""
+    if not returns.shape[0]:
+        return MIN_RETURNS[0]
+    cells = sorted_unique(index_keys(np.floor(returns / resolution).astype(np.int64) - np.floor(
+        returns.min(axis=0) / resolution).astype(np.int64), np.zeros(3, dtype=np.int64), (1 << 20, 1 << 20, 1 << 20)))
+    mean = returns.shape[0] / max(cells.size, 1)
+    return int(np.clip(math.ceil(MIN_RETURNS_SHARE * mean), *MIN_RETURNS))
+
+
+def merge_planes(cells: NDArray[np.int64], counts: NDArray[np.int64], means: FloatArray, outers: FloatArray,
+                 normals: FloatArray, shape: tuple[int, int, int]
+                 ) -> tuple[NDArray[np.uint8], NDArray[np.uint8], FloatArray]:
+    """One plane over neighbouring cells whose returns lie on it: each cell's reference code
+    (:func:`ref_steps`; 0 where it keeps its own plane), each cell's plane's direction code
+    and a point on that plane.
+
+    Face neighbours whose own planes have the same direction code and lie within
+    :data:`MERGE_DISTANCE` of each other are joined; each group's plane is fitted to all its
+    returns (their summed second moments); a cell whose mean lies farther than
+    :data:`MERGE_DISTANCE` from it keeps its own. A grouped cell refers to a grouped neighbour
+    before it in key order where it has one, so that its plane costs the file a few bits.
+    """
+    size = cells.size
+    if size == 0:
+        return np.zeros(0, dtype=np.uint8), np.zeros(0, dtype=np.uint8), np.zeros((0, 3))
+    own = normal_codes(normals)
+    own_normal = normal_of(own)
+    label = np.arange(size)
+    steps = ref_steps(shape)
+    wrap = [np.zeros(size, dtype=bool), cells % shape[2] == 0, (cells // shape[2]) % shape[1] == 0,
+            cells // (shape[1] * shape[2]) == 0]
+    before = np.full((4, size), -1, dtype=np.int64)
+    for ref in (1, 2, 3):
+        at = np.clip(np.searchsorted(cells, cells - steps[ref]), 0, max(size - 1, 0))
+        there = (~wrap[ref]) & (cells[at] == cells - steps[ref]) if size else np.zeros(0, dtype=bool)
+        near = there & (np.abs(np.sum(normals * normals[at], axis=1)) >= MERGE_COSINE) & (
+            np.abs(np.sum((means - means[at]) * own_normal, axis=1)) <= MERGE_DISTANCE)
+        before[ref] = np.where(near, at, -1)
+    pairs = [(np.flatnonzero(before[ref] >= 0), before[ref][before[ref] >= 0]) for ref in (1, 2, 3)]
+    a = np.concatenate([p for p, _ in pairs]) if size else np.zeros(0, dtype=np.int64)
+    b = np.concatenate([q for _, q in pairs]) if size else np.zeros(0, dtype=np.int64)
+    while a.size:  # connected groups: the smallest index of each, spread along the links
+        lowest = np.minimum(label[a], label[b])
+        changed = (label[a] != lowest) | (label[b] != lowest)
+        if not changed.any():
+            break
+        np.minimum.at(label, a, lowest)
+        np.minimum.at(label, b, lowest)
+        label = label[label]
+    group_size = np.bincount(label, minlength=size)
+    n = counts.astype(np.float64)
+    total = np.bincount(label, weights=n, minlength=size)
+    weight = np.maximum(total, 1.0)
+    centroid = np.column_stack([np.bincount(label, weights=n * means[:, k], minlength=size) / weight
+                                for k in range(3)])
+    second = np.stack([np.column_stack([np.bincount(label, weights=n * outers[:, r, c], minlength=size) / weight
+                                        for c in range(3)]) for r in range(3)], axis=1)
+    grouped = group_size[label] > 1
+    codes, points = own.copy(), means.copy()
+    if grouped.any():
+        roots = np.unique(label[grouped])
+        _, vectors = np.linalg.eigh(second[roots] - centroid[roots][:, :, None] * centroid[roots][:, None, :])
+        group_code = np.zeros(size, dtype=np.uint8)
+        group_code[roots] = normal_codes(vectors[:, :, 0])
+        normal = normal_of(group_code[label])
+        fits = grouped & (np.abs(np.sum((means - centroid[label]) * normal, axis=1)) <= MERGE_DISTANCE)
+        codes = np.where(fits, group_code[label], own).astype(np.uint8)
+        points = np.where(fits[:, None], centroid[label], means)
+        grouped = fits
+    refs = np.zeros(size, dtype=np.uint8)
+    for ref in (3, 2, 1):  # the last written wins: z before y before x
+        at = before[ref]
+        ok = grouped & (at >= 0) & grouped[np.maximum(at, 0)] & (label[np.maximum(at, 0)] == label)
+        refs[ok] = ref
+    return refs, codes.astype(np.uint8), points
 
 
 def concatenate(parts: list[PatchGeometry]) -> PatchGeometry:
@@ -204,9 +347,9 @@ def _snap(fraction: FloatArray, levels: int, closed: bool = False) -> NDArray[np
 
 
 def trust_codes(trust: FloatArray) -> NDArray[np.uint8]:
-    """Byte codes of trusts in [0, 1] on :data:`LEVELS` ``["trust"]`` steps, never 0."""
-    step = 255 // (LEVELS["trust"] - 1)
-    return np.clip(np.round(trust * (LEVELS["trust"] - 1)) * step, step, 255).astype(np.uint8)
+    """Byte codes of trusts in [0, 1] on :data:`TRUST_LEVELS` steps, never 0."""
+    step = 255 // (TRUST_LEVELS - 1)
+    return np.clip(np.round(trust * (TRUST_LEVELS - 1)) * step, step, 255).astype(np.uint8)
 
 
 def sorted_unique(keys: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -214,6 +357,22 @@ def sorted_unique(keys: NDArray[np.int64]) -> NDArray[np.int64]:
     millions of cell keys a run's rays cross."""
     ordered = np.sort(keys)
     return ordered[np.r_[True, ordered[1:] != ordered[:-1]]] if ordered.size else ordered
+
+
+def counted_unique(keys: NDArray[np.int64], weights: NDArray[np.int64] | None = None
+                   ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The distinct keys, sorted, and how many times (or the summed ``weights``) each occurs
+    (by a sort, as :func:`sorted_unique`)."""
+    if weights is None:  # a plain sort is several times faster than an argsort
+        ordered = np.sort(keys)
+        starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]]) if ordered.size else ordered[:0]
+        return ordered[starts], np.diff(np.r_[starts, ordered.size]).astype(np.int64)
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    if not ordered.size:
+        return ordered, np.zeros(0, dtype=np.int64)
+    starts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
+    return ordered[starts], np.add.reduceat(weights[order], starts)
 
 
 def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
@@ -240,23 +399,25 @@ def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
 
 def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_],
                              levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[int, int, int],
-                             resolution: float, margin: float) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
+                             resolution: float, margin: float, extent: float = EXTENT
+                             ) -> tuple[NDArray[np.int64], NDArray[np.int64], list[NDArray[np.int64]]]:
     """The sorted keys of the cells the rays crossed (a return's ray stops ``margin`` short of
-    it; a free-only ray is free to its end) and, per level and patch, how many rays went
-    through its slab (level ``l``'s cells are ``2 ** l`` times the resolution)."""
+    it; a free-only ray is free to its end), how many of the walk's points (every half cell
+    along the rays) fell in each, and, per level and patch, how many rays went through its
+    slab (level ``l``'s cells are ``2 ** l`` times the resolution)."""
     step = 0.5 * resolution
     length = np.linalg.norm(ends - origins, axis=1)
     free_length = np.where(hits, length - margin, length)
     boxes = [level_box(lo, shape, level) for level in range(len(levels))]
-    shapes = [geometry(codes, box[0], box[1], resolution * (1 << level))
+    shapes = [geometry(codes, box[0], box[1], resolution * (1 << level), extent)
               for level, (codes, box) in enumerate(zip(levels, boxes))]
     crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
-    free: list[NDArray[np.int64]] = []
+    free: list[tuple[NDArray[np.int64], NDArray[np.int64]]] = []
     for ray, t, point, after in _walk(origins, ends, free_length, step):
         # Cell coordinates once; a level's are the same shifted (floor of a floor).
         ijk = np.floor(point / resolution).astype(np.int64)
         keys = index_keys(ijk, lo, shape)
-        free.append(sorted_unique(keys[keys >= 0]))
+        free.append(counted_unique(keys[keys >= 0]))
         # A crossing is counted only where the next point is still short of the ray's return.
         short = t + step <= free_length[ray]
         for level, (codes, box, g) in enumerate(zip(levels, boxes, shapes)):
@@ -276,9 +437,11 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
             inside = ((np.abs(np.sum(x * g.u[q], axis=1)) <= g.extents[q, 0])
                       & (np.abs(np.sum(x * g.v[q], axis=1)) <= g.extents[q, 1]))
             crossings[level] += np.bincount(q[inside], minlength=len(codes))
-    keys = sorted_unique(np.concatenate(free)) if free else np.zeros(0, dtype=np.int64)
-    return keys, crossings
+    if not free:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), crossings
+    keys, counts = counted_unique(np.concatenate([k for k, _ in free]), np.concatenate([c for _, c in free]))
+    return keys, counts, crossings
 
 
-__all__ = ["LEVELS", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
+__all__ = ["LEVELS", "fewest_returns", "PatchCodes", "PatchGeometry", "cell_keys", "concatenate", "fit_patches",
            "free_cells_and_crossings", "geometry", "index_keys", "key_corners", "level_box", "trust_codes"]

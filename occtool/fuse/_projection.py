@@ -39,6 +39,12 @@ GROUND_WINDOW = 0.3
 #: seed-0 split (bench/heldout3d.py) it took the held-out returns 0.6-2 m up that land on
 #: free cells from 1.5 % to 0.2 % (0.3-0.6 m: 4.3 to 0.5 %).
 FREE_RIM = 0.1
+#: A patch in the band whose trust reaches this (more of the rays reaching it returned than
+#: passed) is not drawn occupied below the occupied level, but the cells under it and within
+#: :data:`FREE_RIM` are never free: the free space is kept in cells four times the patches'
+#: (:data:`occtool.fuse._world3d.FREE_SHIFT`), so a column can be crossed beside an obstacle
+#: whose edge cells' patches were crossed beside it too.
+BLOCKS_FREE = 0.5
 #: Most raster cells drawn (memory: a few bytes each).
 MAX_CELLS = 50_000_000
 #: Raster cells filled at once, and patch samples drawn at once (memory, not speed).
@@ -161,17 +167,16 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     if tile is None:
         tile = max(4.0 * world.resolution, 1.0)
     ground = TileGround(world, places, sensor_height, tile)
-    # Free: the columns of the map's cells whose band cells were all crossed.
-    r = world.resolution
-    shape = world.shape
-    keys = world.free_keys
+    # Free: the columns of the finest crossed cells known (the build's, where the map was
+    # built here) whose band cells were all crossed.
+    free_lo, shape, r, keys = world.band_free
     i, rest = np.divmod(keys, shape[1] * shape[2])
     j, k = np.divmod(rest, shape[2])
     column_xy = (np.column_stack([np.arange(shape[0] * shape[1]) // shape[1],
-                                  np.arange(shape[0] * shape[1]) % shape[1]]) + world.lo[:2] + 0.5) * r
+                                  np.arange(shape[0] * shape[1]) % shape[1]]) + free_lo[:2] + 0.5) * r
     column_ground = ground(column_xy)
-    low = np.floor((column_ground + ground_clearance) / r).astype(np.int64) - world.lo[2]
-    high = np.floor((column_ground + body_height) / r).astype(np.int64) - world.lo[2]
+    low = np.floor((column_ground + ground_clearance) / r).astype(np.int64) - free_lo[2]
+    high = np.floor((column_ground + body_height) / r).astype(np.int64) - free_lo[2]
     column = i * shape[1] + j
     in_band = (k >= low[column]) & (k <= high[column])
     seen = np.bincount(column[in_band], minlength=shape[0] * shape[1])
@@ -182,11 +187,11 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
     g = world.geometry
     reach = np.sqrt(np.sum(g.extents ** 2, axis=1)) + g.thickness
     above = g.centres[:, 2] - ground(g.centres[:, :2])
-    members = np.flatnonzero(~ground.ground_patch & (g.trust >= RASTER_OCCUPIED)
+    members = np.flatnonzero(~ground.ground_patch & (g.trust >= BLOCKS_FREE)
                              & (above + reach >= ground_clearance) & (above - reach <= body_height))
     # The raster covers what the band holds (a lidar's rays reach far above it): the columns
     # whose band was seen, the obstacles in it and the robot's footprint.
-    seen_ij = np.column_stack(np.divmod(np.flatnonzero(band_seen), shape[1])) + world.lo[:2]
+    seen_ij = np.column_stack(np.divmod(np.flatnonzero(band_seen), shape[1])) + free_lo[:2]
     corners = [seen_ij * r, (seen_ij + 1) * r, g.centres[members, :2] - reach[members, None],
                g.centres[members, :2] + reach[members, None], places[:, :2] - radius, places[:, :2] + radius]
     every = np.concatenate([c.reshape(-1, 2) for c in corners])
@@ -198,8 +203,8 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         raise InputError(f"a {resolution} m raster of the map needs {nx}x{ny} cells: use a coarser resolution")
     # A raster cell's map column is separable: its x picks i, its y picks j. Rows are
     # filled in strips (memory of a strip, not of the raster, beyond the output itself).
-    ci = np.floor((origin[0] + (np.arange(nx) + 0.5) * resolution) / r).astype(np.int64) - world.lo[0]
-    cj = np.floor((origin[1] + (np.arange(ny) + 0.5) * resolution) / r).astype(np.int64) - world.lo[1]
+    ci = np.floor((origin[0] + (np.arange(nx) + 0.5) * resolution) / r).astype(np.int64) - free_lo[0]
+    cj = np.floor((origin[1] + (np.arange(ny) + 0.5) * resolution) / r).astype(np.int64) - free_lo[1]
     ci_in, cj_in = (ci >= 0) & (ci < shape[0]), (cj >= 0) & (cj < shape[1])
     ci, cj = np.clip(ci, 0, shape[0] - 1), np.clip(cj, 0, shape[1] - 1)
     cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
@@ -239,9 +244,28 @@ def project_band(world: Any, positions: ArrayLike, *, sensor_height: float, body
         ok = (height >= ground_clearance) & (height <= body_height) & (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
         flat = row[ok] * nx + col[ok]
         near_surface[flat] = True
-        cells[flat] = OCCUPIED
         explored[flat] = True
+        solid = g.trust[index[ok]] >= RASTER_OCCUPIED
+        cells[flat[solid]] = OCCUPIED
         np.maximum.at(probability, flat, g.trust[index[ok]].astype(np.float32))
+    bare = getattr(world, "bare_points", None)
+    if bare is not None and len(bare):
+        # The returns no patch took (their cells held too few) still mark something there:
+        # the footprint of each map cell holding one inside the band is not free (nor,
+        # through the rim, its neighbours). The build's rays are in the map's own frame.
+        inside = (bare[:, 2] - ground(bare[:, :2]) >= ground_clearance) & (
+            bare[:, 2] - ground(bare[:, :2]) <= body_height)
+        r = world.resolution
+        cells_xy = np.unique(np.floor(bare[inside, :2] / r).astype(np.int64), axis=0)
+        steps = np.minimum(np.arange(int(math.ceil(r / spacing)) + 1) * spacing, r * (1.0 - 1e-9))
+        du, dv = (a.reshape(-1) for a in np.meshgrid(steps, steps, indexing="ij"))
+        for part in np.array_split(cells_xy, cells_xy.shape[0] * du.size // SAMPLES_AT_ONCE + 1):
+            xy = (np.repeat(part * r, du.size, axis=0) + np.column_stack([np.tile(du, len(part)),
+                                                                           np.tile(dv, len(part))]))
+            col = np.floor((xy[:, 0] - origin[0]) / resolution).astype(np.int64)
+            row = np.floor((xy[:, 1] - origin[1]) / resolution).astype(np.int64)
+            ok = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+            near_surface[row[ok] * nx + col[ok]] = True
     if near_surface.any():
         from scipy import ndimage  # lazy: scipy's import is slow
 
