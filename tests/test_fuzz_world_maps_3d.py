@@ -1,4 +1,4 @@
-"""Damage to a 3D ``world.occmap`` (version 5): flipped and cut bytes, and header fields and
+"""Damage to a 3D ``world.occmap`` (version 6): flipped and cut bytes, and header fields and
 array bytes changed under a valid checksum, are a one-line :class:`InputError` or a map that
 answers in [0, 1], never another exception -- in :func:`load_map` and in ``occtool query``."""
 

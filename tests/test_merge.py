@@ -175,7 +175,7 @@ def test_bad_input_is_one_line_and_writes_nothing(robots: list[WorldMap], tmp_pa
         directions = np.random.default_rng(0).normal(size=(800, 3))
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
         build_world_map_3d(np.zeros((800, 3)), 2.0 * directions, resolution=0.25).save(other)
-        wanted = "a 3D world map (occmap version 5); occtool merges 2D world maps"
+        wanted = "a 3D world map (occmap version 5 or 6); occtool merges 2D world maps"
     else:
         robots[1].save(other)
         args += {"bad transform": ["--transform", str(other), "1,2,east"],

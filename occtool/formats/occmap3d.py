@@ -452,7 +452,7 @@ def _check_refs(columns: dict[str, np.ndarray], counts: list[int], planes: list[
 
 
 def read_map3d(path: str | os.PathLike[str]) -> Map3DArrays:
-    """Read a version-5 ``.occmap`` file: a regular file of at most
+    """Read a 3D ``.occmap`` file (version 5 or 6): a regular file of at most
     :data:`occtool.limits.MAX_MAP_BYTES`, checked before it is read whole."""
     from occtool.limits import MAX_MAP_BYTES
 

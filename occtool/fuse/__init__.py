@@ -54,7 +54,7 @@ Below it, and below :mod:`occtool.formats` which writes its files: :mod:`occtool
 (what a position observed: reach and first obstacle per pan bin, returns; the
 :class:`Observation` a model file keeps) and :mod:`occtool.raster` (:class:`Raster` and the
 Nav2 pixel values). :mod:`occtool.formats.occmap` reads and writes the ``.occmap`` file's
-numbers; :func:`load_map` makes a :class:`WorldMap` of them (a :class:`WorldMap3D` of a version-5 file).
+numbers; :func:`load_map` makes a :class:`WorldMap` of them (a :class:`WorldMap3D` of a version-5 or -6 file).
 
 A :class:`FusedMap` is the run as its local models saw it (a megabyte and more for a
 building); :func:`build_world_map` refits it into a :class:`WorldMap` (walls as MIN nodes

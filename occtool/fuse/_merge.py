@@ -296,7 +296,7 @@ def _assemble(codes: _Codes, positions: NDArray[np.int64], region: Any, settings
 
 def _load(path: Any) -> WorldMap:
     """:func:`occtool.fuse.load_map` of a file or of a folder's ``world.occmap`` (``occtool
-    map``'s output); a 3D map (version 5) is refused."""
+    map``'s output); a 3D map (version 5 or 6) is refused."""
     import os
 
     from occtool.fuse._load import load_map
@@ -310,7 +310,7 @@ def _load(path: Any) -> WorldMap:
 
 
 #: Why a 3D map is refused.
-_NOT_2D = "a 3D world map (occmap version 5); occtool merges 2D world maps (versions 1-4)"
+_NOT_2D = "a 3D world map (occmap version 5 or 6); occtool merges 2D world maps (versions 1-4)"
 
 
 def merge_files(paths: Sequence[Any], output: Any, transforms: Sequence[Transform | None] | None = None, *,

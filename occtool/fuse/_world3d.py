@@ -381,14 +381,14 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
 
 
 def load_map_3d(path: str | os.PathLike[str]) -> WorldMap3D:
-    """Read a version-5 ``.occmap`` (:mod:`occtool.formats.occmap3d`)."""
+    """Read a 3D ``.occmap`` (version 5 or 6, :mod:`occtool.formats.occmap3d`)."""
     from occtool.formats import occmap3d
 
     return from_arrays(occmap3d.read_map3d(path))
 
 
 def from_arrays(arrays: Any) -> WorldMap3D:
-    """The map of a version-5 file's numbers (:class:`occtool.formats.occmap3d.Map3DArrays`)."""
+    """The map of a 3D file's numbers (:class:`occtool.formats.occmap3d.Map3DArrays`)."""
     from dataclasses import fields
 
     return WorldMap3D(**{item.name: getattr(arrays, item.name) for item in fields(arrays)})
