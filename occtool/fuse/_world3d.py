@@ -235,10 +235,12 @@ class WorldMap3D:
                 chunk = points[begin:begin + QUERY_CHUNK]
                 _, found = tree.query(chunk, k=k, distance_upper_bound=reach)
                 index = np.asarray(found).reshape(chunk.shape[0], k)
-                valid = index < members.size
-                ridge = self.ridge(chunk[:, None, :], members[np.where(valid, index, 0)])
-                best = np.where(valid, ridge, 0.0).max(axis=1)
-                out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], best)
+                # Only the neighbours within reach (a third or less of them on the bench's
+                # sequences) can rise above 0: the ridges of those, the rest stay 0.
+                row, column = np.nonzero(index < members.size)
+                ridge = np.zeros(index.shape)
+                ridge[row, column] = self.ridge(chunk[row], members[index[row, column]])
+                out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], ridge.max(axis=1))
         return out
 
     def __call__(self, xyz: ArrayLike) -> FloatArray:
