@@ -394,7 +394,7 @@ def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
         ray = np.repeat(np.arange(begin, end), c)
         k = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
         t = (k + 0.5) * step
-        x, y, z = (o[ray] + t * d[ray] for o, d in columns)
+        x, y, z = (np.take(o, ray) + t * np.take(d, ray) for o, d in columns)
         yield ray, t, (x, y, z)
         begin = end
 
@@ -424,11 +424,14 @@ class _PatchCells:
         return np.where(self.keys[at] == keys, at, -1)
 
 
-def _patch_cells(levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[int, int, int]) -> _PatchCells:
+def _patch_cells(levels: list[PatchCodes], shapes: list[PatchGeometry], lo: NDArray[np.int64],
+                 shape: tuple[int, int, int], resolution: float, reach: float) -> _PatchCells:
     """The fine cells each level's patches cover (a level-``l`` cell is ``8 ** l`` fine ones;
-    those outside the fine box hold no walk point and are left out)."""
+    those outside the fine box hold no walk point and are left out), and of a coarser level's
+    only those whose middle lies within ``reach`` and half a fine cell's diagonal of the
+    patch's plane: no point of the others is within ``reach`` of it."""
     fine_keys, level_of, patch_of = [], [], []
-    for level, codes in enumerate(levels):
+    for level, (codes, g) in enumerate(zip(levels, shapes)):
         if not len(codes):
             continue
         low, box = level_box(lo, shape, level)
@@ -437,9 +440,14 @@ def _patch_cells(levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[i
         corner = (np.column_stack([i, j, k]) + low) << level
         side = np.arange(1 << level)
         offsets = np.stack(np.meshgrid(side, side, side, indexing="ij"), axis=-1).reshape(-1, 3)
-        keys = index_keys((corner[:, None, :] + offsets[None, :, :]).reshape(-1, 3), lo, shape)
+        fine = (corner[:, None, :] + offsets[None, :, :]).reshape(-1, 3)
+        keys = index_keys(fine, lo, shape)
         patch = np.repeat(np.arange(len(codes)), offsets.shape[0])
         inside = keys >= 0
+        if level:
+            middle = (fine + 0.5) * resolution
+            apart = np.abs(np.sum((middle - g.centres[patch]) * g.normals[patch], axis=1))
+            inside &= apart <= (0.5 * math.sqrt(3.0) * resolution + reach) * (1.0 + 1e-6) + 1e-9
         fine_keys.append(keys[inside])
         level_of.append(np.full(int(inside.sum()), level, dtype=np.int64))
         patch_of.append(patch[inside])
@@ -482,7 +490,8 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     shapes = [geometry(codes, box[0], box[1], resolution * (1 << level), extent)
               for level, (codes, box) in enumerate(zip(levels, boxes))]
     crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
-    covered = _patch_cells(levels, lo, shape)
+    reach = step * (1.0 + 1e-6) + 1e-9
+    covered = _patch_cells(levels, shapes, lo, shape, resolution, reach)
     cells = int(shape[0]) * int(shape[1]) * int(shape[2])
     dense = np.zeros(cells, dtype=np.int64) if cells <= DENSE_CELLS else None
     free: list[tuple[NDArray[np.int64], NDArray[np.int64]]] = []
@@ -513,9 +522,13 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
             if not len(codes):
                 continue
             here = np.flatnonzero(index[:, level] >= 0)
+            d0 = np.sum((point[here] - g.centres[index[here, level]]) * g.normals[index[here, level]], axis=1)
+            # The next point is a step on: a point farther than that from the plane does not
+            # cross it (the bound has room for rounding), and the rest need not be looked at.
+            close = np.abs(d0) <= reach
+            here, d0 = here[close], d0[close]
             p = index[here, level]
             c, n = g.centres[p], g.normals[p]
-            d0 = np.sum((point[here] - c) * n, axis=1)
             d1 = np.sum((after[here] - c) * n, axis=1)
             through = (d0 * d1 < 0.0) & (np.minimum(np.abs(d0), np.abs(d1)) > 0.0)
             s = d0[through] / (d0[through] - d1[through])
