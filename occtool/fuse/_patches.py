@@ -491,6 +491,9 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
               for level, (codes, box) in enumerate(zip(levels, boxes))]
     crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
     reach = step * (1.0 + 1e-6) + 1e-9
+    direction_columns = [np.ascontiguousarray(direction[:, a]) for a in range(3)]
+    centres = [[np.ascontiguousarray(g.centres[:, a]) for a in range(3)] for g in shapes]
+    normals = [[np.ascontiguousarray(g.normals[:, a]) for a in range(3)] for g in shapes]
     covered = _patch_cells(levels, shapes, lo, shape, resolution, reach)
     cells = int(shape[0]) * int(shape[1]) * int(shape[2])
     dense = np.zeros(cells, dtype=np.int64) if cells <= DENSE_CELLS else None
@@ -515,26 +518,30 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
         rows = covered.rows(np.maximum(keys, 0))
         near = np.flatnonzero((rows >= 0) & (keys >= 0))
         near = near[t[near] + step <= free_length[ray[near]]]
-        point = np.column_stack([x[near], y[near], z[near]])
-        after = point + step * direction[ray[near]]
+        # One coordinate an array (the sums below in the order of a (K, 3) row's: x, y, z).
+        point = (x[near], y[near], z[near])
+        heading = [np.take(d, ray[near]) for d in direction_columns]
         index = covered.index[rows[near]]
-        for level, (codes, g) in enumerate(zip(levels, shapes)):
+        for level, (codes, g, centre, normal) in enumerate(zip(levels, shapes, centres, normals)):
             if not len(codes):
                 continue
             here = np.flatnonzero(index[:, level] >= 0)
-            d0 = np.sum((point[here] - g.centres[index[here, level]]) * g.normals[index[here, level]], axis=1)
+            p = index[here, level]
+            d0 = sum(((a[here] - np.take(c, p)) * np.take(m, p) for a, c, m in zip(point, centre, normal)),
+                     start=np.zeros(here.size))
             # The next point is a step on: a point farther than that from the plane does not
             # cross it (the bound has room for rounding), and the rest need not be looked at.
             close = np.abs(d0) <= reach
-            here, d0 = here[close], d0[close]
-            p = index[here, level]
-            c, n = g.centres[p], g.normals[p]
-            d1 = np.sum((after[here] - c) * n, axis=1)
+            here, d0, p = here[close], d0[close], p[close]
+            at = [a[here] for a in point]
+            after = [a + step * d[here] for a, d in zip(at, heading)]
+            d1 = sum(((a - np.take(c, p)) * np.take(m, p) for a, c, m in zip(after, centre, normal)),
+                     start=np.zeros(here.size))
             through = (d0 * d1 < 0.0) & (np.minimum(np.abs(d0), np.abs(d1)) > 0.0)
             s = d0[through] / (d0[through] - d1[through])
-            x0 = point[here][through]
-            xs = x0 + s[:, None] * (after[here][through] - x0) - c[through]
             q = p[through]
+            x0 = np.column_stack([a[through] for a in at])
+            xs = x0 + s[:, None] * (np.column_stack([a[through] for a in after]) - x0) - g.centres[q]
             inside = ((np.abs(np.sum(xs * g.u[q], axis=1)) <= g.extents[q, 0])
                       & (np.abs(np.sum(xs * g.v[q], axis=1)) <= g.extents[q, 1]))
             crossings[level] += np.bincount(q[inside], minlength=len(codes))
