@@ -217,7 +217,10 @@ class WorldMap3D:
             return out
         g = self.geometry
         if self._trees is None:
-            from scipy.spatial import cKDTree  # lazy: scipy's import is slow and only predict needs it
+            # occtool's own index answers as cKDTree does (but for which of exactly equal
+            # distances comes first), without scipy.spatial's import: 0.3-0.45 s of CPU a
+            # process, a sixth of a TUM cabinet's 3D map.
+            from occtool.neighbours import NeighbourIndex
 
             self._trees = []
             first = 0
@@ -228,7 +231,7 @@ class WorldMap3D:
                     # No ridge is above 0 farther from its centre than its half-diagonal plus a falloff.
                     reach = float(np.sqrt(np.sum(g.extents[members].max(axis=0) ** 2)
                                           + g.thickness[members].max() ** 2)) + max(self.falloff, self.edge_falloff)
-                    self._trees.append((cKDTree(g.centres[members]), members, reach))
+                    self._trees.append((NeighbourIndex(g.centres[members], reach), members, reach))
         for tree, members, reach in self._trees:
             k = min(NEIGHBOURS, members.size)
             for begin in range(0, points.shape[0], QUERY_CHUNK):
