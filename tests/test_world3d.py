@@ -231,3 +231,7 @@ def test_a_large_box_walks_to_the_same_map_as_a_small_one(room: WorldMap3D, monk
     assert np.array_equal(sparse.fine_free_keys, room.fine_free_keys)
     monkeypatch.setattr(_patches, "CHUNK_SAMPLES", 5_000)  # many walk chunks: the same sums
     assert build_world_map_3d(*_rays(), resolution=0.2).to_bytes() == room.to_bytes()
+    monkeypatch.setattr(_patches, "DENSE_CELLS", 1 << 22)  # dense tables, counts by a sort or a bincount
+    for chunks in (1, 1 << 10):
+        monkeypatch.setattr(_patches, "DENSE_COUNTS", chunks)
+        assert build_world_map_3d(*_rays(), resolution=0.2).to_bytes() == room.to_bytes()
