@@ -75,8 +75,10 @@ COARSE_LEVELS = 2
 #: RMS distance (metres) of a coarse cell's returns from their plane under which it is one
 #: patch: about the range noise of a Kinect at 3-4 m or a lidar's plus its registration.
 FLAT = 0.05
-#: Query points evaluated at once (memory of the ``(K, NEIGHBOURS, 3)`` differences).
-QUERY_CHUNK = 100_000
+#: Query points evaluated at once: their ``(K, NEIGHBOURS)`` temporaries stay within the
+#: caches (58k held-out points of the depth office: 0.12 s of CPU in chunks of 100k, 0.085 s
+#: in chunks of 16k; the same answers).
+QUERY_CHUNK = 1 << 14
 
 
 @dataclass(eq=False)
