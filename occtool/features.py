@@ -283,7 +283,12 @@ class Pose:
 class Position:
     """The features registered at one robot position, with the position's world pose.
 
-    ``pose`` is ``None`` when the log carries no poses.
+    ``pose`` is ``None`` when the log carries no poses. ``scan_origins`` ``(K, 3)`` and
+    ``scan_sizes`` ``(K,)``, when the position gathers scans taken at different poses
+    (:func:`occtool.io.positions.group_scans`): each scan's sensor in the position's frame and
+    its count of features, in the order of ``features`` (a 3D map starts each ray at its own
+    scan's sensor and holds scans out one by one); ``None``: every feature's sensor is the
+    position's.
     """
 
     index: int
@@ -291,6 +296,8 @@ class Position:
     pose: Pose | None = None
     stamp: float | None = None
     source: str = ""
+    scan_origins: FloatArray | None = None
+    scan_sizes: NDArray[np.int64] | None = None
 
 
 class Note(str):

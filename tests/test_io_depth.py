@@ -232,16 +232,16 @@ def test_occtool_map_takes_the_depth_folder_itself(tmp_path, office_frames, layo
     from click.testing import CliRunner
 
     from occtool.cli.main import cli
-    from occtool.fuse import WorldMap3D, load_map
+    from occtool.fuse import WorldMap, load_map
 
     frames, _ = office_frames
     world = np.linalg.inv(frames[0].camera_to_world) if layout == "3dmatch" else None
     folder = write_depth_folder(frames, tmp_path / layout, layout=layout, world=world)
     out = tmp_path / "map"
     result = CliRunner().invoke(cli, ["-q", "map", str(folder), "-o", str(out), "--depth-features", "500",
-                                      "--sensor-height", "1.0"])
+                                      "--sensor-height", "1.0", "--world", "2d"])
     assert result.exit_code == 0, result.output
-    assert isinstance(load_map(out / "world.occmap"), WorldMap3D)
+    assert isinstance(load_map(out / "world.occmap"), WorldMap)
     plain = tmp_path / "plain"
     plain.mkdir()
     result = CliRunner().invoke(cli, ["-q", "map", str(plain), "-o", str(tmp_path / "none")])

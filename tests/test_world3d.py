@@ -130,6 +130,32 @@ def test_a_range_log_maps_in_the_frame_of_its_poses() -> None:
     assert world.predict(probe)[0] > 0.8 and world.predict(probe)[2] == 0.5
 
 
+def test_scans_merged_into_one_position_keep_their_own_sensors() -> None:
+    # Four scans 0.07-0.2 m apart (within the position tolerance): one position, whose rays
+    # still start at each scan's sensor, and whose scans are held out one by one.
+    from occtool.fuse._log3d import rays_of_log
+    from occtool.io.positions import Scan, build_log
+
+    origins, ends, hits = _rays(1500)
+    scans = []
+    for k in range(4):
+        sensor = np.array([2.0 + 0.06 * k, 2.0 - 0.03 * k, 1.2 + 0.02 * k])
+        pose = Pose(*sensor, yaw=0.05 * k)
+        rows = slice(k * 1500, (k + 1) * 1500)
+        direction = ends[rows] - origins[rows]
+        local = (sensor + direction - pose.translation) @ pose.rotation
+        scans.append(Scan(local, np.where(hits[rows], 0.9, 0.0), pose))
+    merged = build_log(scans, source="scans")
+    apart = build_log(scans, source="scans", group_by="message")
+    assert len(merged.positions) == 1 and len(apart.positions) == 4
+    got, want = rays_of_log(merged), rays_of_log(apart)
+    for a, b in zip(got[:2], want[:2]):
+        np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_array_equal(got[3], want[3])
+    sensors = np.unique(np.round(got[0], 9), axis=0)
+    assert len(sensors) == 4
+
+
 def test_a_stored_frame_transform_is_applied_to_queries(room: WorldMap3D, tmp_path) -> None:
     """A map built in a levelled frame answers in the poses' frame through ``to_map``."""
     angle = np.radians(4.0)

@@ -1,9 +1,10 @@
-"""The 3D world map's cell size, chosen on the run's own positions (an inner held-out split).
+"""The 3D world map's cell size, chosen on the run's own scans (an inner held-out split).
 
 The best cell for a run depends on its sensor and scene: a depth camera a metre or two from
 the furniture wants small cells, a lidar whose returns lie 15 m away larger ones (a finer cell
 is crossed by fewer rays and stays unknown). :func:`choose_resolution` asks the data, as a
-reviewer tunes a baseline: it holds out blocks of consecutive positions, builds the map of
+reviewer tunes a baseline: it holds out blocks of consecutive scans (``groups``: the frames
+a position gathered, :func:`occtool.fuse._log3d.rays_of_log`), builds the map of
 the rest at each candidate cell size, scores it on the held-out rays (their returns occupied,
 points every :data:`FREE_STEP` along them free; ROC AUC), coarsest first, and refines only
 while a finer cell scores better by more than :data:`AUC_TOLERANCE`: a finer cell costs

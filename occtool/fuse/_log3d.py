@@ -44,13 +44,15 @@ def sensor_positions(log: Any) -> FloatArray:
 
 
 def rays_of_log(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.intp]]:
-    """Each feature of a :class:`~occtool.features.RangeLog` as a world-frame ray: origins (the
-    position's pose), end points (its sensor-centred robot-frame point turned by the yaw and
-    moved by the pose), hits (evidence above 0; 0 is a free-only ray) and the number of its
-    position in the log (0, 1, ...)."""
+    """Each feature of a :class:`~occtool.features.RangeLog` as a world-frame ray: origins (its
+    scan's sensor where the position gathers several scans, else the position's pose), end
+    points (its sensor-centred robot-frame point turned by the yaw and moved by the pose),
+    hits (evidence above 0; 0 is a free-only ray) and the number of its scan in the log (0, 1,
+    ...; a position's own number where it keeps no scans apart)."""
     from occtool.features import Pose
 
-    origins, ends, hits, counts = [], [], [], []
+    origins, ends, hits = [], [], []
+    sizes: list[int] = []
     # One position and no pose (a single scan): its own frame is the world's, as in 2D.
     alone = len(log.positions) == 1 and log.positions[0].pose is None
     for position in log.positions:
@@ -60,12 +62,20 @@ def rays_of_log(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], ND
         points = np.asarray(position.features.points, dtype=np.float64).reshape(-1, 3)
         pose = position.pose or Pose(0.0, 0.0, 0.0, 0.0)
         ends.append(points @ pose.rotation.T + pose.translation)
-        origins.append(np.broadcast_to(pose.translation, points.shape))
+        scans, scan_sizes = position.scan_origins, position.scan_sizes
+        if scans is not None and scan_sizes is not None and int(np.sum(scan_sizes)) == points.shape[0]:
+            # Merged scans: a ray from the first scan's sensor would cross space the camera's
+            # own ray did not (up to the position tolerance, 0.25 m, off).
+            origins.append(np.repeat(np.asarray(scans, dtype=np.float64), scan_sizes, axis=0) @ pose.rotation.T
+                           + pose.translation)
+            sizes.extend(int(size) for size in scan_sizes)
+        else:
+            origins.append(np.broadcast_to(pose.translation, points.shape))
+            sizes.append(points.shape[0])
         hits.append(np.asarray(position.features.evidence, dtype=np.float64).reshape(-1) > 0.0)
-        counts.append(points.shape[0])
     if not ends:
         raise InputError(f"{log.source or 'the log'}: no positions to map")
-    groups = np.repeat(np.arange(len(counts)), counts)
+    groups = np.repeat(np.arange(len(sizes)), sizes)
     return np.concatenate(origins), np.concatenate(ends), np.concatenate(hits), groups
 
 

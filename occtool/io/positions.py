@@ -289,25 +289,32 @@ def _merge_scans(group: list[Scan], index: int) -> tuple[Position | None, int]:
     reference = next((s.pose for s in group if s.pose is not None), None)
     parts_points = []
     parts_evidence = []
+    origins = []  # each scan's sensor in the reference's frame
     for scan in group:
         if scan.points.shape[0] == 0:
             continue
         points = np.asarray(scan.points, dtype=np.float64)
+        origin = np.zeros(3)
         if reference is not None and scan.pose is not None and scan.pose != reference:
-            rotation, translation = relative_transform(scan.pose, reference)
-            points = points @ rotation.T + translation
+            rotation, origin = relative_transform(scan.pose, reference)
+            points = points @ rotation.T + origin
         parts_points.append(points)
         parts_evidence.append(np.asarray(scan.evidence, dtype=np.float64))
+        origins.append(origin)
     if not parts_points:
         return None, 0
     points = np.concatenate(parts_points)
     evidence = np.concatenate(parts_evidence)
     keep = (np.abs(points) > 0.0).any(axis=1)
     dropped = int((~keep).sum())
+    sizes = np.array([part.shape[0] for part in parts_points], dtype=np.int64)
     if not keep.all():
         points, evidence = points[keep], evidence[keep]
+        sizes = np.bincount(np.repeat(np.arange(sizes.size), sizes)[keep], minlength=sizes.size).astype(np.int64)
     if not points.shape[0]:
         return None, dropped
+    # A 3D map starts each ray at its own scan's sensor and holds scans out one by one (Position).
+    scan_origins = np.array(origins) if len(origins) > 1 else None
     stamps = [s.stamp for s in group if s.stamp is not None]
     sources = sorted({s.source for s in group if s.source})
     return Position(
@@ -316,6 +323,8 @@ def _merge_scans(group: list[Scan], index: int) -> tuple[Position | None, int]:
         pose=reference,
         stamp=stamps[0] if stamps else None,
         source=", ".join(sources) if len(sources) <= 3 else f"{sources[0]} ... ({len(group)} scans)",
+        scan_origins=scan_origins,
+        scan_sizes=sizes if scan_origins is not None else None,
     ), dropped
 
 
