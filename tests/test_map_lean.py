@@ -105,3 +105,19 @@ def test_a_collection_is_dumped_as_json_dump_writes_it(both):
             json.dump(collection, expected, separators=(",", ":"))
             dump_collection(lazy[name], written)
             assert written.getvalue() == expected.getvalue(), name
+
+
+def test_a_consumed_log_is_used_up_as_it_is_fitted(tmp_path):
+    from occtool.fuse import fuse_log
+    from occtool.io import read_log
+
+    log_path = tmp_path / "room.log"
+    write_room_log(log_path, scans=6)
+    kept, used = read_log(log_path, **READ), read_log(log_path, **READ)
+    fused, models, report = fuse_log(kept, _estimator(), keyframe_share=0.0)
+    fused_used, models_used, report_used = fuse_log(used, _estimator(), keyframe_share=0.0, consume=True)
+    assert len(kept.positions) == 6 and used.positions == []
+    assert report.fitted == report_used.fitted and len(models) == len(models_used) == 6
+    np.testing.assert_array_equal(fused.returns, fused_used.returns)
+    np.testing.assert_array_equal(fused.reaches, fused_used.reaches)
+    assert [p.x for p in fused.poses] == [p.x for p in fused_used.poses]

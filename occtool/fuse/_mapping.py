@@ -26,7 +26,7 @@ from occtool.fuse._log3d import is_3d_log, map_log_3d, sensor_positions
 from occtool.fuse._memory import check_map_memory
 from occtool.fuse._outputs import _write_run_map, check_outputs
 from occtool.fuse._refit import build_world_map
-from occtool.fuse._run import RunMap, map_of_run
+from occtool.fuse._run import RunMap, map_of_run, place_navigation
 from occtool.limits import DEFAULT_MEMORY_LIMIT
 
 #: The kinds of world map :func:`map_log` writes.
@@ -134,12 +134,13 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         the workers): :func:`occtool.executor.make_executor`. The files are the same, byte
         for byte, wherever it ran.
     lean
-        Hold only what the files need, each part no longer than the map needs it: the
-        models go once their navigation maps are placed (:attr:`MapResult.models` is then
-        empty), every position's sightings once the world map is built (the report's
-        :attr:`~FuseReport.sightings` is ``None``), and the placed navigation maps keep no
-        per-height slices. The files are the same; a large run's memory is less (the
-        command line maps lean).
+        Hold only what the files need, each part no longer than the map needs it: a log
+        read here (for a 2D map) is used up as it is fitted (:func:`fuse_log`'s
+        ``consume``), the models go once their navigation maps are placed, before the world
+        map is built (:attr:`MapResult.models` is then empty), every position's sightings
+        once the world map is built (the report's :attr:`~FuseReport.sightings` is
+        ``None``), and the placed navigation maps keep no per-height slices. The files are
+        the same; a large run's memory is less (the command line maps lean).
 
     Raises
     ------
@@ -173,10 +174,18 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     three_d = world == "3d" or (world == "auto" and is_3d_log(log))
     check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d)
     with make_executor(jobs, scheduler) as executor:  # an unreachable scheduler is refused before any fit
+        # A log read here is used up as it is fitted when mapped lean (a 3D map reads it again).
         fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
                                          keyframe_share=keyframe_share, progress=progress,
-                                         heights_from_data=heights_from_data, executor=executor)
+                                         heights_from_data=heights_from_data, executor=executor,
+                                         consume=lean and not three_d and not isinstance(source, RangeLog))
         positions = list(zip(report.fitted, fused.poses, fused.stamps))
+        navigation = {"max_range": max_range, "threshold": threshold}
+        placed, navigation_seconds = None, None
+        if lean:
+            # The navigation maps first, so that the models go before the world map is built.
+            placed, navigation_seconds = place_navigation(models, positions, navigation=navigation,
+                                                          executor=executor, release_models=True)
         world3d, world2d, sensors = None, None, None
         started = time.perf_counter()
         if three_d:
@@ -193,11 +202,12 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         seconds = time.perf_counter() - started
         # The raster keeps its float32 occupancy only for a scale map, the one file drawn from
         # it: four bytes a cell a trinary map would hold for nothing.
-        run = map_of_run(fused, models, positions, resolution=resolution,
-                         navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
-                         world3d=world3d, sensor_positions=sensors, executor=executor,
-                         occupancy=nav2_mode == "scale", world=world2d, release_models=lean)
+        run = map_of_run(fused, models, positions, resolution=resolution, navigation=navigation,
+                         sightings=report.sightings, world3d=world3d, sensor_positions=sensors, executor=executor,
+                         occupancy=nav2_mode == "scale", world=world2d, release_models=lean, placed=placed)
     run.seconds["world_map"] = seconds
+    if navigation_seconds is not None:
+        run.seconds["navigation"] = navigation_seconds
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
              "skipped_positions": [index for index, _ in report.skipped],
              "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}

@@ -136,7 +136,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                robot_overrides: Mapping[str, float] | None = None, world3d: Any | None = None,
                sensor_positions: Any | None = None, executor: Any = None,
                occupancy: bool | None = None, world: WorldMap | None = None,
-               release_models: bool = False) -> RunMap:
+               release_models: bool = False, placed: list[PlacedMap] | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -181,8 +181,11 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         those maps without their per-height slices (no file holds them): what a large run
         holds a position while its raster is drawn and its files written
         (:func:`occtool.fuse.map_log` with ``lean``). The map is the same.
+    placed
+        The models' navigation maps placed already (:func:`place_navigation`; ``models``
+        are then not used and may be empty); ``None``: placed here.
     """
-    if len(models) != len(positions):
+    if placed is None and len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
     unknown = sorted(set(robot_overrides or {}) - {f.name for f in fields(Robot)})
     if unknown:
@@ -198,8 +201,12 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         robot = replace(robot, **(robot_overrides or {}))
     # The navigation maps first: the models (a large run's largest share per position) may
     # then go before the raster is drawn.
-    placed, seconds["navigation"] = _place_navigation(models, positions, navigation, robot_overrides, executor,
-                                                      release_models)
+    if placed is None:
+        placed, seconds["navigation"] = place_navigation(models, positions, navigation=navigation,
+                                                         robot_overrides=robot_overrides, executor=executor,
+                                                         release_models=release_models)
+    else:
+        seconds["navigation"] = 0.0
     started = time.perf_counter()
     if world3d is None:
         raster = the_world.rasterise(resolution, executor=executor, occupancy=occupancy)
@@ -222,10 +229,11 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     return RunMap(fused, the_world, raster, placed, region, obstacles, frontiers, seconds)
 
 
-def _place_navigation(models: list[Any], positions: list[tuple[int, Pose, float | None]],
-                      navigation: dict[str, Any] | None, robot_overrides: Mapping[str, float] | None,
-                      executor: Any, release_models: bool) -> tuple[list[PlacedMap], float]:
-    """Each model's navigation map placed at its position (:func:`map_of_run`), and the seconds it took."""
+def place_navigation(models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
+                     navigation: dict[str, Any] | None = None, robot_overrides: Mapping[str, float] | None = None,
+                     executor: Any = None, release_models: bool = False) -> tuple[list[PlacedMap], float]:
+    """Each model's navigation map placed at its position, as :func:`map_of_run` places them
+    (its keywords), and the seconds it took."""
     started = time.perf_counter()
     options = []
     for model in models:
@@ -248,4 +256,4 @@ def _place_navigation(models: list[Any], positions: list[tuple[int, Pose, float 
     return placed, time.perf_counter() - started
 
 
-__all__ = ["FRONTIER_MIN_LENGTH", "PlacedMap", "RunMap", "frontiers_of", "map_of_run"]
+__all__ = ["FRONTIER_MIN_LENGTH", "PlacedMap", "RunMap", "frontiers_of", "map_of_run", "place_navigation"]
