@@ -121,3 +121,23 @@ def test_a_consumed_log_is_used_up_as_it_is_fitted(tmp_path):
     np.testing.assert_array_equal(fused.returns, fused_used.returns)
     np.testing.assert_array_equal(fused.reaches, fused_used.reaches)
     assert [p.x for p in fused.poses] == [p.x for p in fused_used.poses]
+
+
+def test_a_lean_3d_map_is_drawn_for_the_models_robot(tmp_path):
+    """A 3D map's raster is its body band over the ground for the models' robot: mapped
+    lean, the models are gone by then and the fused map's robot (the same one) is used."""
+    rng = np.random.default_rng(4)
+    floor = np.column_stack([rng.uniform(0.3, 6.0, 3000), rng.uniform(-3, 3, 3000), rng.normal(-0.08, 0.005, 3000)])
+    walls = [np.column_stack([rng.uniform(0, 6, 600), np.full(600, side), rng.uniform(-0.08, 2.5, 600)])
+             for side in (-3.0, 3.0)]
+    scan = tmp_path / "scan.xyz"
+    np.savetxt(scan, np.vstack([floor, *walls]), fmt="%.4f")
+    robot = Robot(sensor_height=0.08, body_height=1.0)
+    full = map_log(scan, tmp_path / "full", estimator=OccupancyRegressor(pieces=8, robot=robot), register=False,
+                   world_resolution=0.2, mcap=False)
+    lean = map_log(scan, tmp_path / "lean", estimator=OccupancyRegressor(pieces=8, robot=robot), register=False,
+                   world_resolution=0.2, mcap=False, lean=True)
+    assert full.summary["world_map"]["kind"] == "3d" and lean.models == []
+    assert (full.run.raster.cells == 254).sum() > 1000
+    for name in ("world.occmap", "map.pgm", "navigation.geojson", "obstacles.geojson", "frontiers.geojson"):
+        assert (tmp_path / "full" / name).read_bytes() == (tmp_path / "lean" / name).read_bytes(), name

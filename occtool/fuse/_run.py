@@ -197,7 +197,8 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         seconds["world_map"] = time.perf_counter() - started
     else:
         the_world = world3d
-        robot = (navigation or {}).get("robot") or (models[0].robot_ if models else Robot())
+        # The models' robot (the fused map's: the one they were fitted for, when they are gone already).
+        robot = (navigation or {}).get("robot") or (models[0].robot_ if models else fused.robot)
         robot = replace(robot, **(robot_overrides or {}))
     # The navigation maps first: the models (a large run's largest share per position) may
     # then go before the raster is drawn.
