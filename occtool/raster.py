@@ -15,6 +15,55 @@ FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 RASTER_OCCUPIED, RASTER_FREE = 0.65, 0.35
 
 
+class PackedFlags:
+    """A ``(rows, cols)`` bool array kept as bits, eight cells a byte (:func:`numpy.packbits`
+    along each row): a large raster's explored flags (:attr:`Raster.explored`) in an eighth
+    of the memory of a bool array.
+
+    Read as numpy reads a bool array: ``flags[low:high]`` (rows, unpacked), ``flags[row, col]``
+    (cells), ``numpy.asarray(flags)`` and ``~flags`` (all of it, unpacked); written a band of rows at a time
+    (``flags[low:high] = rows``).
+    """
+
+    ndim = 2
+    dtype = np.dtype(bool)
+
+    def __init__(self, shape: tuple[int, int]) -> None:
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.bits = np.zeros((self.shape[0], -(-self.shape[1] // 8)), dtype=np.uint8)
+
+    @property
+    def size(self) -> int:
+        return self.shape[0] * self.shape[1]
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __setitem__(self, rows: slice, values: ArrayLike) -> None:
+        if not isinstance(rows, slice):
+            raise TypeError("packed flags are written a slice of whole rows at a time")
+        self.bits[rows] = np.packbits(np.asarray(values, dtype=bool), axis=1)
+
+    def __getitem__(self, key: object) -> NDArray[np.bool_]:
+        if isinstance(key, tuple) and len(key) == 2:
+            row, col = key
+            if isinstance(row, slice) or isinstance(col, slice):
+                return self[row][:, col] if isinstance(row, slice) else self[row][col]
+            col = np.asarray(col)
+            return ((self.bits[row, col >> 3] >> (7 - (col & 7))) & 1).astype(bool)
+        rows = self.bits[key]  # type: ignore[call-overload]
+        if rows.ndim == 1:
+            return np.unpackbits(rows, count=self.shape[1]).astype(bool)
+        return np.unpackbits(rows, axis=1, count=self.shape[1]).astype(bool)
+
+    def __invert__(self) -> NDArray[np.bool_]:
+        return ~self[:]
+
+    def __array__(self, dtype: object = None, copy: object = None) -> NDArray[np.bool_]:
+        whole = self[:]
+        return whole if dtype is None else whole.astype(dtype)  # type: ignore[call-overload]
+
+
 @dataclass
 class Raster:
     """A free / occupied / unknown grid in the world (map) frame.
@@ -27,7 +76,8 @@ class Raster:
     when the raster was drawn without it (a large one, whose occupancy as float32 would
     take four times its cells: :meth:`occtool.fuse.WorldMap.rasterise`).
     ``explored`` (``None``: none) marks cells the run observed: an unknown cell there is
-    uncertain (a wall's edge), not unexplored, and no frontier.
+    uncertain (a wall's edge), not unexplored, and no frontier; a bool array, or for a world
+    map's raster the same flags packed eight a byte (:class:`PackedFlags`, read as one).
     """
 
     cells: NDArray[np.uint8]
@@ -35,7 +85,7 @@ class Raster:
     origin: tuple[float, float]
     probability: NDArray[np.float32] | None
     conflict: NDArray[np.bool_]
-    explored: NDArray[np.bool_] | None = field(default=None)
+    explored: NDArray[np.bool_] | PackedFlags | None = field(default=None)
 
     def graded(self) -> NDArray[np.float32]:
         """The fused occupancy of every cell the run observed (or placed a wall near), NaN

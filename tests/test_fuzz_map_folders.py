@@ -25,7 +25,8 @@ from hypothesis import strategies as st
 
 from occtool.cli.main import cli
 from occtool.errors import InputError
-from occtool.formats.nav2 import MAX_IMAGE_CELLS, read_nav2, write_nav2
+from occtool.formats.nav2 import PNG_DECODE_BYTES, read_nav2, write_nav2
+from occtool.limits import DEFAULT_MEMORY_LIMIT, memory_bytes
 from occtool.plot import read_map_folder
 
 pytest.importorskip("matplotlib")
@@ -207,13 +208,13 @@ def test_a_pgm_whose_header_lies_about_its_length_is_refused(tmp_path_factory, w
 @given(st.integers(1, 2**31), st.integers(1, 2**31))
 @example(100_000, 100_000)
 def test_a_pgm_claiming_a_huge_image_is_refused_before_reading(tmp_path_factory, width, height):
+    # A PGM holds every pixel it claims: a header its length does not bear out is refused
+    # from the two, before any pixel is read, however large it claims to be.
     folder = make_folder(tmp_path_factory.mktemp("pgm"))
     (folder / "map.pgm").write_bytes(f"P5 {width} {height} 255\n".encode() + bytes(16))
-    if width * height <= MAX_IMAGE_CELLS:
-        pattern = r"the PGM header says .* \(a short or padded file\)"
-    else:
-        pattern = rf"a {width}x{height} map image is over 50,000,000 cells"
-    assert_refused(folder, "map.pgm", pattern)
+    if width * height == 16:
+        return
+    assert_refused(folder, "map.pgm", r"the PGM header says .* \(a short or padded file\)")
 
 
 @given(st.sampled_from([
@@ -246,14 +247,25 @@ def _chunk(kind: bytes, body: bytes) -> bytes:
 @example(8_000, 8_000, 6)
 @example(2**31 - 1, 2**31 - 1, 6)
 def test_a_png_claiming_a_huge_image_is_refused_from_its_header(tmp_path_factory, width, height, colour):
-    if width * height <= MAX_IMAGE_CELLS:
-        width = MAX_IMAGE_CELLS // height + 1
+    # Decoded whole, a PNG of more than this many pixels needs more than the default memory limit.
+    most = memory_bytes(DEFAULT_MEMORY_LIMIT) // PNG_DECODE_BYTES
+    if width * height <= most:
+        width = most // height + 1
     folder = make_folder(tmp_path_factory.mktemp("png"))
     header = struct.pack(">IIBBBBB", width, height, 8, colour, 0, 0, 0)
     (folder / "map.png").write_bytes(b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header)
                                      + _chunk(b"IDAT", zlib.compress(b"\0" * 64)))
     write_yaml(folder, {**GOOD_YAML, "image": "map.png", "mode": "scale", "free_thresh": "0.25"})
-    assert_refused(folder, "map.png", rf"a {width}x{height} map image is over 50,000,000 cells")
+    expected = (re.escape(str(folder / "map.png")) + rf": a {width}x{height} map image needs about [0-9.]+ [GT]B of "
+                r"memory to read, over the limit of 4.0 GB: raise it with {}[0-9]+G'?")
+    with pytest.raises(InputError, match=expected.format("memory_limit='")):
+        read_map_folder(folder)
+    out = folder.parent / (folder.name + "-out")
+    out.mkdir()
+    result = CliRunner().invoke(cli, ["plot", "map", str(folder), "-o", str(out / "map.png"), "--size", "200,200px"])
+    assert result.exit_code == 1 and re.fullmatch("Error: " + expected.format("--memory-limit "),
+                                                  result.output.strip()), result.output
+    assert list(out.iterdir()) == []
 
 
 @given(st.data())

@@ -179,8 +179,84 @@ def test_a_png_too_large_to_decode_is_refused_from_its_header(tmp_path):
                                        + chunk(b"IDAT", zlib.compress(b"\0" * 64)))
     (tmp_path / "map.yaml").write_text("image: map.png\nmode: scale\nresolution: 0.05\norigin: [0, 0, 0]\n"
                                        "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
-    with pytest.raises(InputError, match="over 50,000,000 cells"):
-        read_nav2(tmp_path / "map.yaml")
+    # Decoded whole, about a gigabyte: over a limit of 500 MB, refused before Pillow sees it.
+    with pytest.raises(InputError, match=r"a 8000x8000 map image needs about 1\.0 GB of memory to read, over the "
+                                         r"limit of 0\.5 GB: raise it with memory_limit='2G'"):
+        read_nav2(tmp_path / "map.yaml", memory_limit="500M")
+
+
+def _pgm_map(folder, pixels, resolution=0.05):
+    folder.mkdir(exist_ok=True)
+    write_nav2(pixels, resolution, (-2.0, 3.0), folder / "map.yaml")
+    return folder / "map.yaml"
+
+
+def test_a_map_over_the_memory_limit_is_refused_before_its_pixels_are_read(tmp_path):
+    from occtool.formats.nav2 import nav2_shape, read_memory
+
+    yaml_path = _pgm_map(tmp_path / "map", np.full((300, 400), 254, dtype=np.uint8))
+    assert nav2_shape(yaml_path) == (300, 400)
+    need = read_memory(300, 400)
+    assert need >= 300 * 400  # a byte a cell kept, and a strip's temporaries
+    (tmp_path / "map" / "map.pgm").chmod(0o200)  # the header is read; the pixels would be too if not refused
+    try:
+        with pytest.raises(InputError, match=r"map\.pgm: a 400x300 map image needs about .* of memory to read, "
+                                             r"over the limit of under 1 MB: raise it with memory_limit='1G'"):
+            read_nav2(yaml_path, memory_limit=need - 1)
+    finally:
+        (tmp_path / "map" / "map.pgm").chmod(0o600)
+    assert read_nav2(yaml_path, memory_limit=need).cells.shape == (300, 400)
+    assert read_nav2(yaml_path, memory_limit=None).cells.shape == (300, 400)
+    # Read 10 times coarser it needs less: a byte a block and one strip.
+    assert read_memory(300, 400, decimate=10) < need
+
+
+@given(st.integers(1, 40), st.integers(1, 40), st.integers(1, 9), st.integers(0, 2**32 - 1))
+def test_a_map_read_decimated_is_its_cells_reduced_block_by_block(tmp_path_factory, rows, cols, factor, seed):
+    from occtool.formats.nav2 import decimate_cells
+
+    rng = np.random.default_rng(seed)
+    pixels = rng.choice(np.array([254, 0, 205], dtype=np.uint8), size=(rows, cols), p=[0.6, 0.1, 0.3])
+    yaml_path = _pgm_map(tmp_path_factory.mktemp("dec") / "map", pixels)
+    whole = read_nav2(yaml_path)
+    reduced = read_nav2(yaml_path, decimate=factor)
+    assert reduced.decimation == factor and whole.decimation == 1 and reduced.resolution == whole.resolution
+    assert reduced.cells.shape == (-(-rows // factor), -(-cols // factor))
+    np.testing.assert_array_equal(reduced.cells, decimate_cells(whole.cells, factor))
+    # Block by block: its largest cell (row 0 the bottom), unknown only where every cell is.
+    j, i = rng.integers(0, reduced.cells.shape[0]), rng.integers(0, reduced.cells.shape[1])
+    assert reduced.cells[j, i] == whole.cells[j * factor:(j + 1) * factor, i * factor:(i + 1) * factor].max()
+
+
+def test_a_pgm_is_read_in_strips_of_rows(tmp_path, monkeypatch):
+    from occtool.formats import nav2
+
+    # Strips of 3 rows (and of 2 blocks of 3 rows when decimated): the same cells as one read.
+    pixels = np.random.default_rng(4).choice(np.array([254, 0, 205], dtype=np.uint8), size=(17, 5))
+    yaml_path = _pgm_map(tmp_path / "map", pixels)
+    whole, reduced = read_nav2(yaml_path).cells, read_nav2(yaml_path, decimate=3).cells
+    monkeypatch.setattr(nav2, "_READ_STRIP_CELLS", 15)
+    np.testing.assert_array_equal(read_nav2(yaml_path).cells, whole)
+    np.testing.assert_array_equal(read_nav2(yaml_path, decimate=3).cells, reduced)
+    monkeypatch.setattr(nav2, "_READ_STRIP_CELLS", 1)
+    np.testing.assert_array_equal(read_nav2(yaml_path, decimate=3).cells, reduced)
+
+
+def test_a_png_map_reads_decimated_too(tmp_path):
+    from occtool.formats.nav2 import decimate_cells, write_nav2_scale
+
+    occupancy = np.random.default_rng(5).random((23, 31))
+    occupancy[3:6, 4:9] = np.nan
+    write_nav2_scale(occupancy, 0.1, (0.0, 0.0), tmp_path / "map.yaml")
+    whole = read_nav2(tmp_path / "map.yaml")
+    np.testing.assert_array_equal(read_nav2(tmp_path / "map.yaml", decimate=4).cells, decimate_cells(whole.cells, 4))
+
+
+@pytest.mark.parametrize("factor", [0, -1, 1.5, True, "2"])
+def test_a_decimation_is_a_whole_number_from_one(tmp_path, factor):
+    yaml_path = _pgm_map(tmp_path / "map", np.full((2, 2), 254, dtype=np.uint8))
+    with pytest.raises(InputError, match="decimate must be a whole number >= 1"):
+        read_nav2(yaml_path, decimate=factor)
 
 
 @pytest.mark.parametrize("maxval", [15, 255, 1000, 65535])

@@ -640,17 +640,18 @@ def test_a_one_cell_wall_in_a_big_map_stays_black(tmp_path_factory, column, row)
 
 
 def test_the_reduction_is_the_blockwise_maximum(tmp_path):
+    from occtool.formats import nav2
     from occtool.plot import _map
 
     rng = np.random.default_rng(3)
     cells = rng.choice(np.array([-1, 0, 37, 100], dtype=np.int8), size=(203, 157), p=[0.5, 0.4, 0.05, 0.05])
     for factor in (1, 2, 7, 16, 300):
         # Strips of a few rows at a time give the same result as one pass.
-        saved, _map._STRIP_CELLS = _map._STRIP_CELLS, 3 * 157 * factor * factor
+        saved, nav2._DECIMATE_STRIP_CELLS = nav2._DECIMATE_STRIP_CELLS, 3 * 157 * factor * factor
         try:
             reduced = _map.decimate(cells, factor)
         finally:
-            _map._STRIP_CELLS = saved
+            nav2._DECIMATE_STRIP_CELLS = saved
         rows, cols = -(-203 // factor), -(-157 // factor)
         expected = np.array([[cells[i * factor:(i + 1) * factor, j * factor:(j + 1) * factor].max()
                               for j in range(cols)] for i in range(rows)], dtype=np.int8)

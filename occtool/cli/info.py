@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from occtool.cli.options import log_option
+from occtool.cli.options import log_option, read_memory_limit_option
 
 
 @click.command(short_help="Describe a model, a model set, a world map, a Nav2 map or a range log.")
@@ -17,7 +17,9 @@ from occtool.cli.options import log_option
 @log_option("no_return_range",
             help="Range log: count laser beams that returned nothing as free rays at this range "
                  "(as fit --no-return-range does).")
-def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: float | None) -> None:
+@read_memory_limit_option
+def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: float | None,
+         memory_limit: str | None) -> None:
     """Summarise FILE or FOLDER: a model or inverse file (pieces, tree, constraints, fit
     error, samples, run), a model set (`occtool fit LOG -o DIR/`: DIR or its index.json), a
     world map (`world.occmap`), a Nav2 map (`map.yaml`, or the folder `occtool map` wrote:
@@ -40,7 +42,8 @@ def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: floa
     if target.is_dir() and (target / "map.yaml").is_file():
         for part in (target / "world.occmap", target / "map.yaml"):
             if part.is_file():
-                console.print(_world_map_summary(part) if part.suffix == ".occmap" else _nav2_summary(part))
+                console.print(_world_map_summary(part) if part.suffix == ".occmap"
+                              else _nav2_summary(part, memory_limit))
         return
     if target.name == "index.json":
         console.print(_model_set_summary(target))
@@ -49,7 +52,7 @@ def info(path: str, show_pieces: bool, skip_invalid: bool, no_return_range: floa
         console.print(_world_map_summary(target))
         return
     if target.suffix in (".yaml", ".yml"):
-        console.print(_nav2_summary(target))
+        console.print(_nav2_summary(target, memory_limit))
         return
     found = None if target.is_dir() else read_any(path)
     if found is None:
@@ -226,13 +229,13 @@ def _occmap_version() -> int:
     return FORMAT_VERSION
 
 
-def _nav2_summary(path):
+def _nav2_summary(path, memory_limit=None):
     """A Nav2 map as map_server loads it: mode, size, resolution, origin and its cells."""
     import numpy as np
 
     from occtool.formats.nav2 import read_nav2
 
-    nav2 = read_nav2(path)
+    nav2 = read_nav2(path, memory_limit=memory_limit)
     rows, cols = nav2.cells.shape
     table = _key_value_table(f"Nav2 map: {path}")
     table.add_row("image", f"{nav2.image} ({nav2.mode} mode, negate {nav2.negate})")

@@ -208,7 +208,7 @@ def map_command(sources: tuple[str, ...], output: str, resolution: float, nav2_m
                               registration=registration, keyframe_share=keyframe_share, **written,
                               heights_from_data=not {"sensor_height", "body_height"} & set(_given(ctx)),
                               world=world, world_resolution=world_resolution, seed=seed,
-                              memory_limit=memory_limit)
+                              memory_limit=memory_limit, lean=True)
         report = result.report
         assert report is not None
         log_notes(logger, Path(source).name, report.notes)

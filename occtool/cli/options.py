@@ -116,6 +116,15 @@ memory_limit_option = click.option(
          "(decimal); 'none': no limit. The estimate counts the positions and the raster of the log's extent.",
 )
 
+#: ``--memory-limit`` (``plot map``, ``info``): the library's ``memory_limit`` of
+#: :func:`occtool.formats.nav2.read_nav2`, reading a Nav2 map back.
+read_memory_limit_option = click.option(
+    "--memory-limit", default=DEFAULT_MEMORY_LIMIT, show_default=True, metavar="SIZE", callback=_memory_limit,
+    help="Refuse (before reading its pixels) a Nav2 map estimated to need more memory than SIZE: bytes, or "
+         "500M, 8G (decimal); 'none': no limit. A PGM map takes a byte a cell (less when drawn reduced), a PNG "
+         "map about 16.",
+)
+
 #: ``--keyframe-share`` (``map``, ``evaluate-log``): what it changes for the user. The cells
 #: are :data:`occtool.fuse._keyframes.KEYFRAME_CELL` wide (not imported: numpy, cold start).
 KEYFRAME_SHARE_HELP = (

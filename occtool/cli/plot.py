@@ -18,6 +18,7 @@ from occtool.cli.options import (
     config_option,
     log_options,
     overwrite_option,
+    read_memory_limit_option,
     refuse_existing,
 )
 from occtool.limits import MAX_ROBOT_SIZE
@@ -206,9 +207,10 @@ def compare(report: str, bench: str | None, output: str, overwrite: bool, dpi: f
 @click.option("--frontiers/--no-frontiers", default=True, show_default=True, help="Draw the frontier points.")
 @click.option("--walls/--no-walls", default=False, show_default=True,
               help="Draw the world map's wall segments (FOLDER/world.occmap) over the cells.")
+@read_memory_limit_option
 @_figure_options
-def map_picture(folder: str, draw_path: bool, frontiers: bool, walls: bool, output: str, overwrite: bool, dpi: float,
-                size: str | None, title: str | None) -> None:
+def map_picture(folder: str, draw_path: bool, frontiers: bool, walls: bool, memory_limit: str | None, output: str,
+                overwrite: bool, dpi: float, size: str | None, title: str | None) -> None:
     """The map FOLDER written by `occtool map`: free, occupied and unknown cells as Nav2
     reads them, the robot's path and the frontier points; with --walls, the wall segments
     of the world map (world.occmap) coloured by how many positions trusted them."""
@@ -216,5 +218,5 @@ def map_picture(folder: str, draw_path: bool, frontiers: bool, walls: bool, outp
     from occtool.plot import DEFAULT_MAP_SIZE, map_figure
 
     figure = map_figure(folder, size=figure_size or DEFAULT_MAP_SIZE, dpi=dpi, title=title, path=draw_path,
-                        frontiers=frontiers, walls=walls)
+                        frontiers=frontiers, walls=walls, memory_limit=memory_limit)
     _write(figure, output)

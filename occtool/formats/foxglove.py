@@ -96,7 +96,15 @@ def _nanoseconds(stamp: float | None, fallback: int) -> int:
 
 
 def run_map_mcap_bytes(run: Any) -> bytes:
-    """The MCAP file of a :class:`occtool.fuse.RunMap`, as bytes (the caller writes them atomically)."""
+    """The MCAP file of a :class:`occtool.fuse.RunMap`, as bytes (:func:`write_run_map_mcap`)."""
+    buffer = io.BytesIO()
+    write_run_map_mcap(run, buffer)
+    return buffer.getvalue()
+
+
+def write_run_map_mcap(run: Any, buffer: Any) -> None:
+    """Write the MCAP file of a :class:`occtool.fuse.RunMap` to the binary stream ``buffer``
+    (a file the caller writes atomically: the file is written as it is made, never held whole)."""
     (Color_pb2, Grid_pb2, LinePrimitive_pb2, PackedElementField_pb2, Point3_pb2, Pose_pb2, Quaternion_pb2,
      SceneEntity_pb2, SceneUpdate_pb2, SpherePrimitive_pb2, Vector2_pb2, Vector3_pb2, Writer) = _imports()
     from google.protobuf.timestamp_pb2 import Timestamp
@@ -111,7 +119,6 @@ def run_map_mcap_bytes(run: Any) -> bytes:
     green = Color_pb2.Color(r=0.1, g=0.7, b=0.2, a=1.0)
     blue = Color_pb2.Color(r=0.1, g=0.4, b=0.9, a=1.0)
     size = Vector3_pb2.Vector3(x=POINT_DIAMETER, y=POINT_DIAMETER, z=POINT_DIAMETER)
-    buffer = io.BytesIO()
     writer = Writer(buffer)
     last = 0
     for k, item in enumerate(run.placed):
@@ -154,7 +161,6 @@ def run_map_mcap_bytes(run: Any) -> bytes:
     writer.write_message(GRID_TOPIC, grid, log_time=last, publish_time=last)
     _write_trajectory(writer, getattr(run, "trajectory", None) or [], stamp_of)
     writer.finish()
-    return buffer.getvalue()
 
 
 def _write_trajectory(writer: Any, trajectory: list[Any], stamp_of: Any) -> None:
@@ -175,4 +181,4 @@ def _write_trajectory(writer: Any, trajectory: list[Any], stamp_of: Any) -> None
 
 
 __all__ = ["BASE_FRAME", "FRAME", "GRID_TOPIC", "MAX_GRID_CELLS", "SCENE_TOPIC", "TF_TOPIC", "grid_values",
-           "run_map_mcap_bytes"]
+           "run_map_mcap_bytes", "write_run_map_mcap"]

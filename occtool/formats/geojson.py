@@ -332,7 +332,7 @@ RUN_MAP_LAYERS = {"navigation": "navigation", "obstacles": "obstacle", "frontier
 
 def run_map_layers(navigation: BaseGeometry | None, obstacles: ArrayLike, frontiers: ArrayLike, *,
                    simplify: float | None = None, precision: int | None = None,
-                   georeference: Georeference | None = None) -> dict[str, dict[str, Any]]:
+                   georeference: Georeference | None = None, lazy: bool = False) -> dict[str, dict[str, Any]]:
     """The GeoJSON layers of a run's map, one geometry type each (``occtool map`` writes
     them as ``navigation.geojson``, ``obstacles.geojson`` and ``frontiers.geojson``).
 
@@ -349,6 +349,10 @@ def run_map_layers(navigation: BaseGeometry | None, obstacles: ArrayLike, fronti
         ``10**-precision`` (whose rings then come out as GEOS builds them).
     georeference
         Write WGS84 longitude/latitude (RFC 7946) instead of metric map x, y.
+    lazy
+        Each collection's ``features`` an iterator that makes them one at a time, for
+        :func:`dump_collection` to write as it goes (a large run's layers are never held
+        whole as Python lists), instead of a list.
 
     Returns
     -------
@@ -363,26 +367,60 @@ def run_map_layers(navigation: BaseGeometry | None, obstacles: ArrayLike, fronti
     parts = [] if navigation is None or navigation.is_empty else (
         [navigation] if navigation.geom_type == "Polygon" else
         [g for g in getattr(navigation, "geoms", []) if g.geom_type == "Polygon" and not g.is_empty])
-    polygons = [orient(p, sign=1.0) for p in parts]
     properties: dict[str, Any] = {"frame": "map", "units": "m",
                                   "crs_note": "metric x, y in the map frame, not longitude/latitude"}
     if georeference is not None:
-        # A rotation and an azimuthal projection: rings keep their orientation.
-        polygons = [shapely.transform(p, georeference.to_lonlat) for p in polygons]
         obstacles, frontiers = georeference.to_lonlat(obstacles), georeference.to_lonlat(frontiers)
         properties = {"frame": "WGS84", "units": "degrees",
                       "origin": {"lat": georeference.lat, "lon": georeference.lon, "heading": georeference.heading}}
-    if precision is not None:
-        polygons = [shapely.set_precision(p, 10.0 ** -precision) for p in polygons]
-    # Polygons are oriented before the transform and the snap, and written as those leave them.
-    geometries = {"navigation": [_polygon_geometry(p, None, orient_rings=False) for p in polygons],
-                  **{layer: [{"type": "Point", "coordinates": xy}
-                             for xy in _rounded(np.asarray(points, dtype=np.float64).reshape(-1, 2), precision)]
-                     for layer, points in (("obstacles", obstacles), ("frontiers", frontiers))}}
+
+    def polygon(part: BaseGeometry) -> dict[str, Any]:
+        part = orient(part, sign=1.0)
+        if georeference is not None:
+            # A rotation and an azimuthal projection: rings keep their orientation.
+            part = shapely.transform(part, georeference.to_lonlat)
+        if precision is not None:
+            part = shapely.set_precision(part, 10.0 ** -precision)
+        # Polygons are oriented before the transform and the snap, and written as those leave them.
+        return _polygon_geometry(part, None, orient_rings=False)
+
+    def points(values: ArrayLike) -> Iterator[dict[str, Any]]:
+        xy = np.asarray(values, dtype=np.float64).reshape(-1, 2)
+        for low in range(0, xy.shape[0], _POINTS_AT_ONCE):
+            yield from ({"type": "Point", "coordinates": p} for p in _rounded(xy[low:low + _POINTS_AT_ONCE], precision))
+
+    geometries = {"navigation": (polygon(part) for part in parts), "obstacles": points(obstacles),
+                  "frontiers": points(frontiers)}
+
+    def features(layer: str, kind: str) -> Iterator[dict[str, Any]]:
+        return ({"type": "Feature", "properties": {"kind": kind}, "geometry": geometry}
+                for geometry in geometries[layer])
+
     return {layer: {"type": "FeatureCollection", "properties": {**properties, "kind": kind},
-                    "features": [{"type": "Feature", "properties": {"kind": kind}, "geometry": geometry}
-                                 for geometry in geometries[layer]]}
+                    "features": features(layer, kind) if lazy else list(features(layer, kind))}
             for layer, kind in RUN_MAP_LAYERS.items()}
+
+
+#: Points turned into Python lists at a time by a lazy layer (:func:`run_map_layers`).
+_POINTS_AT_ONCE = 1 << 16
+
+
+def dump_collection(collection: Mapping[str, Any], handle: Any) -> None:
+    """Write ``collection`` (a GeoJSON object whose ``features`` may be any iterable, e.g. a
+    lazy layer of :func:`run_map_layers`) to the text stream ``handle`` as compact JSON: the
+    same text as ``json.dump(collection, handle, separators=(",", ":"))``, each feature
+    encoded on its own (by the C encoder, which ``json.dump`` does not use)."""
+    handle.write("{")
+    for n, (key, value) in enumerate(collection.items()):
+        handle.write(("," if n else "") + json.dumps(key) + ":")
+        if key != "features":
+            handle.write(json.dumps(value, separators=(",", ":")))
+            continue
+        handle.write("[")
+        for k, feature in enumerate(value):
+            handle.write(("," if k else "") + json.dumps(feature, separators=(",", ":")))
+        handle.write("]")
+    handle.write("}")
 
 
 # --- reading ------------------------------------------------------------------------------
@@ -593,6 +631,7 @@ __all__ = [
     "navigation_to_geojson",
     "read_navigation",
     "read_navigation_maps",
+    "dump_collection",
     "run_map_layers",
     "write_navigation",
     "write_navigation_set",

@@ -36,14 +36,20 @@ from numpy.typing import NDArray
 
 from occtool._files import atomic_write
 from occtool.errors import InputError
-from occtool.limits import MAX_DISTANCE
+from occtool.limits import DEFAULT_MEMORY_LIMIT, MAX_DISTANCE, memory_bytes
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
 #: Bytes of image rows written at a time.
 _STRIP_BYTES = 1 << 20
-#: Map images larger than this many cells are refused before they are decoded.
-MAX_IMAGE_CELLS = 50_000_000
+#: Bytes a cell of a map read back holds (:func:`read_nav2`): its map_server cell (int8) ...
+CELL_BYTES = 1
+#: ... and, for a PNG image, what decoding it whole takes a cell (Pillow's RGBA image and its
+#: RGB copy, the channels' sums, the alpha and the lookup keys). A PGM is read a strip of
+#: rows at a time, so its pixels are never held whole.
+PNG_DECODE_BYTES = 15
+#: Image cells read and classified at a time from a PGM (a whole number of rows, at least one).
+_READ_STRIP_CELLS = 1 << 22
 #: A scale map's free threshold, map_saver's default (its unknown is transparency, not a grey).
 SCALE_FREE_THRESH = 0.25
 #: map_server's cell values (nav_msgs/OccupancyGrid).
@@ -54,7 +60,8 @@ CELL_FREE, CELL_OCCUPIED, CELL_UNKNOWN = 0, 100, -1
 class Nav2Map:
     """A map as map_server loads it: ``cells`` ``(rows, cols)`` int8 of 0 free / 100 occupied /
     -1 unknown (``scale`` maps also 1-99 between), row 0 at the bottom (y = origin y), plus the
-    YAML's settings."""
+    YAML's settings. Read with ``decimate=k`` (:func:`read_nav2`), each cell is a ``k`` x ``k``
+    block of the image's (``decimation``; ``resolution`` stays the image's own), its largest value."""
 
     cells: NDArray[np.int8]
     resolution: float
@@ -64,6 +71,7 @@ class Nav2Map:
     occupied_thresh: float
     free_thresh: float
     mode: str
+    decimation: int = 1
 
 
 def write_nav2(pixels: NDArray[np.uint8], resolution: float, origin: tuple[float, float], yaml_path: str | os.PathLike[str],
@@ -180,27 +188,38 @@ def _shown(text: str) -> str:
     return repr(text if len(text) <= 40 else text[:37] + "...")
 
 
-def _read_png(path: Path) -> tuple[NDArray[np.uint16], NDArray[np.uint8] | None]:
-    """The sum of each pixel's colour channels (0-765; map_server's brightness is their mean)
-    and its alpha (``None``: the image has none)."""
-    image_module = _pillow(f"{path}: reading a PNG map image")
-    # A PNG's size is in its header and a small file can inflate to any size: the size is
-    # refused from the IHDR chunk (bytes 16-24) before Pillow sees the file, so its own
-    # bomb check (a process-wide setting occtool leaves alone) never decides.
+def _png_size(path: Path) -> tuple[int, int]:
+    """A PNG's ``(height, width)`` from its IHDR chunk (bytes 16-24), once its signature is
+    checked: a small file can inflate to any size, so the size is judged (:func:`read_nav2`)
+    before Pillow sees the file."""
     with open(path, "rb") as handle:
         head = handle.read(24)
     if len(head) < 24 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
         raise InputError(f"{path}: not a PNG image (no PNG signature and IHDR header)")
     width, height = struct.unpack(">II", head[16:24])
-    if width * height > MAX_IMAGE_CELLS:
-        raise InputError(f"{path}: a {width}x{height} map image is over {MAX_IMAGE_CELLS:,} cells")
+    if width < 1 or height < 1:
+        raise InputError(f"{path}: a {width}x{height} PNG image has no pixels")
+    return height, width
+
+
+def _read_png(path: Path) -> tuple[NDArray[np.uint16], NDArray[np.uint8] | None]:
+    """The sum of each pixel's colour channels (0-765; map_server's brightness is their mean)
+    and its alpha (``None``: the image has none), of a PNG whose size :func:`read_nav2` has
+    judged from its header (:func:`_png_size`)."""
+    image_module = _pillow(f"{path}: reading a PNG map image")
+    from PIL import PngImagePlugin
+
     # Pillow decodes a file cut after its last pixel row without complaint: a PNG ends with IEND.
     with open(path, "rb") as handle:
         handle.seek(max(0, path.stat().st_size - len(_PNG_END)))
         if handle.read() != _PNG_END:
             raise InputError(f"{path}: truncated PNG image (it does not end with an IEND chunk)")
     try:
-        with image_module.open(path) as image:
+        # The PNG plugin's own class, not Image.open: the image's size was judged against the
+        # caller's memory limit already, and Pillow's process-wide bomb limit (a setting
+        # occtool leaves alone) would refuse a map occtool writes (the 237 M cells of ten
+        # Freiburg campuses).
+        with open(path, "rb") as handle, PngImagePlugin.PngImageFile(handle) as image:
             image.load()  # a truncated file fails here (OSError), not half-decoded
             alpha = np.asarray(image.getchannel("A")) if "A" in image.getbands() else None
             colour = np.asarray(image.convert("RGB"))
@@ -210,9 +229,10 @@ def _read_png(path: Path) -> tuple[NDArray[np.uint16], NDArray[np.uint8] | None]
     return colour.sum(axis=-1, dtype=np.uint16), alpha
 
 
-def _read_pgm(path: Path) -> tuple[NDArray[Any], int]:
-    """The pixels (``(height, width)``, first row the top) and maxval of a binary PGM whose
-    header agrees with its length to the byte."""
+def _pgm_header(path: Path) -> tuple[int, int, int, int]:
+    """A binary PGM's width, height, maxval and the offset of its first pixel, once its
+    header is checked and agrees with the file's length to the byte (a PGM holds every
+    pixel it claims, so its size needs no other bound)."""
     size = path.stat().st_size
     with open(path, "rb") as handle:
         head = handle.read(MAX_PGM_HEADER_BYTES)
@@ -244,8 +264,6 @@ def _read_pgm(path: Path) -> tuple[NDArray[Any], int]:
     width, height, maxval = (int(token) for token in tokens[1:])
     if width < 1 or height < 1:
         raise InputError(f"{path}: a {width}x{height} PGM image has no pixels")
-    if width * height > MAX_IMAGE_CELLS:
-        raise InputError(f"{path}: a {width}x{height} map image is over {MAX_IMAGE_CELLS:,} cells")
     if not 1 <= maxval <= 65535:
         raise InputError(f"{path}: PGM maxval {maxval} is not in [1, 65535]")
     position += 1  # the single whitespace byte after maxval
@@ -253,13 +271,28 @@ def _read_pgm(path: Path) -> tuple[NDArray[Any], int]:
     if size - position != width * height * sample:
         raise InputError(f"{path}: the PGM header says {width}x{height} pixels ({width * height * sample:,} bytes) "
                          f"but {size - position:,} bytes follow it (a short or padded file)")
-    dtype = np.dtype(np.uint8) if sample == 1 else np.dtype(">u2")
-    pixels = np.fromfile(path, dtype=dtype, count=width * height, offset=position)
-    if pixels.size != width * height:
-        raise InputError(f"{path}: the PGM image changed while it was read")
-    if maxval not in (255, 65535) and int(pixels.max()) > maxval:
-        raise InputError(f"{path}: a pixel value {int(pixels.max())} is above the PGM maxval {maxval}")
-    return pixels.reshape(height, width), maxval
+    return width, height, maxval, position
+
+
+def _pgm_cells(path: Path, width: int, height: int, maxval: int, position: int, table: NDArray[np.int8],
+               factor: int) -> NDArray[np.int8]:
+    """``table[pixel]`` of every pixel of a PGM (:func:`_pgm_header`'s figures), row 0 at the
+    bottom (the image's last row), reduced in ``factor`` x ``factor`` blocks (:func:`decimate_cells`),
+    read a strip of rows at a time from the file's end: only the result is held whole."""
+    dtype = np.dtype(np.uint8) if maxval < 256 else np.dtype(">u2")
+    cells = np.empty((-(-height // factor), -(-width // factor)), dtype=np.int8)
+    step = max(1, _READ_STRIP_CELLS // (width * factor)) * factor  # map rows a step, whole blocks
+    for low in range(0, height, step):  # map rows, from the bottom: the image's last rows first
+        high = min(low + step, height)
+        count = (high - low) * width
+        pixels = np.fromfile(path, dtype=dtype, count=count, offset=position + (height - high) * width * dtype.itemsize)
+        if pixels.size != count:
+            raise InputError(f"{path}: the PGM image changed while it was read")
+        if maxval not in (255, 65535) and int(pixels.max()) > maxval:
+            raise InputError(f"{path}: a pixel value {int(pixels.max())} is above the PGM maxval {maxval}")
+        block = decimate_cells(table[pixels.reshape(high - low, width)][::-1], factor)
+        cells[low // factor:low // factor + block.shape[0]] = block
+    return cells
 
 
 def _classify(p: NDArray[np.floating], mode: str, occupied: float, free: float) -> NDArray[np.int8]:
@@ -273,20 +306,62 @@ def _classify(p: NDArray[np.floating], mode: str, occupied: float, free: float) 
     return cells
 
 
-def _lookup_flipped(table: NDArray[np.int8], keys: NDArray[Any], unknown: NDArray[np.bool_] | None) -> NDArray[np.int8]:
-    """``table[keys]`` with row 0 at the bottom (``keys``' last row), ``unknown`` cells -1.
+def _lookup_flipped(table: NDArray[np.int8], keys: NDArray[Any], unknown: NDArray[np.bool_] | None,
+                    factor: int = 1) -> NDArray[np.int8]:
+    """``table[keys]`` with row 0 at the bottom (``keys``' last row), ``unknown`` cells -1,
+    reduced in ``factor`` x ``factor`` blocks (:func:`decimate_cells`).
 
     A cell depends on its pixel's value only, so a table of every value replaces float
     arrays the image's size; rows go in chunks so that numpy's index arrays stay small."""
     rows, cols = keys.shape
-    cells = np.empty((rows, cols), dtype=np.int8)
-    step = max(1, _LOOKUP_CHUNK // cols)
-    for top in range(0, rows, step):
-        block = table[keys[top:top + step]]
+    cells = np.empty((-(-rows // factor), -(-cols // factor)), dtype=np.int8)
+    step = max(1, _LOOKUP_CHUNK // (cols * factor)) * factor  # map rows a step, whole blocks
+    for low in range(0, rows, step):  # map rows, from the bottom: the image's last rows first
+        high = min(low + step, rows)
+        block = table[keys[rows - high:rows - low]]
         if unknown is not None:
-            block[unknown[top:top + step]] = CELL_UNKNOWN
-        cells[rows - top - len(block):rows - top] = block[::-1]
+            block[unknown[rows - high:rows - low]] = CELL_UNKNOWN
+        reduced = decimate_cells(block[::-1], factor)
+        cells[low // factor:low // factor + reduced.shape[0]] = reduced
     return cells
+
+
+#: Cells reduced per step by :func:`decimate_cells`: bounds the padded copy of a strip of rows.
+_DECIMATE_STRIP_CELLS = 1 << 23
+
+
+def decimate_cells(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
+    """Each ``factor`` x ``factor`` block of map_server ``cells`` (row 0 at the bottom, blocks
+    from it) as its largest value.
+
+    In a map's cells (-1 unknown, 0 free, 1-99 graded, 100 occupied) the largest is the
+    darkest known cell: a block with one occupied cell is occupied, one with no known cell
+    unknown. Edge blocks are padded with unknown, which never wins. The strips of rows
+    reduced at once are bounded, so memory stays that of the result.
+
+    Examples
+    --------
+    >>> cells = np.zeros((4, 5), dtype=np.int8)
+    >>> cells[2, 3] = 100
+    >>> cells[:, 4] = -1
+    >>> decimate_cells(cells, 2).tolist()
+    [[0, 0, -1], [0, 100, -1]]
+    """
+    if factor < 1:
+        raise InputError(f"decimation factor must be >= 1, got {factor}")
+    if factor == 1:
+        return cells
+    rows, cols = cells.shape
+    out_rows, out_cols = -(-rows // factor), -(-cols // factor)
+    reduced = np.empty((out_rows, out_cols), dtype=np.int8)
+    strip = max(1, _DECIMATE_STRIP_CELLS // (out_cols * factor * factor))  # output rows per step
+    for first in range(0, out_rows, strip):
+        block = cells[first * factor:(first + strip) * factor]
+        count = -(-len(block) // factor)
+        padded = np.full((count * factor, out_cols * factor), CELL_UNKNOWN, dtype=np.int8)
+        padded[:len(block), :cols] = block
+        reduced[first:first + count] = padded.reshape(count, factor, out_cols, factor).max(axis=(1, 3))
+    return reduced
 
 
 def _read_yaml(path: Path) -> dict[str, str]:
@@ -373,34 +448,88 @@ def _settings(path: Path) -> tuple[str, str, float, tuple[float, float, float], 
     return image, mode, resolution, origin, int(negate_text), occupied, free
 
 
-def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2Map:
+def _image(yaml_path: Path, image: str) -> tuple[Path, int, int, tuple[int, int, int, int] | None]:
+    """The image map.yaml names, its height and width (from its header, checked:
+    :func:`_pgm_header`, :func:`_png_size`) and the PGM header's figures (``None`` for a PNG)."""
+    image_path = yaml_path.parent / image
+    if not image_path.is_file():
+        raise InputError(f"{yaml_path}: image {_shown(image)} is not a file ({image_path})")
+    if image_path.suffix.lower() == ".png":
+        rows, cols = _png_size(image_path)
+        return image_path, rows, cols, None
+    header = _pgm_header(image_path)
+    return image_path, header[1], header[0], header
+
+
+def read_memory(rows: int, cols: int, *, png: bool = False, decimate: int = 1) -> int:
+    """Bytes :func:`read_nav2` holds at most reading a ``rows`` x ``cols`` image (``png``:
+    decoded whole; a PGM a strip of rows at a time) into cells reduced ``decimate`` times
+    each way: :data:`CELL_BYTES` a cell kept, :data:`PNG_DECODE_BYTES` a PNG's pixel, and
+    the strips' temporaries (a few bytes a cell of a strip)."""
+    kept = -(-rows // decimate) * -(-cols // decimate) * CELL_BYTES
+    strip = min(rows * cols, max(_READ_STRIP_CELLS, cols * decimate)) * 4
+    return kept + strip + (rows * cols * PNG_DECODE_BYTES if png else 0)
+
+
+def nav2_shape(yaml_path: str | os.PathLike[str]) -> tuple[int, int]:
+    """The ``(rows, cols)`` of a Nav2 map's image, from map.yaml and the image's header (each
+    checked as :func:`read_nav2` checks them), without reading its pixels: how finely to
+    read it (``decimate=``) is chosen from it."""
+    yaml_path = Path(yaml_path)
+    _, rows, cols, _ = _image(yaml_path, _settings(yaml_path)[0])
+    return rows, cols
+
+
+def _size(size: int) -> str:
+    return f"{size / 1e9:.1f} GB" if size >= 10**8 else f"{size / 1e6:.0f} MB" if size >= 10**6 else "under 1 MB"
+
+
+def read_nav2(yaml_path: str | os.PathLike[str], *, decimate: int = 1,
+              memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT) -> Nav2Map:
     """Load a Nav2 map by map_server's rules (``negate``, thresholds, ``trinary`` or ``scale``;
     a binary PGM of any maxval up to 65535, its samples fractions of maxval, or a PNG with
     Pillow). ``raw`` maps are refused.
 
     Returns cells with row 0 at the bottom, so cell ``(j, i)`` covers
-    ``origin + (i, j) * resolution``.
+    ``origin + (i, j) * resolution``; with ``decimate`` k > 1, cell ``(j, i)`` is the block of
+    k x k cells from ``origin + k (i, j) * resolution``, its largest value (the darkest known
+    cell: :func:`decimate_cells`), and :attr:`Nav2Map.decimation` is k. A PGM is read a strip
+    of rows at a time, so a map read decimated holds little more than its blocks.
+
+    The memory the read needs (:func:`read_memory`: a byte a cell kept, a PNG's decoding)
+    is judged from the image's header before any pixel is read: over ``memory_limit``
+    (bytes, or a size such as ``"8G"``; ``None``: no limit) the map is refused in one line.
 
     Raises
     ------
     InputError
         One line naming the file and what is wrong: a setting missing or out of map_server's
         range (``resolution`` > 0, ``origin`` ``[x, y, yaw]`` finite, ``negate`` 0 or 1,
-        ``0 <= free_thresh < occupied_thresh <= 1``), an image over :data:`MAX_IMAGE_CELLS`
-        cells, or a PGM whose header and length disagree.
+        ``0 <= free_thresh < occupied_thresh <= 1``), an image that needs more than
+        ``memory_limit`` to read, or a PGM whose header and length disagree.
     """
+    if isinstance(decimate, bool) or not isinstance(decimate, (int, np.integer)) or decimate < 1:
+        raise InputError(f"decimate must be a whole number >= 1, got {decimate!r}")
+    decimate = int(decimate)
+    limit = memory_bytes(memory_limit)
     yaml_path = Path(yaml_path)
     image, mode, resolution, origin, negate, occupied, free = _settings(yaml_path)
-    image_path = yaml_path.parent / image
-    if not image_path.is_file():
-        raise InputError(f"{yaml_path}: image {_shown(image)} is not a file ({image_path})")
-    unknown = None
-    if image_path.suffix.lower() == ".png":
+    image_path, rows, cols, pgm = _image(yaml_path, image)
+    need = read_memory(rows, cols, png=pgm is None, decimate=decimate)
+    if limit is not None and need > limit:
+        wanted = max(1, -(-need // 10**9))  # whole gigabytes, rounded up
+        raise InputError(f"{image_path}: a {cols}x{rows} map image needs about {_size(need)} of memory to read, "
+                         f"over the limit of {_size(limit)}: raise it with memory_limit='{wanted}G'")
+    corner = (origin[0] + cols * resolution, origin[1] + rows * resolution)
+    if max(abs(corner[0]), abs(corner[1])) > MAX_MAP_COORDINATE:
+        raise InputError(f"{yaml_path}: the map's far corner ({corner[0]:g}, {corner[1]:g}) lies beyond "
+                         f"{MAX_MAP_COORDINATE:g} m (check resolution and origin)")
+    if pgm is None:
         brightness, alpha = _read_png(image_path)
-        rows, cols = brightness.shape
         # Every (channel sum, alpha) pair through the arithmetic map_server's rules take.
         shade = np.arange(766, dtype=np.uint16).astype(np.float32) / np.float32(3.0)
         keys: NDArray[Any] = brightness
+        unknown = None
         if mode == "trinary" and alpha is not None:
             # map_server averages the alpha in with the colours in trinary mode.
             shade = (3.0 * shade[:, None] + np.arange(256, dtype=np.uint8)[None, :]) / np.float32(4.0)
@@ -408,21 +537,17 @@ def read_nav2(yaml_path: str | os.PathLike[str]) -> Nav2Map:
         elif mode == "scale" and alpha is not None:
             unknown = alpha < 255
         shade = shade.ravel()
+        p = shade / 255.0 if negate else (255.0 - shade) / 255.0
+        cells = _lookup_flipped(_classify(p, mode, occupied, free), keys, unknown, decimate)
     else:
-        pixels, maxval = _read_pgm(image_path)
-        rows, cols = pixels.shape
+        width, height, maxval, position = pgm
         shade = np.arange(256 if maxval < 256 else 65536, dtype=np.float64)
         if maxval != 255:
             shade *= 255.0 / maxval  # PGM samples are fractions of maxval
-        keys = pixels
-    corner = (origin[0] + cols * resolution, origin[1] + rows * resolution)
-    if max(abs(corner[0]), abs(corner[1])) > MAX_MAP_COORDINATE:
-        raise InputError(f"{yaml_path}: the map's far corner ({corner[0]:g}, {corner[1]:g}) lies beyond "
-                         f"{MAX_MAP_COORDINATE:g} m (check resolution and origin)")
-    p = shade / 255.0 if negate else (255.0 - shade) / 255.0
-    cells = _lookup_flipped(_classify(p, mode, occupied, free), keys, unknown)
-    return Nav2Map(cells, resolution, origin, image, negate, occupied, free, mode)
+        p = shade / 255.0 if negate else (255.0 - shade) / 255.0
+        cells = _pgm_cells(image_path, width, height, maxval, position, _classify(p, mode, occupied, free), decimate)
+    return Nav2Map(cells, resolution, origin, image, negate, occupied, free, mode, decimate)
 
 
-__all__ = ["FREE_THRESH", "OCCUPIED_THRESH", "SCALE_FREE_THRESH", "Nav2Map", "read_nav2", "write_nav2",
-           "write_nav2_scale"]
+__all__ = ["FREE_THRESH", "OCCUPIED_THRESH", "SCALE_FREE_THRESH", "Nav2Map", "decimate_cells", "nav2_shape",
+           "read_memory", "read_nav2", "write_nav2", "write_nav2_scale"]

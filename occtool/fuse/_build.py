@@ -86,27 +86,39 @@ def _chunks(positions: Sequence[Any]) -> list[list[int]]:
 
 
 def fit_in_order(positions: Sequence[Any], params: dict[str, Any], executor: Any = None,
-                 progress: Callable[[int, int], None] | None = None) -> list[Any]:
+                 progress: Callable[[int, int], None] | None = None, *, release: bool = False) -> list[Any]:
     """:func:`_fit_keyframes` of every position of ``positions`` on ``executor`` (an
     :class:`occtool.executor.Executor`; ``None``: this process), in chunks; the outcomes in
     the positions' order whatever order the chunks finish in, so the map does not depend on
-    where the fits ran."""
+    where the fits ran. ``release``: each entry of ``positions`` (a list) is set to ``None``
+    once its features are handed to their task, so that they go when it is done."""
     from occtool.executor import in_order
 
     chunks = _chunks(positions)
-    arguments = ((params, [positions[k].features for k in chunk]) for chunk in chunks)
+    total = len(positions)
+
+    def arguments() -> Any:
+        for chunk in chunks:
+            features = [positions[k].features for k in chunk]
+            if release:
+                for k in chunk:
+                    positions[k] = None  # type: ignore[index]  # a list, as the docstring says
+            yield params, features
+            del features
+
     outcomes: list[Any] = []
-    for outcome in in_order(executor, "fitting the keyframes", _fit_keyframes, arguments):
+    for outcome in in_order(executor, "fitting the keyframes", _fit_keyframes, arguments()):
         outcomes += outcome
         if progress is not None:
-            progress(len(outcomes), len(positions))
+            progress(len(outcomes), total)
     return outcomes
 
 
 def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINATION, threshold: float = 0.6,
              progress: Callable[[int, int], None] | None = None,
              keyframe_share: float = KEYFRAME_NEW_SHARE,
-             heights_from_data: bool = False, executor: Any = None) -> tuple[FusedMap, list[Any], FuseReport]:
+             heights_from_data: bool = False, executor: Any = None,
+             consume: bool = False) -> tuple[FusedMap, list[Any], FuseReport]:
     """Fit the keyframe positions of ``log`` with copies of ``template`` (an unfitted
     :class:`occtool.fit.OccupancyRegressor`) and fuse them.
 
@@ -127,6 +139,10 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     ``executor`` (an :class:`occtool.executor.Executor`: local processes or a Dask cluster,
     :func:`occtool.executor.make_executor`; ``None``: this process) fits the keyframes, a
     few at a time; the map is the same, byte for byte, wherever they were fitted.
+
+    ``consume``: the log is used up (its :attr:`~occtool.features.RangeLog.positions` list
+    is emptied once every position's sightings are read), and each keyframe's features go
+    once it is fitted: a large log's features are not held beside its models. The map is the same.
 
     Returns
     -------
@@ -154,18 +170,22 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     focus_range = params.get("focus_range", math.inf) if params.get("focus", True) else math.inf
     sightings = returns_of_positions(positions, robot, focus_range=focus_range, level=params.get("level"))
     positions = [positions[k] for k in keep]
+    if consume:
+        log.positions.clear()  # the keyframes' features are all that is still needed, each until it is fitted
+    placed = [(item.index, item.pose, item.stamp) for item in positions]
     started = time.perf_counter()
     models, poses, reaches, returns, return_offsets, stamps, skipped = [], [], [], [], [], [], []
     fitted_positions: list[int] = []
-    for item, outcome in zip(positions, fit_in_order(positions, params, executor, progress)):
+    for (index, pose, stamp), outcome in zip(placed, fit_in_order(positions, params, executor, progress,
+                                                                 release=consume)):
         if isinstance(outcome, _Skipped):
-            skipped.append((item.index, outcome.reason))
+            skipped.append((index, outcome.reason))
             continue
         model, observed = outcome
-        fitted_positions.append(item.index)
+        fitted_positions.append(index)
         models.append(model)
-        poses.append(item.pose)
-        stamps.append(item.stamp)
+        poses.append(pose)
+        stamps.append(stamp)
         reaches.append(observed.reach)
         returns.append(observed.returns)
         return_offsets.append(observed.offsets)

@@ -11,6 +11,7 @@ and reports.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +25,8 @@ from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE
 from occtool.fuse._log3d import is_3d_log, map_log_3d, sensor_positions
 from occtool.fuse._memory import check_map_memory
 from occtool.fuse._outputs import _write_run_map, check_outputs
-from occtool.fuse._run import RunMap, map_of_run
+from occtool.fuse._refit import build_world_map
+from occtool.fuse._run import RunMap, map_of_run, place_navigation
 from occtool.limits import DEFAULT_MEMORY_LIMIT
 
 #: The kinds of world map :func:`map_log` writes.
@@ -78,7 +80,7 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             progress: Callable[[int, int], None] | None = None, heights_from_data: bool = False,
             world: str = "auto", world_resolution: float | None = None, seed: int = 0,
             memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT, jobs: int | None = 1,
-            scheduler: Any = None) -> MapResult:
+            scheduler: Any = None, lean: bool = False) -> MapResult:
     """Map a log: what ``occtool map LOG -o OUTPUT`` does.
 
     Parameters
@@ -131,6 +133,14 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         as ``"tcp://host:8786"`` or a ``distributed.Client``; the ``dask`` extra, occtool on
         the workers): :func:`occtool.executor.make_executor`. The files are the same, byte
         for byte, wherever it ran.
+    lean
+        Hold only what the files need, each part no longer than the map needs it: a log
+        read here (for a 2D map) is used up as it is fitted (:func:`fuse_log`'s
+        ``consume``), the models go once their navigation maps are placed, before the world
+        map is built (:attr:`MapResult.models` is then empty), every position's sightings
+        once the world map is built (the report's :attr:`~FuseReport.sightings` is
+        ``None``), and the placed navigation maps keep no per-height slices. The files are
+        the same; a large run's memory is less (the command line maps lean).
 
     Raises
     ------
@@ -164,30 +174,40 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
     three_d = world == "3d" or (world == "auto" and is_3d_log(log))
     check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d)
     with make_executor(jobs, scheduler) as executor:  # an unreachable scheduler is refused before any fit
+        # A log read here is used up as it is fitted when mapped lean (a 3D map reads it again).
         fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
                                          keyframe_share=keyframe_share, progress=progress,
-                                         heights_from_data=heights_from_data, executor=executor)
+                                         heights_from_data=heights_from_data, executor=executor,
+                                         consume=lean and not three_d and not isinstance(source, RangeLog))
         positions = list(zip(report.fitted, fused.poses, fused.stamps))
-        world3d, sensors, seconds = None, None, 0.0
+        navigation = {"max_range": max_range, "threshold": threshold}
+        placed, navigation_seconds = None, None
+        if lean:
+            # The navigation maps first, so that the models go before the world map is built.
+            placed, navigation_seconds = place_navigation(models, positions, navigation=navigation,
+                                                          executor=executor, release_models=True)
+        world3d, world2d, sensors = None, None, None
+        started = time.perf_counter()
         if three_d:
-            import time
-
-            started = time.perf_counter()
             world3d = map_log_3d(log, world_resolution, to_map=log.to_log_frame, seed=seed)
-            seconds = time.perf_counter() - started
             sensors = sensor_positions(log)
-        # The raster keeps its float32 occupancy only for a scale map, the one file drawn from
-        # it: four bytes a cell a trinary map would hold for nothing.
         if not isinstance(source, RangeLog):
             # Read here and fused: the features of every scan are of no more use (a large run's
             # raster needs the memory they held).
             del log
-        run = map_of_run(fused, models, positions, resolution=resolution,
-                         navigation={"max_range": max_range, "threshold": threshold}, sightings=report.sightings,
-                         world3d=world3d, sensor_positions=sensors, executor=executor,
-                         occupancy=nav2_mode == "scale")
-    if world3d is not None:
-        run.seconds["world_map"] = seconds
+        if not three_d:
+            world2d = build_world_map(fused, sightings=report.sightings)
+            if lean:
+                report.sightings = None  # every position's returns: the world map holds what the files need
+        seconds = time.perf_counter() - started
+        # The raster keeps its float32 occupancy only for a scale map, the one file drawn from
+        # it: four bytes a cell a trinary map would hold for nothing.
+        run = map_of_run(fused, models, positions, resolution=resolution, navigation=navigation,
+                         sightings=report.sightings, world3d=world3d, sensor_positions=sensors, executor=executor,
+                         occupancy=nav2_mode == "scale", world=world2d, release_models=lean, placed=placed)
+    run.seconds["world_map"] = seconds
+    if navigation_seconds is not None:
+        run.seconds["navigation"] = navigation_seconds
     extra = {"source": name, "fitted_here": True, "fit_seconds": round(report.fit_seconds, 3),
              "skipped_positions": [index for index, _ in report.skipped],
              "keyframe_share": keyframe_share, "not_keyframes": len(report.not_keyframes)}

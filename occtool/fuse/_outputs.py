@@ -119,26 +119,26 @@ def _write_run_map(run: RunMap, folder: str | os.PathLike[str], *, overwrite: bo
 
     check_outputs(folder, nav2_mode=nav2_mode, overwrite=overwrite)  # before any file is written
     folder = Path(folder)
+    # The layers' features are made as they are written (a large run's would take hundreds
+    # of megabytes as lists); their options are checked here, before any file.
     layers = run_map_layers(run.navigation, run.obstacles, run.frontiers, simplify=simplify, precision=precision,
-                            georeference=georeference)
+                            georeference=georeference, lazy=True)
     world_bytes = encode(run.world) if isinstance(run.world, WorldMap) else run.world.to_bytes()  # 2D or 3D
     summary = {**run.summary(), **(extra_summary or {})}
     summary["world_map"]["file_bytes"] = len(world_bytes)
-    mcap_bytes = None
-    if mcap:
-        from occtool.formats.foxglove import run_map_mcap_bytes
-
-        mcap_bytes = run_map_mcap_bytes(run)
     with _output_set(folder, overwrite=overwrite) as staging:
-        written = _write_files(run, staging, world_bytes, mcap_bytes, layers, summary, nav2_mode)
+        written = _write_files(run, staging, world_bytes, mcap, layers, summary, nav2_mode)
         if also is not None:
             written += also(staging)
     return [folder / path.name for path in written], summary
 
 
-def _write_files(run: RunMap, staging: Path, world_bytes: bytes, mcap_bytes: bytes | None,
+def _write_files(run: RunMap, staging: Path, world_bytes: bytes, mcap: bool,
                  layers: dict[str, Any], summary: dict[str, Any], nav2_mode: str) -> list[Path]:
-    """The set's files, written into the (new, empty) folder ``staging``."""
+    """The set's files, written into the (new, empty) folder ``staging``; the MCAP and the
+    GeoJSON layers are written as they are made (:func:`occtool.formats.foxglove.write_run_map_mcap`,
+    :func:`occtool.formats.geojson.dump_collection`), never held whole."""
+    from occtool.formats.geojson import dump_collection
     from occtool.formats.nav2 import write_nav2, write_nav2_scale
 
     with atomic_write(staging / "world.occmap", "wb") as handle:
@@ -152,13 +152,15 @@ def _write_files(run: RunMap, staging: Path, world_bytes: bytes, mcap_bytes: byt
         written += list(write_nav2_scale(raster.graded(), raster.resolution, raster.origin, staging / "map.yaml"))
     else:
         written += list(write_nav2(run.raster.cells, run.raster.resolution, run.raster.origin, staging / "map.yaml"))
-    if mcap_bytes is not None:
+    if mcap:
+        from occtool.formats.foxglove import write_run_map_mcap
+
         with atomic_write(staging / "map.mcap", "wb") as handle:
-            handle.write(mcap_bytes)
+            write_run_map_mcap(run, handle)
         written.append(staging / "map.mcap")
     for name, collection in layers.items():
         with atomic_write(staging / f"{name}.geojson", "w") as handle:
-            json.dump(collection, handle, separators=(",", ":"))
+            dump_collection(collection, handle)
             handle.write("\n")
         written.append(staging / f"{name}.geojson")
     with atomic_write(staging / "summary.json", "w") as handle:

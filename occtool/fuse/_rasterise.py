@@ -8,7 +8,8 @@ held whole. Before a strip's cells are queried its square tiles are sorted by wh
 can meet, so that most cells of a large map cost no query at all:
 
 * a tile whose box lies inside the observed region is observed in every cell, one outside
-  it in none; only the cells of tiles on the region's boundary are tested one by one;
+  it in none; only the cells of tiles on the region's boundary are tested one by one (and
+  the same for the part of it the raster may call free, :attr:`WorldMap.free_region`);
 * a tile with no segment middle within reach of its box (the farthest a wall's ridge or
   rim spreads, plus the box's half-diagonal) meets no wall: its cells skip the neighbour
   queries.
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, Raster
+from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, PackedFlags, Raster
 
 FloatArray = NDArray[np.float64]
 
@@ -57,10 +58,10 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
     ``executor`` (an :class:`occtool.executor.Executor`; ``None``: this process) computes
     the bands of rows (:func:`tile_rows`); the raster is the same wherever they ran.
     Without ``occupancy`` the raster keeps no float32 occupancy (``probability`` ``None``):
-    two bytes a cell held, not six."""
+    a byte and an eighth a cell held (the cells, the explored flags packed), not five and an eighth."""
     cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
     probability = np.empty((ny, nx), dtype=np.float32) if occupancy else None
-    explored = np.zeros((ny, nx), dtype=bool)
+    explored = PackedFlags((ny, nx))  # an eighth of a byte a cell
     for low, high, strip in raster_bands(world, resolution, nx, ny, origin, within, doubted_trust, tile=tile,
                                          strip_cells=strip_cells, executor=executor):
         cells[low:high], explored[low:high] = strip[0], strip[2]
@@ -116,6 +117,9 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
         # How far a ridge spreads (the walls' occupancy) and a band or rim (their distances).
         reaches = (world._reach(max(world.width, world.front_width, world.back_width)), world._reach(within + 1e-9))
         tree = world._segment_tree()
+    free_region = getattr(world, "free_region", None)
+    if free_region is not None:
+        shapely.prepare(free_region)
     # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
     chunk = max(1, strip_cells // (tile * tile))
     pad = 0.25 * resolution
@@ -132,6 +136,7 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
             else:
                 inside = shapely.contains_properly(world.region, boxes)
                 outside = ~shapely.intersects(world.region, boxes)
+            free = _free_tiles(free_region, boxes)
             near = [np.zeros(lo.size, dtype=bool), np.zeros(lo.size, dtype=bool)]
             if walls:
                 half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
@@ -141,16 +146,30 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
             r0, r1 = t0 - low, t1 - low
             _strip(world, cells[r0:r1, c0:c1], probability[r0:r1, c0:c1], explored[r0:r1, c0:c1], xs[c0:c1], ys,
-                   lo - c0, hi - c0, inside, outside, near, within, doubted_trust)
+                   lo - c0, hi - c0, inside, outside, near, within, doubted_trust, free)
     return cells, probability, explored
+
+
+def _free_tiles(free_region: Any, boxes: Any) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The tiles (``boxes``) wholly inside and wholly outside the part of the observed region
+    the raster may call free (:attr:`WorldMap.free_region`; ``None``: a map without one,
+    whose cells each ask :meth:`WorldMap.free_space`), as the region's own tiles are sorted."""
+    import shapely
+
+    if free_region is None:
+        return None
+    return shapely.contains_properly(free_region, boxes), ~shapely.intersects(free_region, boxes)
 
 
 def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
            xs: NDArray[np.floating[Any]], ys: NDArray[np.floating[Any]], first: NDArray[np.intp],
            last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
-           near: list[NDArray[np.bool_]], within: float, doubted_trust: float) -> None:
+           near: list[NDArray[np.bool_]], within: float, doubted_trust: float,
+           free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None = None) -> None:
     """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``near``:
-    the tiles a ridge reaches, and those a wall's band or rim reaches."""
+    the tiles a ridge reaches, and those a wall's band or rim reaches; ``free``: the tiles
+    inside and outside the world's :attr:`~WorldMap.free_region` (``None``: each cell asks
+    :meth:`~WorldMap.free_space`)."""
 
     h, nx = ys.size, xs.size
     tile_of = np.repeat(np.arange(first.size), last - first + 1)
@@ -171,7 +190,16 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
         xy = np.column_stack([x[seen], y[seen]])
         base[seen] = world.free_value(xy)
         # Only the part of it the raster may call free counts as observed (WorldMap.rasterise).
-        observed[seen] = world.free_space(xy)
+        if free is None:
+            observed[seen] = world.free_space(xy)
+        else:
+            # Tiles wholly inside or outside the free region are decided whole, as above.
+            tiles = column_tile[seen]
+            decided = free[0][tiles]
+            edge = np.flatnonzero(~decided & ~free[1][tiles])
+            if edge.size:
+                decided[edge] = world.free_space(xy[edge])
+            observed[seen] = decided
     every = np.full(h * nx, -np.inf)
     of_trusted = every.copy()
     wall = np.zeros(h * nx, dtype=bool)

@@ -49,13 +49,18 @@ def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> 
 
     bins = distances.shape[1]
     angles = -math.pi + (np.arange(bins) + 0.5) * (2.0 * math.pi / bins)
-    r = np.minimum(distances, reach)
-    seen = (r > 0).any(axis=1)
-    if not seen.any():
+    views = []
+    for low in range(0, distances.shape[0], 1024):  # a block of positions' rings at a time (a large run's memory)
+        r = np.minimum(distances[low:low + 1024], reach)
+        seen = (r > 0).any(axis=1)
+        block = poses[low:low + 1024]
+        a = angles[None, :] + block[seen, 3:4]
+        rings = np.stack([block[seen, 0:1] + r[seen] * np.cos(a), block[seen, 1:2] + r[seen] * np.sin(a)], axis=-1)
+        views.append(shapely.make_valid(shapely.polygons(rings)))
+    polygons = np.concatenate(views) if views else np.zeros(0, dtype=object)
+    if not polygons.size:
         return shapely.MultiPolygon()
-    a = angles[None, :] + poses[seen, 3:4]
-    rings = np.stack([poses[seen, 0:1] + r[seen] * np.cos(a), poses[seen, 1:2] + r[seen] * np.sin(a)], axis=-1)
-    return shapely.union_all(shapely.make_valid(shapely.polygons(rings)))
+    return shapely.union_all(polygons)
 
 
 def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach: float, far_reach: float,

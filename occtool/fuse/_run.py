@@ -135,7 +135,8 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                frontier_min_length: float = FRONTIER_MIN_LENGTH, sightings: RunReturns | None = None,
                robot_overrides: Mapping[str, float] | None = None, world3d: Any | None = None,
                sensor_positions: Any | None = None, executor: Any = None,
-               occupancy: bool | None = None) -> RunMap:
+               occupancy: bool | None = None, world: WorldMap | None = None,
+               release_models: bool = False, placed: list[PlacedMap] | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -172,29 +173,68 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     occupancy
         Keep the 2D raster's float32 occupancy (a ``scale`` Nav2 map needs it); ``None``: for
         a raster of at most :data:`occtool.fuse._world.OCCUPANCY_CELLS` cells (:meth:`WorldMap.rasterise`).
+    world
+        The 2D world map of the run, built already (:func:`occtool.fuse.build_world_map` of
+        ``fused`` and ``sightings``, which are then not used); ``None``: built here.
+    release_models
+        Clear ``models`` (the list given) once their navigation maps are placed, and keep
+        those maps without their per-height slices (no file holds them): what a large run
+        holds a position while its raster is drawn and its files written
+        (:func:`occtool.fuse.map_log` with ``lean``). The map is the same.
+    placed
+        The models' navigation maps placed already (:func:`place_navigation`; ``models``
+        are then not used and may be empty); ``None``: placed here.
     """
-    if len(models) != len(positions):
+    if placed is None and len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
     unknown = sorted(set(robot_overrides or {}) - {f.name for f in fields(Robot)})
     if unknown:
         raise InputError(f"robot_overrides: no robot field {', '.join(unknown)}")
-    seconds = {}
+    seconds: dict[str, float] = {}
     started = time.perf_counter()
     if world3d is None:
-        world: WorldMap | Any = build_world_map(fused, sightings=sightings)
+        the_world: WorldMap | Any = build_world_map(fused, sightings=sightings) if world is None else world
         seconds["world_map"] = time.perf_counter() - started
-        started = time.perf_counter()
-        raster = world.rasterise(resolution, executor=executor, occupancy=occupancy)
+    else:
+        the_world = world3d
+        # The models' robot (the fused map's: the one they were fitted for, when they are gone already).
+        robot = (navigation or {}).get("robot") or (models[0].robot_ if models else fused.robot)
+        robot = replace(robot, **(robot_overrides or {}))
+    # The navigation maps first: the models (a large run's largest share per position) may
+    # then go before the raster is drawn.
+    if placed is None:
+        placed, seconds["navigation"] = place_navigation(models, positions, navigation=navigation,
+                                                         robot_overrides=robot_overrides, executor=executor,
+                                                         release_models=release_models)
+    else:
+        seconds["navigation"] = 0.0
+    started = time.perf_counter()
+    if world3d is None:
+        raster = the_world.rasterise(resolution, executor=executor, occupancy=occupancy)
     else:
         from occtool.fuse._projection import project_band
 
-        world = world3d
-        robot = (navigation or {}).get("robot") or (models[0].robot_ if models else Robot())
-        robot = replace(robot, **(robot_overrides or {}))
         raster = project_band(world3d, sensor_positions if sensor_positions is not None else np.zeros((0, 3)),
                               sensor_height=robot.sensor_height, body_height=robot.body_height,
                               ground_clearance=robot.ground_clearance, radius=robot.radius, resolution=resolution)
-    seconds["raster"] = time.perf_counter() - started
+    # In the order the stages ran before the navigation maps moved ahead (summary.json's seconds).
+    seconds = {**{key: seconds[key] for key in ("world_map",) if key in seconds},
+               "raster": time.perf_counter() - started, "navigation": seconds["navigation"]}
+    started = time.perf_counter()
+    region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])
+    obstacles = np.concatenate([np.asarray(p.nav.obstacle_points, dtype=np.float64).reshape(-1, 2)
+                                for p in placed]) if placed else np.zeros((0, 2))
+    release_free_memory()  # the world map's and the raster's temporaries, back to the system
+    frontiers = frontiers_in_strips(raster, frontier_min_length)
+    seconds["union_frontiers"] = time.perf_counter() - started
+    return RunMap(fused, the_world, raster, placed, region, obstacles, frontiers, seconds)
+
+
+def place_navigation(models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
+                     navigation: dict[str, Any] | None = None, robot_overrides: Mapping[str, float] | None = None,
+                     executor: Any = None, release_models: bool = False) -> tuple[list[PlacedMap], float]:
+    """Each model's navigation map placed at its position, as :func:`map_of_run` places them
+    (its keywords), and the seconds it took."""
     started = time.perf_counter()
     options = []
     for model in models:
@@ -206,17 +246,15 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                       ((models[k:k + NAVIGATION_CHUNK], options[k:k + NAVIGATION_CHUNK],
                         [pose for _, pose, _ in positions[k:k + NAVIGATION_CHUNK]])
                        for k in range(0, len(models), NAVIGATION_CHUNK)))
-    navs = [nav for chunk in chunks for nav in chunk]
-    placed = [PlacedMap(index, pose, stamp, nav) for (index, pose, stamp), nav in zip(positions, navs)]
-    seconds["navigation"] = time.perf_counter() - started
-    started = time.perf_counter()
-    region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])
-    obstacles = np.concatenate([np.asarray(p.nav.obstacle_points, dtype=np.float64).reshape(-1, 2)
-                                for p in placed]) if placed else np.zeros((0, 2))
-    release_free_memory()  # the world map's and the raster's temporaries, back to the system
-    frontiers = frontiers_in_strips(raster, frontier_min_length)
-    seconds["union_frontiers"] = time.perf_counter() - started
-    return RunMap(fused, world, raster, placed, region, obstacles, frontiers, seconds)
+    placed = []
+    for chunk, at in zip(chunks, range(0, len(models), NAVIGATION_CHUNK)):
+        for (index, pose, stamp), nav in zip(positions[at:at + NAVIGATION_CHUNK], chunk):
+            # No file holds a placed map's per-height slices (about half its geometry).
+            placed.append(PlacedMap(index, pose, stamp, replace(nav, slices=[]) if release_models else nav))
+        del chunk
+    if release_models:
+        models.clear()
+    return placed, time.perf_counter() - started
 
 
-__all__ = ["FRONTIER_MIN_LENGTH", "PlacedMap", "RunMap", "frontiers_of", "map_of_run"]
+__all__ = ["FRONTIER_MIN_LENGTH", "PlacedMap", "RunMap", "frontiers_of", "map_of_run", "place_navigation"]

@@ -53,13 +53,23 @@ class RunReturns:
         return int(self.poses.shape[0])
 
     def return_points(self, within: float) -> tuple[FloatArray, NDArray[np.int64]]:
-        """World ``(N, 2)`` returns no farther than ``within`` from their position, and the position of each."""
+        """World ``(N, 2)`` returns no farther than ``within`` from their position, and the
+        position of each (a block of positions at a time: the temporaries are a block's)."""
         bins = self.ranges.shape[1]
-        k, b = np.nonzero(self.returned & (self.ranges <= within))
-        alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
-        r = self.ranges[k, b]
-        return (np.column_stack([self.poses[k, 0] + r * np.cos(alpha), self.poses[k, 1] + r * np.sin(alpha)]),
-                k.astype(np.int64))
+        points, owners = [], []
+        for low in range(0, len(self), _POSITIONS_AT_ONCE):
+            high = low + _POSITIONS_AT_ONCE
+            k, b = np.nonzero(self.returned[low:high] & (self.ranges[low:high] <= within))
+            k += low
+            alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
+            r = self.ranges[k, b]
+            points.append(np.column_stack([self.poses[k, 0] + r * np.cos(alpha), self.poses[k, 1] + r * np.sin(alpha)]))
+            owners.append(k.astype(np.int64))
+        if len(points) == 1:
+            return points[0], owners[0]
+        if not points:
+            return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+        return np.concatenate(points), np.concatenate(owners)
 
 
 def returns_of_fused(fused: Any) -> RunReturns:
@@ -111,12 +121,23 @@ def position_ranges(fused: Any) -> FloatArray:
 
 def _ranges(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatArray:
     """Nearest returns ``(P, bins)`` (millimetres) where a bin has one, else the reach
-    (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres."""
+    (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres
+    (a block of positions at a time: the temporaries are a block's)."""
     bins = returns.shape[1]
-    reach = reaches[:, 0].astype(np.float64) * REACH_UNIT
     centre = (np.arange(bins) + 0.5) / bins
-    coarse = np.minimum((centre * reach.shape[1]).astype(np.intp), reach.shape[1] - 1)
-    return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0, reach[:, coarse])
+    coarse = np.minimum((centre * reaches.shape[2]).astype(np.intp), reaches.shape[2] - 1)
+    out = np.empty(returns.shape, dtype=np.float64)
+    for low in range(0, returns.shape[0], _POSITIONS_AT_ONCE):
+        high = low + _POSITIONS_AT_ONCE
+        reach = reaches[low:high, 0].astype(np.float64) * REACH_UNIT
+        part = returns[low:high]
+        out[low:high] = np.where(part != NO_OBSTACLE, part.astype(np.float64) / 1000.0, reach[:, coarse])
+    return out
+
+
+#: Positions whose ranges or returns are worked on at once (bounds the temporaries: ~6 MB a
+#: float64 array of 1,024 positions' 720 bins).
+_POSITIONS_AT_ONCE = 1024
 
 
 __all__ = ["SIGHTING_BINS", "RunReturns", "position_ranges", "returns_of_fused", "returns_of_positions"]

@@ -7,7 +7,7 @@ coordinates in range), and a refusal is one :class:`~occtool.errors.InputError` 
 the file.
 
 A map can hold far more cells than the picture has pixels (the MIT corridor's: ~100 M).
-The raster is reduced to the axes' pixel count before any colour array is built, keeping
+The raster is read reduced to the axes' pixel count (a PGM a strip of rows at a time), keeping
 each block's darkest cell, so a one-cell wall stays black and memory stays that of the
 picture, not of the map.
 """
@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from occtool._json import read_json
 from occtool.errors import InputError
+from occtool.limits import DEFAULT_MEMORY_LIMIT
 from occtool.plot._canvas import new_figure
 
 DEFAULT_MAP_SIZE = (8.0, 8.0)
@@ -32,8 +33,6 @@ MAX_SIDECAR_BYTES = 128 * 1024 * 1024
 #: Share of the figure the map's axes cover at least (matplotlib's default subplot box is
 #: 0.775 x 0.77; the constrained layout gives more), for the pixels the raster is reduced to.
 _AXES_SHARE = 0.75
-#: Cells reduced per step: bounds the padded copy of a strip of rows.
-_STRIP_CELLS = 1 << 23
 
 
 def _sidecar(path: Path) -> Any:
@@ -72,14 +71,22 @@ def _frontier_coordinates(document: Any, path: Path) -> Any:
     return [g.get("coordinates") for g in geometries]  # type: ignore[union-attr]
 
 
-def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndarray]:
-    """The Nav2 map, the path and the frontier points of an ``occtool map`` folder."""
+def _map_yaml(folder: Path) -> Path:
+    if not (folder / "map.yaml").is_file():
+        raise InputError(f"{folder}: no map.yaml (write the folder with `occtool map LOG -o {folder}/`)")
+    return folder / "map.yaml"
+
+
+def read_map_folder(folder: str | Path, *, decimate: int = 1,
+                    memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT) -> tuple[Any, list[list[float]],
+                                                                                           np.ndarray]:
+    """The Nav2 map (read ``decimate`` times coarser, within ``memory_limit``:
+    :func:`occtool.formats.nav2.read_nav2`), the path and the frontier points of an
+    ``occtool map`` folder."""
     from occtool.formats.nav2 import read_nav2
 
     folder = Path(folder)
-    if not (folder / "map.yaml").is_file():
-        raise InputError(f"{folder}: no map.yaml (write the folder with `occtool map LOG -o {folder}/`)")
-    nav2 = read_nav2(folder / "map.yaml")
+    nav2 = read_nav2(_map_yaml(folder), decimate=decimate, memory_limit=memory_limit)
     path: list[list[float]] = []
     frontiers = np.zeros((0, 2))
     summary_path, frontiers_path = folder / "summary.json", folder / "frontiers.geojson"
@@ -96,12 +103,12 @@ def read_map_folder(folder: str | Path) -> tuple[Any, list[list[float]], np.ndar
 
 
 def decimate(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
-    """Each ``factor`` x ``factor`` block of ``cells`` as its largest value.
+    """Each ``factor`` x ``factor`` block of ``cells`` as its largest value
+    (:func:`occtool.formats.nav2.decimate_cells`; :func:`map_figure` reads a map so reduced).
 
     In a map's cells (-1 unknown, 0 free, 1-99 graded, 100 occupied) the largest is the
     darkest known cell: a block with one occupied cell is occupied, one with no known cell
-    unknown. Edge blocks are padded with unknown, which never wins. The strips of rows
-    reduced at once are bounded, so memory stays that of the result.
+    unknown. Edge blocks are padded with unknown, which never wins.
 
     Examples
     --------
@@ -111,21 +118,9 @@ def decimate(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
     >>> decimate(cells, 2).tolist()
     [[0, 0, -1], [0, 100, -1]]
     """
-    if factor < 1:
-        raise InputError(f"decimation factor must be >= 1, got {factor}")
-    if factor == 1:
-        return cells
-    rows, cols = cells.shape
-    out_rows, out_cols = -(-rows // factor), -(-cols // factor)
-    reduced = np.empty((out_rows, out_cols), dtype=np.int8)
-    strip = max(1, _STRIP_CELLS // (out_cols * factor * factor))  # output rows per step
-    for first in range(0, out_rows, strip):
-        block = cells[first * factor:(first + strip) * factor]
-        count = -(-len(block) // factor)
-        padded = np.full((count * factor, out_cols * factor), -1, dtype=np.int8)
-        padded[:len(block), :cols] = block
-        reduced[first:first + count] = padded.reshape(count, factor, out_cols, factor).max(axis=(1, 3))
-    return reduced
+    from occtool.formats.nav2 import decimate_cells
+
+    return decimate_cells(cells, factor)
 
 
 #: A wall's colour is ``(1, 1 - trust, 1 - trust) * _WALL_SHADE``: dark red at trust 1,
@@ -163,25 +158,27 @@ def _trust_key(figure: Any, axes: Any) -> None:
 
 
 def map_figure(folder: str | Path, *, size: tuple[float, float] = DEFAULT_MAP_SIZE, dpi: float = 100.0,
-               title: str | None = None, path: bool = True, frontiers: bool = True, walls: bool = False) -> Any:
+               title: str | None = None, path: bool = True, frontiers: bool = True, walls: bool = False,
+               memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT) -> Any:
     """Free (white), occupied (black) and unknown (grey; pale blue in a scale map, whose graded
     cells are greys) cells in the map frame, the run's
     path (blue), the frontier points (green) and (``walls``) the world map's wall
     segments, from ``world.occmap``, red where every position that saw them returned from
     them and paler as more saw through them, with a colour bar of that trust (0-1).
 
-    A map with more cells than the axes have pixels is drawn block by block, each block
-    its darkest cell (:func:`decimate`)."""
-    from occtool.formats.nav2 import CELL_UNKNOWN
+    A map with more cells than the axes have pixels is read and drawn block by block, each
+    block its darkest cell (:func:`decimate`), so memory is that of the picture, not of the
+    map (a PNG map is decoded whole: ``memory_limit``, :func:`occtool.formats.nav2.read_nav2`)."""
+    from occtool.formats.nav2 import CELL_UNKNOWN, nav2_shape
 
-    nav2, run_path, frontier_points = read_map_folder(folder)
-    figure = new_figure(size, dpi)
-    axes = figure.add_subplot(1, 1, 1)
-    rows, cols = nav2.cells.shape
+    rows, cols = nav2_shape(_map_yaml(Path(folder)))
     # At equal aspect the axes show the map at the smaller of the two pixels-per-cell ratios.
     width_px, height_px = size[0] * dpi * _AXES_SHARE, size[1] * dpi * _AXES_SHARE
     factor = max(1, math.ceil(max(cols / width_px, rows / height_px)))
-    cells = decimate(nav2.cells, factor)
+    nav2, run_path, frontier_points = read_map_folder(folder, decimate=factor, memory_limit=memory_limit)
+    cells = nav2.cells
+    figure = new_figure(size, dpi)
+    axes = figure.add_subplot(1, 1, 1)
     # Grey from white (free, 0) to black (occupied, 100); a scale map's graded cells between.
     # Unknown: mid grey in a trinary map, pale blue in a scale map, whose greys are taken.
     grey = 1.0 - np.clip(cells, 0, 100).astype(np.float32) / 100.0
