@@ -244,3 +244,20 @@ def test_surface_keys_round_trip_as_varint_gaps(keys: list[int]) -> None:
     assert occmap3d.keys_of_varints(coded, len(keys) + 1, 4_000_000) is None
     if keys:
         assert occmap3d.keys_of_varints(coded, len(keys), keys[-1]) is None  # beyond the box
+
+
+def test_a_large_box_walks_to_the_same_map_as_a_small_one(room: WorldMap3D, monkeypatch) -> None:
+    """Boxes over ``DENSE_CELLS`` count the walk by sorting and find patch cells by search
+    rather than by dense tables; the map is the same, byte for byte."""
+    from occtool.fuse import _patches
+
+    monkeypatch.setattr(_patches, "DENSE_CELLS", 0)
+    sparse = build_world_map_3d(*_rays(), resolution=0.2)
+    assert sparse.to_bytes() == room.to_bytes()
+    assert np.array_equal(sparse.fine_free_keys, room.fine_free_keys)
+    monkeypatch.setattr(_patches, "CHUNK_SAMPLES", 5_000)  # many walk chunks: the same sums
+    assert build_world_map_3d(*_rays(), resolution=0.2).to_bytes() == room.to_bytes()
+    monkeypatch.setattr(_patches, "DENSE_CELLS", 1 << 22)  # dense tables, counts by a sort or a bincount
+    for chunks in (1, 1 << 10):
+        monkeypatch.setattr(_patches, "DENSE_COUNTS", chunks)
+        assert build_world_map_3d(*_rays(), resolution=0.2).to_bytes() == room.to_bytes()

@@ -104,38 +104,40 @@ def choose_resolution(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bo
     if occupied.shape[0] == 0 or free.shape[0] == 0:
         return default, {"chosen": default, "why": "the held-out positions hold no returns"}
     walked = float(np.linalg.norm(ends[train_rays] - origins[train_rays], axis=1).sum())
+    points = np.vstack([occupied, free])  # the world's own frame: predict's without to_map
     scores: dict[str, float] = {}
-    best, best_auc, best_world = None, -1.0, None
+    best, best_auc, best_world, best_ridges = None, -1.0, None, None
     for size in sorted(candidates, reverse=True):  # coarse first: the coarsest is always tried
         if best is not None and walked / (0.5 * size) > MAX_STEPS:
             break
         world = build_world_map_3d(origins[train_rays], ends[train_rays], hits[train_rays], resolution=size,
                                    **options)
-        auc = roc_auc(world.predict(occupied), world.predict(free))
+        ridges = world.ridges(points)
+        p = np.maximum(world.background(points), ridges)
+        auc = roc_auc(p[:len(occupied)], p[len(occupied):])
         scores[f"{size:g}"] = round(auc, 4)
         if best is not None and auc < best_auc + AUC_TOLERANCE:
             break  # no finer cell is tried once one does not earn its bytes
-        best, best_auc, best_world = size, auc, world
-    assert best is not None and best_world is not None
+        best, best_auc, best_world, best_ridges = size, auc, world, ridges
+    assert best is not None and best_world is not None and best_ridges is not None
     report: dict[str, Any] = {"chosen": best, "inner_auc": scores,
                               "held_out_positions": int(held_out_blocks(count, seed).sum()), "positions": count}
     if "saturation" not in options and best_world.free_table is not None:
-        report["saturation"], report["saturation_auc"] = _saturation(best_world, occupied, free)
+        report["saturation"], report["saturation_auc"] = _saturation(best_world, points, len(occupied), best_ridges)
     return best, report
 
 
-def _saturation(world: Any, occupied: FloatArray, free: FloatArray) -> tuple[float, dict[str, float]]:
+def _saturation(world: Any, points: FloatArray, occupied: int, ridges: FloatArray) -> tuple[float, dict[str, float]]:
     """The :data:`SATURATIONS` value under which ``world``'s free space scores the held-out
-    points best (the patches' ridges are the same for every one: computed once)."""
-    points = np.vstack([occupied, free])
-    ridges = world.ridges(points)
+    points (the first ``occupied`` of them returns) best; the patches' ``ridges`` there are
+    the same for every one."""
     _, _, size = world.free_box
     scores: dict[str, float] = {}
     best, best_auc = FREE_SATURATION, -1.0
     for saturation in SATURATIONS:
         world.free_table = free_table(size, world.free_level, saturation, world.free_table.size)
         p = np.maximum(world.background(points), ridges)
-        auc = roc_auc(p[:len(occupied)], p[len(occupied):])
+        auc = roc_auc(p[:occupied], p[occupied:])
         scores[f"{saturation:g}"] = round(auc, 4)
         if auc > best_auc:
             best, best_auc = saturation, auc

@@ -25,8 +25,10 @@ from occtool.formats.occmap3d import AZIMUTH_STEPS, POLAR_STEPS, PatchCodes, Pat
 
 FloatArray = NDArray[np.float64]
 
-#: Rays are walked in chunks of at most this many samples (memory, not speed).
-CHUNK_SAMPLES = 1_000_000
+#: Rays are walked in chunks of at most this many samples: a chunk's dozen temporaries
+#: stay within the caches (on the TUM cabinet, 3.7 M walk points at 0.2 m: 1 << 20 a
+#: chunk took 1.35-1.6 s of CPU on this project's shared 2-core machine, 1 << 18 0.42-0.45 s).
+CHUNK_SAMPLES = 1 << 18
 #: A patch is never thinner than this (metres): range noise of the sensors read.
 MIN_THICKNESS = 0.01
 #: A patch fitted to fewer returns than this takes its normal from the rays that hit it.
@@ -376,12 +378,14 @@ def counted_unique(keys: NDArray[np.int64], weights: NDArray[np.int64] | None = 
 
 
 def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
-          step: float) -> Iterator[tuple[NDArray[np.int64], FloatArray, FloatArray, FloatArray]]:
-    """Chunks of ``(ray, distance, point, next point)``: points every ``step`` along each ray's
-    free part (the last within half a step of its end), the next point a step further."""
+          step: float) -> Iterator[tuple[NDArray[np.int64], FloatArray, tuple[FloatArray, FloatArray, FloatArray]]]:
+    """Chunks of ``(ray, distance, (x, y, z))``: points every ``step`` along each ray's free
+    part (the last within half a step of its end), one coordinate an array (a point is
+    ``origin + distance * direction``, the same numbers as a ``(K, 3)`` array's)."""
     vector = ends - origins
     length = np.maximum(np.linalg.norm(vector, axis=1), 1e-12)
     direction = vector / length[:, None]
+    columns = [(np.ascontiguousarray(origins[:, a]), np.ascontiguousarray(direction[:, a])) for a in range(3)]
     count = np.maximum(np.floor(free_length / step + 0.5).astype(np.int64), 0)
     total = np.cumsum(count)
     begin = 0
@@ -392,9 +396,79 @@ def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
         ray = np.repeat(np.arange(begin, end), c)
         k = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
         t = (k + 0.5) * step
-        point = origins[ray] + t[:, None] * direction[ray]
-        yield ray, t, point, point + step * direction[ray]
+        x, y, z = (np.take(o, ray) + t * np.take(d, ray) for o, d in columns)
+        yield ray, t, (x, y, z)
         begin = end
+
+
+#: Boxes of at most this many cells find the patch cells a point lies in by a table, larger
+#: ones by a search; those of at most ``DENSE_COUNTS`` chunks count the walk's points in a
+#: dense array (a bincount a chunk), larger ones by sorting each chunk's keys.
+DENSE_CELLS = 1 << 22
+DENSE_COUNTS = 4
+
+
+@dataclass
+class _PatchCells:
+    """Which patch of each level covers a cell of the finest box: the sorted fine keys any
+    patch covers, and ``(len(keys), levels)`` the patch's index there per level (-1: none);
+    ``dense`` (boxes of at most :data:`DENSE_CELLS`) the row of every fine key (-1: none)."""
+
+    keys: NDArray[np.int64]
+    index: NDArray[np.int64]
+    dense: NDArray[np.int32] | None
+
+    def rows(self, keys: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The row of each fine key, -1 where no patch covers it."""
+        if self.dense is not None:
+            return self.dense[keys].astype(np.int64)
+        if not self.keys.size:
+            return np.full(keys.shape, -1, dtype=np.int64)
+        at = np.minimum(np.searchsorted(self.keys, keys), self.keys.size - 1)
+        return np.where(self.keys[at] == keys, at, -1)
+
+
+def _patch_cells(levels: list[PatchCodes], shapes: list[PatchGeometry], lo: NDArray[np.int64],
+                 shape: tuple[int, int, int], resolution: float, reach: float) -> _PatchCells:
+    """The fine cells each level's patches cover (a level-``l`` cell is ``8 ** l`` fine ones;
+    those outside the fine box hold no walk point and are left out), and of a coarser level's
+    only those whose middle lies within ``reach`` and half a fine cell's diagonal of the
+    patch's plane: no point of the others is within ``reach`` of it."""
+    fine_keys, level_of, patch_of = [], [], []
+    for level, (codes, g) in enumerate(zip(levels, shapes)):
+        if not len(codes):
+            continue
+        low, box = level_box(lo, shape, level)
+        i, rest = np.divmod(codes.keys, box[1] * box[2])
+        j, k = np.divmod(rest, box[2])
+        corner = (np.column_stack([i, j, k]) + low) << level
+        side = np.arange(1 << level)
+        offsets = np.stack(np.meshgrid(side, side, side, indexing="ij"), axis=-1).reshape(-1, 3)
+        fine = (corner[:, None, :] + offsets[None, :, :]).reshape(-1, 3)
+        keys = index_keys(fine, lo, shape)
+        patch = np.repeat(np.arange(len(codes)), offsets.shape[0])
+        inside = keys >= 0
+        if level:
+            middle = (fine + 0.5) * resolution
+            apart = np.abs(np.sum((middle - g.centres[patch]) * g.normals[patch], axis=1))
+            inside &= apart <= (0.5 * math.sqrt(3.0) * resolution + reach) * (1.0 + 1e-6) + 1e-9
+        fine_keys.append(keys[inside])
+        level_of.append(np.full(int(inside.sum()), level, dtype=np.int64))
+        patch_of.append(patch[inside])
+    cells = int(shape[0]) * int(shape[1]) * int(shape[2])
+    if not fine_keys:
+        empty = np.zeros(0, dtype=np.int64)
+        return _PatchCells(empty, np.zeros((0, len(levels)), dtype=np.int64),
+                           np.full(cells, -1, dtype=np.int32) if cells <= DENSE_CELLS else None)
+    every = np.concatenate(fine_keys)
+    keys, row = np.unique(every, return_inverse=True)
+    index = np.full((keys.size, len(levels)), -1, dtype=np.int64)
+    index[row, np.concatenate(level_of)] = np.concatenate(patch_of)
+    dense = None
+    if cells <= DENSE_CELLS:
+        dense = np.full(cells, -1, dtype=np.int32)
+        dense[keys] = np.arange(keys.size, dtype=np.int32)
+    return _PatchCells(keys, index, dense)
 
 
 def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_],
@@ -404,39 +478,80 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     """The sorted keys of the cells the rays crossed (a return's ray stops ``margin`` short of
     it; a free-only ray is free to its end), how many of the walk's points (every half cell
     along the rays) fell in each, and, per level and patch, how many rays went through its
-    slab (level ``l``'s cells are ``2 ** l`` times the resolution)."""
+    slab (level ``l``'s cells are ``2 ** l`` times the resolution).
+
+    A ray goes through a slab where a walk point lies in the patch's cell, the next point
+    (a step on, still short of the ray's return) lies on the other side of its plane, and
+    the segment between them meets the plane within the patch's extent. Only the points in
+    a patch's cell are looked at for that (found once for every level, :func:`_patch_cells`).
+    """
     step = 0.5 * resolution
     length = np.linalg.norm(ends - origins, axis=1)
     free_length = np.where(hits, length - margin, length)
+    vector = ends - origins
+    direction = vector / np.maximum(np.linalg.norm(vector, axis=1), 1e-12)[:, None]
     boxes = [level_box(lo, shape, level) for level in range(len(levels))]
     shapes = [geometry(codes, box[0], box[1], resolution * (1 << level), extent)
               for level, (codes, box) in enumerate(zip(levels, boxes))]
     crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
+    reach = step * (1.0 + 1e-6) + 1e-9
+    direction_columns = [np.ascontiguousarray(direction[:, a]) for a in range(3)]
+    centres = [[np.ascontiguousarray(g.centres[:, a]) for a in range(3)] for g in shapes]
+    normals = [[np.ascontiguousarray(g.normals[:, a]) for a in range(3)] for g in shapes]
+    covered = _patch_cells(levels, shapes, lo, shape, resolution, reach)
+    cells = int(shape[0]) * int(shape[1]) * int(shape[2])
+    dense = np.zeros(cells, dtype=np.int64) if cells <= min(DENSE_CELLS, DENSE_COUNTS * CHUNK_SAMPLES) else None
     free: list[tuple[NDArray[np.int64], NDArray[np.int64]]] = []
-    for ray, t, point, after in _walk(origins, ends, free_length, step):
-        # Cell coordinates once; a level's are the same shifted (floor of a floor).
-        ijk = np.floor(point / resolution).astype(np.int64)
-        keys = index_keys(ijk, lo, shape)
-        free.append(counted_unique(keys[keys >= 0]))
+    for ray, t, (x, y, z) in _walk(origins, ends, free_length, step):
+        i = np.floor(x / resolution).astype(np.int64) - lo[0]
+        j = np.floor(y / resolution).astype(np.int64) - lo[1]
+        k = np.floor(z / resolution).astype(np.int64) - lo[2]
+        keys = (i * shape[1] + j) * shape[2] + k
+        if not (0 <= i.min() and i.max() < shape[0] and 0 <= j.min() and j.max() < shape[1]
+                and 0 <= k.min() and k.max() < shape[2]):  # rounding at the box's edge
+            inside = (i >= 0) & (i < shape[0]) & (j >= 0) & (j < shape[1]) & (k >= 0) & (k < shape[2])
+            keys = np.where(inside, keys, -1)
+        valid = keys if keys.min() >= 0 else keys[keys >= 0]
+        if dense is not None:
+            dense += np.bincount(valid, minlength=cells)
+        else:
+            free.append(counted_unique(valid))
+        if not covered.keys.size:
+            continue
         # A crossing is counted only where the next point is still short of the ray's return.
-        short = t + step <= free_length[ray]
-        for level, (codes, box, g) in enumerate(zip(levels, boxes, shapes)):
+        rows = covered.rows(np.maximum(keys, 0))
+        near = np.flatnonzero((rows >= 0) & (keys >= 0))
+        near = near[t[near] + step <= free_length[ray[near]]]
+        # One coordinate an array (the sums below in the order of a (K, 3) row's: x, y, z).
+        point = (x[near], y[near], z[near])
+        heading = [np.take(d, ray[near]) for d in direction_columns]
+        index = covered.index[rows[near]]
+        for level, (codes, g, centre, normal) in enumerate(zip(levels, shapes, centres, normals)):
             if not len(codes):
                 continue
-            keys = index_keys(ijk >> level, box[0], box[1])
-            at = np.clip(np.searchsorted(codes.keys, keys), 0, len(codes) - 1)
-            here = np.flatnonzero((keys >= 0) & (codes.keys[at] == keys) & short)
-            p = at[here]
-            c, n = g.centres[p], g.normals[p]
-            d0 = np.sum((point[here] - c) * n, axis=1)
-            d1 = np.sum((after[here] - c) * n, axis=1)
+            here = np.flatnonzero(index[:, level] >= 0)
+            p = index[here, level]
+            d0 = sum(((a[here] - np.take(c, p)) * np.take(m, p) for a, c, m in zip(point, centre, normal)),
+                     start=np.zeros(here.size))
+            # The next point is a step on: a point farther than that from the plane does not
+            # cross it (the bound has room for rounding), and the rest need not be looked at.
+            close = np.abs(d0) <= reach
+            here, d0, p = here[close], d0[close], p[close]
+            at = [a[here] for a in point]
+            after = [a + step * d[here] for a, d in zip(at, heading)]
+            d1 = sum(((a - np.take(c, p)) * np.take(m, p) for a, c, m in zip(after, centre, normal)),
+                     start=np.zeros(here.size))
             through = (d0 * d1 < 0.0) & (np.minimum(np.abs(d0), np.abs(d1)) > 0.0)
             s = d0[through] / (d0[through] - d1[through])
-            x = point[here][through] + s[:, None] * (after[here][through] - point[here][through]) - c[through]
             q = p[through]
-            inside = ((np.abs(np.sum(x * g.u[q], axis=1)) <= g.extents[q, 0])
-                      & (np.abs(np.sum(x * g.v[q], axis=1)) <= g.extents[q, 1]))
+            x0 = np.column_stack([a[through] for a in at])
+            xs = x0 + s[:, None] * (np.column_stack([a[through] for a in after]) - x0) - g.centres[q]
+            inside = ((np.abs(np.sum(xs * g.u[q], axis=1)) <= g.extents[q, 0])
+                      & (np.abs(np.sum(xs * g.v[q], axis=1)) <= g.extents[q, 1]))
             crossings[level] += np.bincount(q[inside], minlength=len(codes))
+    if dense is not None:
+        keys = np.flatnonzero(dense)
+        return keys.astype(np.int64), dense[keys], crossings
     if not free:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), crossings
     keys, counts = counted_unique(np.concatenate([k for k, _ in free]), np.concatenate([c for _, c in free]))

@@ -75,8 +75,10 @@ COARSE_LEVELS = 2
 #: RMS distance (metres) of a coarse cell's returns from their plane under which it is one
 #: patch: about the range noise of a Kinect at 3-4 m or a lidar's plus its registration.
 FLAT = 0.05
-#: Query points evaluated at once (memory of the ``(K, NEIGHBOURS, 3)`` differences).
-QUERY_CHUNK = 100_000
+#: Query points evaluated at once: their ``(K, NEIGHBOURS)`` temporaries stay within the
+#: caches (58k held-out points of the depth office: 0.12 s of CPU in chunks of 100k, 0.085 s
+#: in chunks of 16k; the same answers).
+QUERY_CHUNK = 1 << 14
 
 
 @dataclass(eq=False)
@@ -217,7 +219,10 @@ class WorldMap3D:
             return out
         g = self.geometry
         if self._trees is None:
-            from scipy.spatial import cKDTree  # lazy: scipy's import is slow and only predict needs it
+            # occtool's own index answers as cKDTree does (but for which of exactly equal
+            # distances comes first), without scipy.spatial's import: 0.3-0.45 s of CPU a
+            # process, a sixth of a TUM cabinet's 3D map.
+            from occtool.neighbours import NeighbourIndex
 
             self._trees = []
             first = 0
@@ -228,17 +233,19 @@ class WorldMap3D:
                     # No ridge is above 0 farther from its centre than its half-diagonal plus a falloff.
                     reach = float(np.sqrt(np.sum(g.extents[members].max(axis=0) ** 2)
                                           + g.thickness[members].max() ** 2)) + max(self.falloff, self.edge_falloff)
-                    self._trees.append((cKDTree(g.centres[members]), members, reach))
+                    self._trees.append((NeighbourIndex(g.centres[members], reach), members, reach))
         for tree, members, reach in self._trees:
             k = min(NEIGHBOURS, members.size)
             for begin in range(0, points.shape[0], QUERY_CHUNK):
                 chunk = points[begin:begin + QUERY_CHUNK]
                 _, found = tree.query(chunk, k=k, distance_upper_bound=reach)
                 index = np.asarray(found).reshape(chunk.shape[0], k)
-                valid = index < members.size
-                ridge = self.ridge(chunk[:, None, :], members[np.where(valid, index, 0)])
-                best = np.where(valid, ridge, 0.0).max(axis=1)
-                out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], best)
+                # Only the neighbours within reach (a third or less of them on the bench's
+                # sequences) can rise above 0: the ridges of those, the rest stay 0.
+                row, column = np.nonzero(index < members.size)
+                ridge = np.zeros(index.shape)
+                ridge[row, column] = self.ridge(chunk[row], members[index[row, column]])
+                out[begin:begin + QUERY_CHUNK] = np.maximum(out[begin:begin + QUERY_CHUNK], ridge.max(axis=1))
         return out
 
     def __call__(self, xyz: ArrayLike) -> FloatArray:
