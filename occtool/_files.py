@@ -15,13 +15,31 @@ import contextlib
 import errno
 import io
 import os
+import signal
 import sys
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
 from occtool import limits
 from occtool.errors import InputError
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM held back (delivered when the block ends) where the platform can
+    (POSIX, the main thread): a few renames that must not stop half way, or a call into a
+    library that holds locks its own clean-up needs (a process pool's)."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    can = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if can else None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
 
 #: Characters of the target's name kept in its temporary file's name (``.NAME.XXXXXXXX.tmp``).
 TEMP_PREFIX_CHARS = 32

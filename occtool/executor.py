@@ -28,6 +28,8 @@ import os
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
+from occtool._files import signals_held
+
 Task = tuple[Any, Callable[..., Any], tuple[Any, ...]]
 
 
@@ -82,6 +84,10 @@ def _ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+#: Longest a Ctrl-C or SIGTERM waits (seconds) while the parent waits for a worker's result.
+SIGNAL_SLICE = 0.25
+
+
 class ProcessExecutor(Executor):
     """``jobs`` local processes (spawned, so no thread or lock of the parent is inherited)."""
 
@@ -109,16 +115,26 @@ class ProcessExecutor(Executor):
                 except StopIteration:
                     exhausted = True
                     break
-                pending[self.pool.submit(function, *args)] = key
+                # Ctrl-C or SIGTERM raised inside the pool's own locks (submit's, wait's
+                # futures') would leave them held, and the clean-up that needs them hangs:
+                # held back, they arrive between these calls (SIGTERM mid-run: a fit -j 2
+                # that never exited).
+                with signals_held():
+                    pending[self.pool.submit(function, *args)] = key
             if not pending:
                 return
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done: set[Any] = set()
+            while not done:  # in slices, so that a held signal waits a slice at most
+                with signals_held():
+                    done, _ = wait(pending, timeout=SIGNAL_SLICE, return_when=FIRST_COMPLETED)
             for future in done:
                 key = pending.pop(future)
-                exc = future.exception()
-                if isinstance(exc, BrokenProcessPool):
-                    exc = RuntimeError("a worker process died (out of memory, or killed)")
-                yield key, future.result() if exc is None else exc
+                with signals_held():
+                    exc = future.exception()
+                    if isinstance(exc, BrokenProcessPool):
+                        exc = RuntimeError("a worker process died (out of memory, or killed)")
+                    outcome = future.result() if exc is None else exc
+                yield key, outcome
 
     def close(self, *, cancel: bool = False) -> None:
         if cancel:

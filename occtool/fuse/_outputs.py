@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
-import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -18,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from occtool._files import atomic_write
+from occtool._files import atomic_write, signals_held
 from occtool.errors import InputError
 from occtool.fuse._run import RunMap
 from occtool.fuse._world import WorldMap
@@ -171,20 +169,6 @@ def _write_files(run: RunMap, staging: Path, world_bytes: bytes, mcap: bool,
 
 
 @contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM held back (delivered when the block ends) where the platform can
-    (POSIX, the main thread): a few renames that must not stop half way."""
-    held = {signal.SIGINT, signal.SIGTERM}
-    can = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if can else None
-    try:
-        yield
-    finally:
-        if previous is not None:
-            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
-
-
-@contextmanager
 def _output_set(folder: Path, *, overwrite: bool) -> Iterator[Path]:
     """A new hidden folder to write a set into; moved into ``folder`` as one set when the
     block ends normally, removed in every case (:func:`write_run_map` says how)."""
@@ -197,7 +181,7 @@ def _output_set(folder: Path, *, overwrite: bool) -> Iterator[Path]:
     staging = _new_folder(folder.parent if fresh else folder)
     try:
         yield staging
-        with _signals_held():
+        with signals_held():
             try:
                 if fresh and not folder.exists():
                     os.rename(staging, folder)
@@ -207,7 +191,7 @@ def _output_set(folder: Path, *, overwrite: bool) -> Iterator[Path]:
                 shutil.rmtree(staging, ignore_errors=True)
     finally:
         if staging.exists():  # interrupted while writing
-            with _signals_held():
+            with signals_held():
                 shutil.rmtree(staging, ignore_errors=True)
 
 
