@@ -103,21 +103,9 @@ def read_map_folder(folder: str | Path, *, decimate: int = 1,
 
 
 def decimate(cells: NDArray[np.int8], factor: int) -> NDArray[np.int8]:
-    """Each ``factor`` x ``factor`` block of ``cells`` as its largest value
-    (:func:`occtool.formats.nav2.decimate_cells`; :func:`map_figure` reads a map so reduced).
-
-    In a map's cells (-1 unknown, 0 free, 1-99 graded, 100 occupied) the largest is the
-    darkest known cell: a block with one occupied cell is occupied, one with no known cell
-    unknown. Edge blocks are padded with unknown, which never wins.
-
-    Examples
-    --------
-    >>> cells = np.zeros((4, 5), dtype=np.int8)
-    >>> cells[2, 3] = 100
-    >>> cells[:, 4] = -1
-    >>> decimate(cells, 2).tolist()
-    [[0, 0, -1], [0, 100, -1]]
-    """
+    """Each ``factor`` x ``factor`` block of ``cells`` as its largest value: the one home of
+    that rule is :func:`occtool.formats.nav2.decimate_cells` (:func:`map_figure` reads a
+    map so reduced)."""
     from occtool.formats.nav2 import decimate_cells
 
     return decimate_cells(cells, factor)
