@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from occtool.errors import InputError
+from occtool.executor import CHUNK_FEATURES, CHUNK_POSITIONS
 from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE, select_keyframes
@@ -39,11 +40,6 @@ class FuseReport:
     sightings: RunReturns | None = None
 
 
-#: A task of the keyframes' fits holds consecutive keyframes up to this many features (or
-#: :data:`CHUNK_POSITIONS` positions), so that a cluster's cost per task is shared by several
-#: fits (about 0.1 s each) and the results stay in the positions' order.
-CHUNK_FEATURES = 20_000
-CHUNK_POSITIONS = 16
 
 
 @dataclass(frozen=True)
@@ -73,7 +69,8 @@ def _fit_keyframes(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
 
 
 def _chunks(positions: Sequence[Any]) -> list[list[int]]:
-    """Consecutive indices into ``positions``, grouped as :data:`CHUNK_FEATURES` and :data:`CHUNK_POSITIONS` say."""
+    """Consecutive indices into ``positions``, grouped as
+    :data:`occtool.executor.CHUNK_FEATURES` and ``CHUNK_POSITIONS`` say."""
     chunks: list[list[int]] = [[]]
     size = 0
     for k, item in enumerate(positions):

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from occtool.errors import InputError
+from occtool.executor import CHUNK_FEATURES, CHUNK_POSITIONS
 from occtool.modelset._common import (
     Failure,
     ProgressCallback,
@@ -80,10 +81,6 @@ def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
     return out
 
 
-#: A task holds consecutive positions up to this many features (or CHUNK_POSITIONS
-#: positions): small positions travel together, so a cluster's per-task cost is shared.
-CHUNK_FEATURES = 20_000
-CHUNK_POSITIONS = 16
 
 
 def _open_source(source: Any, read_options: dict[str, Any]) -> Any:
