@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable, Iterator
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from occtool._files import signals_held
 
@@ -37,6 +38,41 @@ Task = tuple[Any, Callable[..., Any], tuple[Any, ...]]
 #: per task (about that of one 0.1 s fit) is shared (model sets' fits and a map's keyframes).
 CHUNK_FEATURES = 20_000
 CHUNK_POSITIONS = 16
+
+T = TypeVar("T")
+
+
+def tasks_of_fits(items: Iterable[T], features: Callable[[T], int]) -> Iterator[list[T]]:
+    """Consecutive ``items`` (positions, or what stands for them) grouped into tasks of fits,
+    lazily: a task holds at most :data:`CHUNK_POSITIONS` of them and :data:`CHUNK_FEATURES`
+    features (``features(item)`` each), unless one item alone holds more: a large position
+    travels alone. Model sets' fits and a map's keyframes are grouped by this one rule.
+
+    >>> [len(task) for task in tasks_of_fits([5_000] * 5 + [30_000, 10], lambda n: n)]
+    [4, 1, 1, 1]
+    """
+    task: list[T] = []
+    size = 0
+    for item in items:
+        count = features(item)
+        if task and size + count > CHUNK_FEATURES:
+            yield task
+            task, size = [], 0
+        task.append(item)
+        size += count
+        if len(task) >= CHUNK_POSITIONS:
+            yield task
+            task, size = [], 0
+    if task:
+        yield task
+
+
+@dataclass(frozen=True)
+class Failed:
+    """One item of a task that failed for its data, by its reason: the exception itself may
+    not survive pickling back from a worker."""
+
+    reason: str
 
 
 def default_jobs() -> int:
@@ -257,5 +293,5 @@ def make_executor(jobs: int | None = None, scheduler: Any = None) -> Executor:
     return Executor() if jobs == 1 else ProcessExecutor(jobs)
 
 
-__all__ = ["CHUNK_FEATURES", "CHUNK_POSITIONS", "DASK_CLUSTER_CONFIG", "DaskExecutor", "Executor",
-           "ProcessExecutor", "check_jobs", "default_jobs", "in_order", "make_executor"]
+__all__ = ["CHUNK_FEATURES", "CHUNK_POSITIONS", "DASK_CLUSTER_CONFIG", "DaskExecutor", "Executor", "Failed",
+           "ProcessExecutor", "check_jobs", "default_jobs", "in_order", "make_executor", "tasks_of_fits"]

@@ -344,3 +344,15 @@ def test_extract_reports_a_broken_model_and_writes_the_others(tmp_path):
     assert result.exit_code == 1 and "1 of 3 position(s) failed" in result.output
     assert sorted(p.name for p in (tmp_path / "navs").iterdir()) == ["nav_0000.geojson", "nav_0002.geojson"]
     assert no_temp_files(tmp_path)
+
+
+def test_tasks_of_fits_hold_a_task_of_positions_or_features_and_a_large_position_alone():
+    from occtool.executor import CHUNK_FEATURES, CHUNK_POSITIONS, tasks_of_fits
+
+    small = [10] * (CHUNK_POSITIONS + 3)
+    assert [len(t) for t in tasks_of_fits(small, lambda n: n)] == [CHUNK_POSITIONS, 3]
+    mixed = [CHUNK_FEATURES // 4] * 3 + [CHUNK_FEATURES * 2] + [1, 1]
+    tasks = list(tasks_of_fits(mixed, lambda n: n))
+    assert tasks == [[CHUNK_FEATURES // 4] * 3, [CHUNK_FEATURES * 2], [1, 1]]
+    # Lazy: a stream of positions is grouped as it is read, in order, each item once.
+    assert [x for t in tasks_of_fits(iter(range(100)), lambda n: 1000) for x in t] == list(range(100))

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from occtool.errors import InputError
-from occtool.executor import CHUNK_FEATURES, CHUNK_POSITIONS
+from occtool.executor import Failed
 from occtool.features import Pose, RangeLog
 from occtool.fuse._combine import DEFAULT_COMBINATION
 from occtool.fuse._keyframes import KEYFRAME_NEW_SHARE, select_keyframes
@@ -40,18 +40,10 @@ class FuseReport:
     sightings: RunReturns | None = None
 
 
-
-
-@dataclass(frozen=True)
-class _Skipped:
-    """A keyframe whose fit failed for its data (the reason: an exception may not survive pickling)."""
-
-    reason: str
-
-
 def _fit_keyframes(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
     """Fit a few keyframes' features with ``params`` (runs in this process or on a worker):
-    for each, the fitted model and its :class:`~occtool.observation.Observation`, or :class:`_Skipped`."""
+    for each, the fitted model and its :class:`~occtool.observation.Observation`, or
+    :class:`~occtool.executor.Failed`."""
     from occtool.errors import OcctoolError
     from occtool.fit import OccupancyRegressor
 
@@ -60,26 +52,12 @@ def _fit_keyframes(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
         try:
             model = OccupancyRegressor(**params).fit(features)
         except OcctoolError as exc:
-            out.append(_Skipped(str(exc)))
+            out.append(Failed(str(exc)))
             continue
         # Every return, far ones too: they mark walls; the map's return_reach keeps them from
         # lending occupancy or clearing cells past the guard's reach.
         out.append((model, observe(model, features)))
     return out
-
-
-def _chunks(positions: Sequence[Any]) -> list[list[int]]:
-    """Consecutive indices into ``positions``, grouped as
-    :data:`occtool.executor.CHUNK_FEATURES` and ``CHUNK_POSITIONS`` say."""
-    chunks: list[list[int]] = [[]]
-    size = 0
-    for k, item in enumerate(positions):
-        if chunks[-1] and (len(chunks[-1]) >= CHUNK_POSITIONS or size + len(item.features) > CHUNK_FEATURES):
-            chunks.append([])
-            size = 0
-        chunks[-1].append(k)
-        size += len(item.features)
-    return [chunk for chunk in chunks if chunk]
 
 
 def fit_in_order(positions: Sequence[Any], params: dict[str, Any], executor: Any = None,
@@ -89,13 +67,12 @@ def fit_in_order(positions: Sequence[Any], params: dict[str, Any], executor: Any
     the positions' order whatever order the chunks finish in, so the map does not depend on
     where the fits ran. ``release``: each entry of ``positions`` (a list) is set to ``None``
     once its features are handed to their task, so that they go when it is done."""
-    from occtool.executor import in_order
+    from occtool.executor import in_order, tasks_of_fits
 
-    chunks = _chunks(positions)
     total = len(positions)
 
     def arguments() -> Any:
-        for chunk in chunks:
+        for chunk in tasks_of_fits(range(total), lambda k: len(positions[k].features)):
             features = [positions[k].features for k in chunk]
             if release:
                 for k in chunk:
@@ -175,7 +152,7 @@ def fuse_log(log: RangeLog, template: Any, *, combination: str = DEFAULT_COMBINA
     fitted_positions: list[int] = []
     for (index, pose, stamp), outcome in zip(placed, fit_in_order(positions, params, executor, progress,
                                                                  release=consume)):
-        if isinstance(outcome, _Skipped):
+        if isinstance(outcome, Failed):
             skipped.append((index, outcome.reason))
             continue
         model, observed = outcome

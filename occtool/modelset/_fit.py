@@ -8,12 +8,11 @@ import stat
 import time
 from collections import Counter
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from occtool.errors import InputError
-from occtool.executor import CHUNK_FEATURES, CHUNK_POSITIONS
+from occtool.executor import Failed, tasks_of_fits
 from occtool.modelset._common import (
     Failure,
     ProgressCallback,
@@ -43,13 +42,6 @@ def _reusable(target: Path, digest: str, settings: str) -> bool:
 
 # --- fitting ------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class _Failed:
-    """A position's failure inside a chunk (an exception may not survive pickling)."""
-
-    reason: str
-
-
 def _reason(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, InputError) else f"{type(exc).__name__}: {exc}"
 
@@ -57,7 +49,7 @@ def _reason(exc: BaseException) -> str:
 def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
     """Fit a few positions (runs in a worker). For each: the model file's text (its run
     object a placeholder), a few facts for the log, the seconds and the host; or a
-    :class:`_Failed`."""
+    :class:`Failed`."""
     import platform
 
     from occtool.fit import OccupancyRegressor
@@ -70,7 +62,7 @@ def _fit_chunk(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
         try:
             model = OccupancyRegressor(**params).fit(features)
         except (InputError, ValueError, ArithmeticError, MemoryError) as exc:
-            out.append(_Failed(_reason(exc)))
+            out.append(Failed(_reason(exc)))
             continue
         seconds = time.perf_counter() - start
         facts = {"features": model.n_features_, "rmse": model.rmse_}
@@ -288,8 +280,8 @@ def fit_model_set(
             summary.positions += count
             outstanding[number] = count
             notify("read", name)
-            chunk: list[tuple[dict[str, Any], Any]] = []
             robot = params.get("robot") or Robot()
+            to_fit = []  # this log's positions that need a fit, a task's worth at a time
             for item in _chosen(stream, positions):
                 digest = features_digest(item.features)
                 model_file = f"model_{item.index:04d}.json"
@@ -306,13 +298,13 @@ def fit_model_set(
                     outstanding[number] -= 1
                     notify("reused", name, item.index)
                     continue
-                chunk.append((entry, item.features))
-                if len(chunk) >= CHUNK_POSITIONS or sum(len(f) for _, f in chunk) >= CHUNK_FEATURES:
-                    yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
-                    chunk = []
-            if chunk:
-                yield (number, [e for e, _ in chunk]), _fit_chunk, (params, [f for _, f in chunk])
-                chunk = []
+                to_fit.append((entry, item.features))
+                # All but the last group of tasks_of_fits's rule are whole tasks already.
+                *tasks_ready, to_fit = tasks_of_fits(to_fit, lambda pair: len(pair[1]))
+                for task in tasks_ready:
+                    yield (number, [e for e, _ in task]), _fit_chunk, (params, [f for _, f in task])
+            if to_fit:
+                yield (number, [e for e, _ in to_fit]), _fit_chunk, (params, [f for _, f in to_fit])
             writer.all_submitted = True
             del stream, survey
 
@@ -324,10 +316,10 @@ def fit_model_set(
             for (number, entries), outcomes in executor.run_unordered(tasks()):
                 writer = writers[number]
                 if isinstance(outcomes, BaseException):  # the whole chunk: a worker died, a cluster error
-                    outcomes = [_Failed(_reason(outcomes))] * len(entries)
+                    outcomes = [Failed(_reason(outcomes))] * len(entries)
                 for entry, outcome in zip(entries, outcomes):
                     outstanding[number] -= 1
-                    if isinstance(outcome, _Failed):
+                    if isinstance(outcome, Failed):
                         summary.failures.append(Failure(writer.source, entry["position"], outcome.reason))
                         writer.fail(entry["position"], outcome.reason)
                         log.warning("%s, position %d: %s", Path(writer.source).name, entry["position"],
