@@ -17,6 +17,7 @@ from occtool.fuse._rasterise import raster_shape, rasterise
 from occtool.fuse._world import DOUBTED_TRUST
 from occtool.io import read_log
 from occtool.limits import memory_bytes
+from occtool.raster import FREE
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 
@@ -36,6 +37,14 @@ def test_the_raster_is_the_same_whatever_its_tiles_and_strips():
         assert np.array_equal(tiled.probability, whole.probability)
         assert np.array_equal(tiled.explored, whole.explored)
     assert np.array_equal(world.rasterise(0.2).cells, whole.cells)
+    # Each band tests its cells against the regions cut to it: the answers of the whole ones.
+    rows, cols = np.indices((ny, nx))
+    centres = np.column_stack([origin[0] + (cols.ravel() + 0.5) * 0.2, origin[1] + (rows.ravel() + 0.5) * 0.2])
+    observed = world.observed(centres).reshape(ny, nx)
+    assert observed.any() and not observed.all()
+    may_be_free = observed & world.free_space(centres).reshape(ny, nx)
+    assert not (tiled.cells == FREE)[~may_be_free].any()
+    assert np.asarray(tiled.explored, dtype=bool)[may_be_free].all()
 
 
 @pytest.fixture(scope="module")
