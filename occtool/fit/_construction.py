@@ -213,13 +213,17 @@ class _Fitter(_Refitter):
 
         pieces: list[FloatArray] = []
         members: list[list[int]] = []
-        centres_per_group = [1] * len(segments)
         extra = L - (3 * len(segments) if len(segments) > 1 else 1)
-        # Extra centres go to the segments whose profile a single line fits worst.
-        seg_cost = [segment_cost(profile, first, end) for first, end in segments]
-        order = np.argsort(-np.asarray(seg_cost), kind="stable")
-        for i in range(extra):
-            centres_per_group[int(order[i % len(order)])] += 1
+        # Extra centres go to the segments whose profile a single line fits worst, in turn:
+        # as many rounds over all of them as there are, the rest by that order (which is
+        # only needed then: the default 64 pieces in 16 segments give every one a second).
+        rounds, rest = divmod(max(extra, 0), len(segments))
+        centres_per_group = [1 + rounds] * len(segments)
+        if rest:
+            seg_cost = [segment_cost(profile, first, end) for first, end in segments]
+            order = np.argsort(-np.asarray(seg_cost), kind="stable")
+            for i in range(rest):
+                centres_per_group[int(order[i])] += 1
 
         plans = self.centre_programmes(profile, segments, centres_per_group)
         for g, ((first, end), centres) in enumerate(zip(segments, self.place_centres(plans))):
