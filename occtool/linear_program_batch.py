@@ -246,7 +246,10 @@ class _Batch:
                 over = go & (self.iterations[run] >= self.max_iterations)
                 status[run[over]] = _ALONE
                 go &= ~over
-            if np.count_nonzero(go):
+            pivots = np.count_nonzero(go)
+            if pivots == go.size:
+                self._pivot(run, r, violation, limit)
+            elif pivots:
                 self._pivot(run[go], r[go], violation[go], limit)
             steps += 1
         return self._results()
@@ -254,16 +257,19 @@ class _Batch:
     def _pivot(self, P: NDArray[np.intp], r: NDArray[np.intp], violation: NDArray[np.float64], limit: int) -> None:
         """One pivot of each programme ``P``, entering inequality ``r``."""
         d = self.d
-        Binv = self.Binv[P]
+        # The state of every programme is read and written in place when all of them pivot
+        # (the first steps of a batch), not gathered and scattered.
+        sel: NDArray[np.intp] | slice = slice(None) if P.size == self.B else P
+        Binv = self.Binv[sel]
         w = np.matmul(self.Gt[P, :d, r][:, None, :], Binv)[:, 0, :]
-        y = self.y[P]
+        y = self.y[sel]
         at = np.arange(P.size)
         size = np.abs(w)  # max(|w|) = max(max(w), -min(w)), solve_lp's
         ptol = PIVOT_TOLERANCE * np.maximum(1.0, size[at, size.argmax(axis=1)])
         positive = w > ptol[:, None]
         safe_w = np.where(positive, w, 1.0)
         # Harris's bound with the dual tolerance, then the largest pivot within it.
-        tol_d = self.tol_d[P]
+        tol_d = self.tol_d[sel]
         ratio = np.where(positive, (y + tol_d[:, None]) / safe_w, np.inf)
         bound = ratio[at, ratio.argmin(axis=1)]
         blocked = bound == np.inf
@@ -281,30 +287,31 @@ class _Batch:
             if P.size == 0:
                 return
             at = np.arange(P.size)
+            sel = P
         k = np.where(positive & (y / safe_w <= bound[:, None]), w, -np.inf).argmax(axis=1)
         wk, yk = w[at, k], y[at, k]
         t = np.where(yk > 0.0, yk / wk, 0.0)
         y -= t[:, None] * w
         y[at, k] = t
-        self.y[P] = y
+        self.y[sel] = y
         # N^-1 after replacing row k of N by g_r; column k is the edge the vertex moves along.
         col = Binv[at, :, k] / wk[:, None]
         Binv -= col[:, :, None] * w[:, None, :]
         Binv[at, :, k] = col
-        self.Binv[P] = Binv
+        self.Binv[sel] = Binv
         col *= (violation + PRIMAL_TOLERANCE * np.maximum(1.0, np.abs(self.h[P, r])))[:, None]
-        self.x1[P, :d] -= col
+        self.x1[sel, :d] -= col
         self.basis[P, k] = r
-        self.iterations[P] += 1
-        since = self.since[P] + 1
-        self.since[P] = since
+        self.iterations[sel] += 1
+        since = self.since[sel] + 1
+        self.since[sel] = since
         # solve_lp refactorises every REFACTOR_EVERY pivots (never reached in the fit).
         if np.count_nonzero(since >= REFACTOR_EVERY):
             self._refactor(P[since >= REFACTOR_EVERY])
         # A degenerate pivot leaves the multipliers where they were; Bland's rule, after a
         # run of them, is solve_lp's.
-        degenerate = np.where(yk <= tol_d, self.degenerate[P] + 1, 0)
-        self.degenerate[P] = degenerate
+        degenerate = np.where(yk <= tol_d, self.degenerate[sel] + 1, 0)
+        self.degenerate[sel] = degenerate
         self.status[P[degenerate >= limit]] = _ALONE
 
     def _refactor(self, R: NDArray[np.intp]) -> None:
