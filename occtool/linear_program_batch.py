@@ -14,8 +14,13 @@ One product differs: the violations of a step (``x1 @ Gt``) come from one stacke
 product, whose last bit may differ from the product of a single programme where BLAS
 splits the row blocks differently. That moves the intermediate vertex by a rounding
 error and can change a choice only between two inequalities whose violations tie within
-it; the answer would then be another optimal vertex within the tolerances (it has not
-happened on the 72,000 programmes of the Freiburg campus map, nor the Intel lab's).
+it; the answer would then be another optimal vertex within the tolerances. It has not
+happened on the ~72,000 programmes of the Freiburg campus map's 1571 keyframes (the same
+coefficients) nor on the Intel lab's 900 positions (the same model files).
+
+Cost: a batch costs about its count of steps (the most pivots any of its programmes takes,
+a dozen or so) times some 40 numpy operations, nearly independent of its width: 64
+programmes of the campus in ~46 us each against ``solve_lp``'s ~230 us.
 
 Whatever leaves the common path is solved again by ``solve_lp`` alone, so its answer is
 ``solve_lp``'s: invalid or unusual data (a zero row, crossed bounds), Bland's rule after
@@ -46,7 +51,7 @@ from occtool.linear_program import (
     solve_lp,
 )
 
-__all__ = ["Programme", "solve_lps"]
+__all__ = ["Programme", "solve_lps", "solve_stacked"]
 
 #: One programme as :func:`solve_lp` takes it: ``cost, A_ub, b_ub, lower, upper``.
 Programme = tuple[ArrayLike, ArrayLike, ArrayLike, ArrayLike, ArrayLike]

@@ -68,9 +68,10 @@ class _Segment:
 class _CentreProgrammes:
     """Every centre's programmes, stacked (:func:`~occtool.linear_program_batch.solve_stacked`).
 
-    Centre ``i`` (of segment ``segment_of[i]``) maximises ``-objective[i] @ q`` under its
-    segment's rows ``rows[own[i]]`` (``r* <= bound[own[i]]``), with the flat floor or the body
-    floor on its emphasised rows ``rows[chosen[i]]`` (``r* >= -flat``, ``-body``), or none.
+    Centre ``i`` (of segment ``segment_of[i]``) minimises ``objective[i] @ q`` (its gains,
+    negated) under its segment's rows ``rows[own[i]]`` (``r* <= bound[i]``), with the flat
+    or the body floor on its emphasised rows ``rows[chosen[i]]`` (``-r* <= flat[chosen[i]]``,
+    ``body[...]`` alike: both hold the floors negated), or none.
     """
 
     segments: list[_Segment]
@@ -225,8 +226,8 @@ class _Fitter(_Refitter):
             for i in range(rest):
                 centres_per_group[int(order[i])] += 1
 
-        plans = self.centre_programmes(profile, segments, centres_per_group)
-        for g, ((first, end), centres) in enumerate(zip(segments, self.place_centres(plans))):
+        programmes = self.centre_programmes(profile, segments, centres_per_group)
+        for g, ((first, end), centres) in enumerate(zip(segments, self.place_centres(programmes))):
             group: list[int] = []
             for piece in centres:
                 group.append(len(pieces))
