@@ -13,6 +13,7 @@ candidate piece is projected onto and the optional refit sweeps that follow are
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -29,7 +30,7 @@ from occtool.fit._profile import (
     segment_near_runs,
 )
 from occtool.fit._refit import FitSettings, FloatArray, ProgressCallback, _Refitter
-from occtool.linear_program import solve_lp
+from occtool.linear_program_batch import solve_lps, solve_stacked
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples
 from occtool.tree import MinMaxTree
@@ -47,6 +48,60 @@ FLAT_SHARE = 0.97
 PROFILE_HEIGHTS = 9
 #: Samples of a segment the slope of its crossing is estimated from, at most.
 SLOPE_SAMPLES = 8192
+
+
+@dataclass
+class _Segment:
+    """What turns a segment's centre programmes' optima into pieces."""
+
+    lower: FloatArray
+    upper: FloatArray
+    #: Pan angle of the segment's middle (the programmes' local angle terms are about it).
+    middle: float
+    #: The centres' slope in r (:meth:`_Fitter.crossing_slope`).
+    c: float
+    #: The nearest crossing of the segment's obstacles (where every floor is infeasible).
+    nearest: float
+
+
+@dataclass
+class _CentreProgrammes:
+    """Every centre's programmes, stacked (:func:`~occtool.linear_program_batch.solve_stacked`).
+
+    Centre ``i`` (of segment ``segment_of[i]``) minimises ``objective[i] @ q`` (its gains,
+    negated) under its segment's rows ``rows[own[i]]`` (``r* <= bound[i]``), with the flat
+    or the body floor on its emphasised rows ``rows[chosen[i]]`` (``-r* <= flat[chosen[i]]``,
+    ``body[...]`` alike: both hold the floors negated), or none.
+    """
+
+    segments: list[_Segment]
+    segment_of: list[int]
+    objective: FloatArray
+    rows: FloatArray
+    own: list[NDArray[np.intp]]
+    bound: list[FloatArray]
+    chosen: list[NDArray[np.intp]]
+    flat: FloatArray
+    body: FloatArray
+
+    def floored(self) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.intp], FloatArray, FloatArray]:
+        """Each centre's programme with the flat floor, then with the body floor, stacked:
+        ``cost, A_ub, b_ub, rows, lower, upper``."""
+        index, negate, values, counts = [], [], [], []
+        for own, bound, chosen in zip(self.own, self.bound, self.chosen):
+            for floor in (self.flat, self.body):
+                index += [own, chosen]
+                negate += [own.size, chosen.size]
+                values += [bound, floor[chosen]]
+                counts.append(own.size + chosen.size)
+        A = self.rows[np.concatenate(index)]
+        # The floor rows are the emphasised rows negated (-r* <= -floor).
+        floor_rows = np.repeat(np.tile([False, True], len(negate) // 2), negate)
+        A[floor_rows] = -A[floor_rows]
+        lower = np.array([self.segments[g].lower for g in self.segment_of])
+        upper = np.array([self.segments[g].upper for g in self.segment_of])
+        return (np.repeat(self.objective, 2, axis=0), A, np.concatenate(values), np.array(counts, dtype=np.intp),
+                np.repeat(lower, 2, axis=0), np.repeat(upper, 2, axis=0))
 
 
 class _Fitter(_Refitter):
@@ -159,17 +214,21 @@ class _Fitter(_Refitter):
 
         pieces: list[FloatArray] = []
         members: list[list[int]] = []
-        centres_per_group = [1] * len(segments)
         extra = L - (3 * len(segments) if len(segments) > 1 else 1)
-        # Extra centres go to the segments whose profile a single line fits worst.
-        seg_cost = [segment_cost(profile, first, end) for first, end in segments]
-        order = np.argsort(-np.asarray(seg_cost), kind="stable")
-        for i in range(extra):
-            centres_per_group[int(order[i % len(order)])] += 1
+        # Extra centres go to the segments whose profile a single line fits worst, in turn:
+        # as many rounds over all of them as there are, the rest by that order (which is
+        # only needed then: the default 64 pieces in 16 segments give every one a second).
+        rounds, rest = divmod(max(extra, 0), len(segments))
+        centres_per_group = [1 + rounds] * len(segments)
+        if rest:
+            seg_cost = [segment_cost(profile, first, end) for first, end in segments]
+            order = np.argsort(-np.asarray(seg_cost), kind="stable")
+            for i in range(rest):
+                centres_per_group[int(order[i])] += 1
 
-        for g, (first, end) in enumerate(segments):
+        programmes = self.centre_programmes(profile, segments, centres_per_group)
+        for g, ((first, end), centres) in enumerate(zip(segments, self.place_centres(programmes))):
             group: list[int] = []
-            centres = self.profile_centres(profile, first, end, centres_per_group[g])
             for piece in centres:
                 group.append(len(pieces))
                 pieces.append(piece)
@@ -189,8 +248,11 @@ class _Fitter(_Refitter):
         self.progress_offset = len(segments)
         return self.alternate(W, members)
 
-    def profile_centres(self, profile: FloatArray, first: int, end: int, count: int) -> list[FloatArray]:
-        """Centre pieces whose level crossing lies just in front of the segment's first obstacles.
+    def centre_programmes(self, profile: FloatArray, segments: list[tuple[int, int]],
+                          counts: list[int]) -> _CentreProgrammes:
+        """The programmes of each segment's centre pieces (``counts[g]`` for segment ``g``),
+        whose level crossing lies just in front of the segment's first obstacles
+        (:meth:`place_centres` solves them).
 
         In range terms a piece crosses ``level`` at ``r* = p0 + p_angle . angle_terms + p_h h``.
         A linear programme pushes ``r*`` as far out as it may go while staying at or below
@@ -198,127 +260,169 @@ class _Fitter(_Refitter):
         edges of every bin of the segment, its overlap and every height of the body band.
         The slope ``c`` through the crossing comes from a robust least-squares fit to the
         segment's samples, so the sensor model decides how sharp the crossing is.
+
+        Every segment's bin edges are formed at once (``seg`` says whose): the same values,
+        element by element, as one segment at a time (16 segments' small arrays took a
+        fifth of a planar laser's fit).
         """
         n_bins = profile.shape[0]
         width = 2.0 * np.pi / n_bins
+        first = np.array([a for a, _ in segments], dtype=np.intp)
+        end = np.array([b for _, b in segments], dtype=np.intp)
+        n = end - first
         # The crossing must stay in front of the obstacles over the segment's own bins only:
         # where a group reaches past its segment, the MAX over groups keeps the nearer one.
-        bins = np.arange(first, end)
+        seg = np.repeat(np.arange(n.size), n)
+        bins = first[seg] + np.arange(seg.size) - np.repeat(np.cumsum(n) - n, n)
         D_bins = profile[np.mod(bins, n_bins)]
         # Between two bins the obstacle may be as near as in either of them.
-        left = np.where(bins > first, np.minimum(D_bins, profile[np.mod(bins - 1, n_bins)]), D_bins)
-        right = np.where(bins < end - 1, np.minimum(D_bins, profile[np.mod(bins + 1, n_bins)]), D_bins)
+        left = np.where(bins > first[seg], np.minimum(D_bins, profile[np.mod(bins - 1, n_bins)]), D_bins)
+        right = np.where(bins < end[seg] - 1, np.minimum(D_bins, profile[np.mod(bins + 1, n_bins)]), D_bins)
         # The right edge of one bin is the left edge of the next, with the same bound:
         # keep each edge once (the nearer bound), halving the programmes' rows.
-        D_edges = np.append(left, np.inf)
-        np.minimum(D_edges[1:], right, out=D_edges[1:])
-        edges = np.arange(first, end + 1) * width - np.pi
-        # From the floor up: the map's lowest cut may lie a little under the clearance.
-        heights = self.profile_heights
+        eseg = np.repeat(np.arange(n.size), n + 1)
+        e = np.arange(eseg.size) - np.repeat(np.cumsum(n + 1) - (n + 1), n + 1)
+        D_edges = np.full(eseg.size, np.inf)
+        D_edges[e < n[eseg]] = left
+        D_edges[e > 0] = np.minimum(D_edges[e > 0], right)
+        edges = (first[eseg] + e) * width - np.pi
         if self.k_angle == 1:
             # The paper's basis is discontinuous at +-pi: keep the overlap on this side.
             keep = (edges >= -np.pi) & (edges <= np.pi)
-            edges, D_edges = edges[keep], D_edges[keep]
-        # Rows edge by edge, PROFILE_HEIGHTS heights each (the values of a meshgrid, formed
-        # per edge and per height: a group's rows took 0.4 ms of small arrays).
-        n_rows = edges.size * PROFILE_HEIGHTS
-        H_rows = np.tile(heights, edges.size)
+            edges, D_edges, eseg = edges[keep], D_edges[keep], eseg[keep]
+        n_edges = np.bincount(eseg, minlength=n.size)
+        estart = np.cumsum(n_edges) - n_edges
+        # From the floor up: the map's lowest cut may lie a little under the clearance.
+        heights = self.profile_heights
+        # Rows edge by edge, PROFILE_HEIGHTS heights each.
         target = np.sqrt((D_edges**2)[:, None] + (heights**2)[None, :]).ravel()
         reach = np.minimum(D_edges, NAVIGATION_REACH_SHARE * self.p.focus_range)
         cap = np.sqrt((reach**2)[:, None] + (heights**2)[None, :]).ravel()
-        body = np.tile(np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + heights**2), edges.size)
-        keep_off = np.minimum(body, target - 1e-6)
-        nearest = np.sqrt(D_edges.min(keepdims=True) ** 2 + heights**2)
-        floor_flat = np.minimum(np.tile(FLAT_SHARE * nearest, edges.size), target - 1e-6)
+        body = np.sqrt((self.robot.radius + BODY_CLEARANCE) ** 2 + heights**2)
+        keep_off = np.minimum(body[None, :], (target - 1e-6).reshape(-1, PROFILE_HEIGHTS)).ravel()
+        nearest = np.sqrt(np.minimum.reduceat(D_edges, estart)[:, None] ** 2 + heights**2)
+        floor_flat = np.minimum((FLAT_SHARE * nearest)[eseg], (target - 1e-6).reshape(-1, PROFILE_HEIGHTS)).ravel()
         # The crossing line in local angle terms about the segment's middle, where they are
         # well conditioned: 1, cos(da) - 1, sin(da), h (linear basis: 1, da, h).
         middle = (first + end) / 2.0 * width - np.pi
-        delta = edges - middle
+        delta = edges - middle[eseg]
         local = [delta] if self.k_angle == 1 else [np.cos(delta) - 1.0, np.sin(delta)]
-        rows = np.empty((n_rows, 2 + len(local)))
+        rows = np.empty((edges.size * PROFILE_HEIGHTS, 2 + len(local)))
         rows[:, 0] = 1.0
         for column, values in enumerate(local, start=1):
             rows[:, column] = np.repeat(values, PROFILE_HEIGHTS)
-        rows[:, -1] = H_rows
+        rows[:, -1] = np.tile(heights, edges.size)
 
-        c = self.crossing_slope(self.segment_ray_samples(first, end, n_bins), median(D_bins))
-        # Half the pan-weight budget is left to the side pieces that switch the group off.
-        bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
-        bound_h = self.p.b_max / c
-        # The offset is free.
-        if self.k_angle == 1:
-            lower = np.array([-np.inf, -bound_angle, -bound_h])
-            upper = np.array([np.inf, bound_angle, bound_h])
-        else:
-            # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
-            # weight <= 0): far from its segment a group then recedes, and its sides can
-            # switch it off.
-            lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
-            upper = np.array([np.inf, 0.0, bound_angle, bound_h])
-        centres = []
-        heights_of_rows = H_rows
+        segments_out = []
+        segment_of: list[int] = []
+        own: list[NDArray[np.intp]] = []
+        emphasised: list[NDArray[np.bool_]] = []
         low, high = self.robot.floor_h, self.robot.body_band[1]
-        for j in range(count):
-            # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
-            # in h, and the group's crossing (the farthest of its pieces') follows it with one
-            # tangent line per part.
-            part_lo = low + (max(high, 0.0) - low) * j / count
-            part_hi = low + (max(high, 0.0) - low) * (j + 1) / count
-            emphasis = (heights_of_rows >= part_lo - 1e-9) & (heights_of_rows <= part_hi + 1e-9)
-            n_rows, k = rows.shape
-            chosen = np.flatnonzero(emphasis)
-            # Maximise the emphasised crossings, but only up to the range the map looks at
-            # (t_i <= min(r*_i, cap_i)): pushing out far walls must not tilt the line into a
-            # near obstacle. Relative gains: a centimetre near the robot counts more. (Maximising
-            # the linearised horizontal distance per bin edge instead measured 0.01-0.02 worse.)
-            # A programme in the line's own k unknowns: the crossings are capped at the
-            # range the map looks at (r*_i <= cap_i) as constraints. (An auxiliary variable
-            # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
-            # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
-            objective = -(rows[chosen] / cap[chosen, None] ** 2).sum(axis=0)
-            # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
-            # each, bounded by the smaller.
-            A_ub = rows
-            b_ub = np.where(emphasis, np.minimum(target, cap), target)
-            # Keep the crossing off the robot's body wherever the obstacle allows: at the
-            # floor, a crossing a few centimetres too near in r is a body in collision.
-            # Only this centre's part of the band: the group's crossing is the farthest of its
-            # centres', so each needs to keep off the body where it is the one that counts.
-            # Nor may it dip below (nearly) the segment's nearest obstacle at that height, which
-            # a flat crossing would keep: a tilt that gains far away must not cost near by.
-            # Each floor is dropped again if it makes the programme infeasible.
-            for floor_kind in ("flat", "body", None):  # each formed only if the one before fails
-                if floor_kind is None:
-                    result = solve_lp(objective, A_ub, b_ub, lower, upper)
-                else:
-                    floor = keep_off[chosen]
-                    if floor_kind == "flat":
-                        floor = np.maximum(floor, floor_flat[chosen])
-                    result = solve_lp(objective, np.vstack([A_ub, -rows[chosen]]),
-                                      np.concatenate([b_ub, -np.minimum(floor, cap[chosen])]), lower, upper)
-                if result.status == 0:
-                    break
-            if result.status == 0:
-                q = result.x[:k]  # type: ignore[index]  # status 0: solved, x is set
-            else:
-                q = np.zeros(rows.shape[1])
-                q[0] = float(target.min())
-            # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
+        for g, count in enumerate(counts):
+            span = np.arange(int(estart[g]) * PROFILE_HEIGHTS, int(estart[g] + n_edges[g]) * PROFILE_HEIGHTS)
+            samples = self.segment_ray_samples(int(first[g]), int(end[g]), n_bins)
+            c = self.crossing_slope(samples, median(D_bins[seg == g]))
+            # Half the pan-weight budget is left to the side pieces that switch the group off.
+            bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
+            bound_h = self.p.b_max / c
+            # The offset is free.
             if self.k_angle == 1:
-                p_angle = np.array([q[1]])
-                p0 = q[0] - q[1] * middle
+                lower = np.array([-np.inf, -bound_angle, -bound_h])
+                upper = np.array([np.inf, bound_angle, bound_h])
             else:
-                cm, sm = math.cos(middle), math.sin(middle)
-                p_angle = np.array([q[1] * cm - q[2] * sm, q[1] * sm + q[2] * cm])
-                p0 = q[0] - q[1]
-            # F = level + c (r - r*): angle and height weights -c p, offset level - c p0.
-            piece = np.empty(self.n_terms)
-            piece[: self.k_angle] = -c * p_angle
-            piece[self.k_angle] = -c * q[-1]
-            piece[self.k_angle + 1] = c
-            piece[-1] = self.p.level - c * p0
-            centres.append(self.project(piece))
-        return centres
+                # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
+                # weight <= 0): far from its segment a group then recedes, and its sides can
+                # switch it off.
+                lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
+                upper = np.array([np.inf, 0.0, bound_angle, bound_h])
+            segments_out.append(_Segment(lower, upper, float(middle[g]), c, float(target[span].min())))
+            for j in range(count):
+                # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
+                # in h, and the group's crossing (the farthest of its pieces') follows it with one
+                # tangent line per part.
+                part_lo = low + (max(high, 0.0) - low) * j / count
+                part_hi = low + (max(high, 0.0) - low) * (j + 1) / count
+                segment_of.append(g)
+                own.append(span)
+                emphasised.append(np.tile((heights >= part_lo - 1e-9) & (heights <= part_hi + 1e-9), int(n_edges[g])))
+        chosen = [span[emphasis] for span, emphasis in zip(own, emphasised)]
+        # Maximise the emphasised crossings, but only up to the range the map looks at
+        # (t_i <= min(r*_i, cap_i)): pushing out far walls must not tilt the line into a
+        # near obstacle. Relative gains: a centimetre near the robot counts more. (Maximising
+        # the linearised horizontal distance per bin edge instead measured 0.01-0.02 worse.)
+        # A programme in the line's own k unknowns: the crossings are capped at the
+        # range the map looks at (r*_i <= cap_i) as constraints. (An auxiliary variable
+        # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
+        # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
+        every = np.concatenate(chosen)
+        gains = rows[every] / cap[every, None] ** 2
+        ends = np.cumsum([part.size for part in chosen])
+        # (One sum a centre: a sum over all of them at once, np.add.reduceat, rounds differently.)
+        objective = np.array([-gains[e - part.size:e].sum(axis=0) for part, e in zip(chosen, ends.tolist())])
+        # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
+        # each, bounded by the smaller.
+        capped = np.minimum(target, cap)
+        bound = [np.where(emphasis, capped[span], target[span]) for span, emphasis in zip(own, emphasised)]
+        # Keep the crossing off the robot's body wherever the obstacle allows: at the
+        # floor, a crossing a few centimetres too near in r is a body in collision.
+        # Only this centre's part of the band: the group's crossing is the farthest of its
+        # centres', so each needs to keep off the body where it is the one that counts.
+        # Nor may it dip below (nearly) the segment's nearest obstacle at that height, which
+        # a flat crossing would keep: a tilt that gains far away must not cost near by.
+        # Each floor is dropped again if it makes the programme infeasible
+        # (place_centres), the flat one first.
+        flat = -np.minimum(np.maximum(keep_off, floor_flat), cap)
+        body = -np.minimum(keep_off, cap)
+        return _CentreProgrammes(segments_out, segment_of, objective, rows, own, bound, chosen, flat, body)
+
+    def place_centres(self, programmes: _CentreProgrammes) -> list[list[FloatArray]]:
+        """Every segment's centre pieces: the optima of their programmes (:meth:`centre_programmes`).
+
+        A centre's programme is tried with the flat floor, then the body floor, then none,
+        each only if the one before is infeasible. The programmes are independent, so they
+        are solved in a batch (:mod:`occtool.linear_program_batch`: ``solve_lp``'s answers,
+        a fraction of its time), the flat and the body floors of every centre at once (the
+        body floor was needed by about 30 % of the Freiburg campus's centres, and a batch's
+        cost is mostly its count of steps, not its width).
+        """
+        results = solve_stacked(*programmes.floored())
+        optima: list[FloatArray | None] = []
+        for flat, body in zip(results[::2], results[1::2]):
+            optima.append(flat.x if flat.status == 0 else body.x if body.status == 0 else None)
+        bare = [i for i, q in enumerate(optima) if q is None]
+        if bare:
+            segments = [programmes.segments[programmes.segment_of[i]] for i in bare]
+            unfloored = solve_lps([(programmes.objective[i], programmes.rows[programmes.own[i]], programmes.bound[i],
+                                    segment.lower, segment.upper) for i, segment in zip(bare, segments)])
+            for i, result in zip(bare, unfloored):
+                optima[i] = result.x if result.status == 0 else None
+        placed: list[list[FloatArray]] = [[] for _ in programmes.segments]
+        for g, q in zip(programmes.segment_of, optima):
+            placed[g].append(self.centre_piece(programmes.segments[g], q))
+        return placed
+
+    def centre_piece(self, plan: _Segment, q: FloatArray | None) -> FloatArray:
+        """The piece of a centre programme's optimum ``q`` (None: every floor infeasible, a
+        flat crossing at the segment's nearest obstacle)."""
+        if q is None:
+            q = np.zeros(self.k_angle + 2)
+            q[0] = plan.nearest
+        middle, c = plan.middle, plan.c
+        # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
+        if self.k_angle == 1:
+            p_angle = np.array([q[1]])
+            p0 = q[0] - q[1] * middle
+        else:
+            cm, sm = math.cos(middle), math.sin(middle)
+            p_angle = np.array([q[1] * cm - q[2] * sm, q[1] * sm + q[2] * cm])
+            p0 = q[0] - q[1]
+        # F = level + c (r - r*): angle and height weights -c p, offset level - c p0.
+        piece = np.empty(self.n_terms)
+        piece[: self.k_angle] = -c * p_angle
+        piece[self.k_angle] = -c * q[-1]
+        piece[self.k_angle + 1] = c
+        piece[-1] = self.p.level - c * p0
+        return self.project(piece)
 
     def segment_ray_samples(self, first: int, end: int, n_bins: int) -> NDArray[np.intp]:
         """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
