@@ -1,22 +1,22 @@
 """A world map's Nav2 raster computed in row strips, tile by tile (:func:`rasterise`).
 
 Every cell of the raster depends only on its centre (:meth:`WorldMap.rasterise` says how),
-so the raster is built a strip of rows at a time: the temporaries (cell centres, the
-walls' neighbour queries, twelve distances and indices a cell) are those of one strip,
-not of the whole extent, and only the raster itself (uint8 cells, float32 occupancy) is
-held whole. Before a strip's cells are queried its square tiles are sorted by what they
-can meet, so that most cells of a large map cost no query at all:
+so the raster is built a strip of rows at a time: the temporaries (cell centres, what the
+tiles' cells ask of the walls and the positions) are those of one strip, not of the whole
+extent, and only the raster itself (uint8 cells, float32 occupancy) is held whole. Before a
+strip's cells are queried its square tiles are sorted by what they can meet, so that most
+cells of a large map cost no query at all:
 
 * a tile whose box lies inside the observed region is observed in every cell, one outside
   it in none; only the cells of tiles on the region's boundary are tested one by one (and
   the same for the part of it the raster may call free, :attr:`WorldMap.free_region`);
-* a tile with no segment middle within reach of its box (the farthest a wall's ridge or
-  rim spreads, plus the box's half-diagonal) meets no wall: its cells skip the neighbour
-  queries.
+* a tile lists the few segments that can matter to its cells and the positions that can be
+  the nearest to them, and its cells are measured against those alone; a tile no segment
+  reaches skips the walls, and only the cells of a thick of segments ask the k-d tree one
+  by one (:mod:`occtool.fuse._tile_queries`).
 
-Both tests only decide tiles whose every cell would get the same answer from the
-per-cell test, so the raster is the same, byte for byte, as one computed over all cells
-at once.
+Both only decide tiles whose every cell would get the same answer from the per-cell
+queries, so the raster is the same, byte for byte, as one computed over all cells at once.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool.fuse._tile_queries import influence, tile_position_distances, tile_walls
 from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, PackedFlags, Raster
 
 FloatArray = NDArray[np.float64]
@@ -37,8 +38,6 @@ TILE = 16
 #: Cells of one strip (a whole number of tile rows): bounds the temporaries, about 200
 #: bytes a cell queried (a 2**19-cell strip: ~100 MB at most).
 STRIP_CELLS = 1 << 19
-#: Added to a tile's reach so that rounding never drops a segment the cells would meet.
-_SLACK = 1e-6
 
 
 def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], int, int]:
@@ -112,14 +111,10 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
     xs = origin[0] + (np.arange(nx) + 0.5) * resolution
     first = np.arange(0, nx, tile)
     last = np.minimum(first + tile, nx) - 1
-    walls = len(world) > 0
-    if walls:
-        # How far a ridge spreads (the walls' occupancy) and a band or rim (their distances).
-        reaches = (world._reach(max(world.width, world.front_width, world.back_width)), world._reach(within + 1e-9))
-        tree = world._segment_tree()
     free_region = getattr(world, "free_region", None)
     if free_region is not None:
         shapely.prepare(free_region)
+    matters = influence(world, within) if len(world) else None  # how far each segment can matter to a cell
     # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
     chunk = max(1, strip_cells // (tile * tile))
     pad = 0.25 * resolution
@@ -137,16 +132,13 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
                 inside = shapely.contains_properly(world.region, boxes)
                 outside = ~shapely.intersects(world.region, boxes)
             free = _free_tiles(free_region, boxes)
-            near = [np.zeros(lo.size, dtype=bool), np.zeros(lo.size, dtype=bool)]
-            if walls:
-                half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
-                middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
-                near = [np.asarray(tree.query_ball_point(middles, reach + half + _SLACK, return_length=True)) > 0
-                        for reach in reaches]
+            # Each box's middle and half-diagonal: what the tiles' queries reach round (occtool.fuse._tile_queries).
+            half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
+            middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
             r0, r1 = t0 - low, t1 - low
             _strip(world, cells[r0:r1, c0:c1], probability[r0:r1, c0:c1], explored[r0:r1, c0:c1], xs[c0:c1], ys,
-                   lo - c0, hi - c0, inside, outside, near, within, doubted_trust, free)
+                   lo - c0, hi - c0, inside, outside, (middles, half), within, doubted_trust, free, matters)
     return cells, probability, explored
 
 
@@ -164,19 +156,24 @@ def _free_tiles(free_region: Any, boxes: Any) -> tuple[NDArray[np.bool_], NDArra
 def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
            xs: NDArray[np.floating[Any]], ys: NDArray[np.floating[Any]], first: NDArray[np.intp],
            last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
-           near: list[NDArray[np.bool_]], within: float, doubted_trust: float,
-           free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None = None) -> None:
-    """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``near``:
-    the tiles a ridge reaches, and those a wall's band or rim reaches; ``free``: the tiles
-    inside and outside the world's :attr:`~WorldMap.free_region` (``None``: each cell asks
-    :meth:`~WorldMap.free_space`)."""
+           boxes: tuple[FloatArray, FloatArray], within: float, doubted_trust: float,
+           free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None = None, matters: FloatArray | None = None) -> None:
+    """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``boxes``:
+    the tiles' middles and half-diagonals; ``free``: the tiles inside and outside the world's
+    :attr:`~WorldMap.free_region` (``None``: each cell asks :meth:`~WorldMap.free_space`);
+    ``matters``: the segments' :func:`~occtool.fuse._tile_queries.influence` (``None``: computed here)."""
 
     h, nx = ys.size, xs.size
+    width = int(last[0] - first[0]) + 1
     tile_of = np.repeat(np.arange(first.size), last - first + 1)
     shape = (h, nx)
     x = np.broadcast_to(xs, shape).ravel()
     y = np.broadcast_to(ys[:, None], shape).ravel()
     column_tile = np.broadcast_to(tile_of, shape).ravel()
+    # The tiles' cell centres as (tiles, columns) and (tiles, rows), the last tile's missing
+    # columns repeating its last one.
+    tile_x = np.pad(np.asarray(xs, dtype=np.float64), (0, first.size * width - nx), mode="edge").reshape(-1, width)
+    tile_y = np.broadcast_to(np.asarray(ys, dtype=np.float64), (first.size, h))
     if inside is None or outside is None:
         observed = np.zeros(h * nx, dtype=bool)
     else:
@@ -188,7 +185,15 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
     if observed.any():
         seen = np.flatnonzero(observed)
         xy = np.column_stack([x[seen], y[seen]])
-        base[seen] = world.free_value(xy)
+        if world.flat_free:
+            base[seen] = world.free_value(xy)
+        else:
+            # The nearest positions of the tiles' cells, those of the tiles with a cell seen.
+            wanted = np.flatnonzero(np.bincount(column_tile[seen], minlength=first.size))
+            nearest = np.full((first.size, h, width), np.inf)
+            nearest[wanted] = tile_position_distances(world, tile_x[wanted], tile_y[wanted], boxes[0][wanted],
+                                                      boxes[1][wanted])
+            base[seen] = world.free_values(_in_rows(nearest, nx)[seen])
         # Only the part of it the raster may call free counts as observed (WorldMap.rasterise).
         if free is None:
             observed[seen] = world.free_space(xy)
@@ -200,19 +205,10 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
             if edge.size:
                 decided[edge] = world.free_space(xy[edge])
             observed[seen] = decided
-    every = np.full(h * nx, -np.inf)
-    of_trusted = every.copy()
-    wall = np.zeros(h * nx, dtype=bool)
-    rim = wall.copy()
-    queried = np.flatnonzero(near[1][column_tile])
-    if queried.size:
-        near_doubted, near_trusted = world._wall_distances(np.column_stack([x[queried], y[queried]]), within,
-                                                           doubted_trust)
-        wall[queried] = near_trusted <= world.wall_half_width
-        rim[queried] = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
-    queried = np.flatnonzero(near[0][column_tile])
-    if queried.size:
-        every[queried], of_trusted[queried] = world._wall_values(np.column_stack([x[queried], y[queried]]))
+    every, of_trusted, near_doubted, near_trusted = (
+        _in_rows(answer, nx) for answer in tile_walls(world, tile_x, tile_y, *boxes, within, doubted_trust, matters))
+    wall = near_trusted <= world.wall_half_width
+    rim = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
     drawn = np.maximum(base, of_trusted)
     out = np.full(h * nx, UNKNOWN, dtype=np.uint8)
     # Never free near a trusted wall, nor right at a doubted one (WorldMap.rasterise says why).
@@ -221,6 +217,12 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
     cells[...] = out.reshape(shape)
     probability[...] = np.maximum(base, every).reshape(shape)
     explored[...] = (observed | rim | wall).reshape(shape)
+
+
+def _in_rows(tiled: FloatArray, nx: int) -> FloatArray:
+    """A ``(tiles, rows, columns)`` answer of a row of tiles as the strip's cells, row by row."""
+    count, h, width = tiled.shape
+    return tiled.transpose(1, 0, 2).reshape(h, count * width)[:, :nx].ravel()
 
 
 __all__ = ["BAND_STRIPS", "STRIP_CELLS", "TILE", "raster_bands", "raster_shape", "rasterise", "tile_rows"]
