@@ -125,12 +125,11 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
             lo, hi = first[k0:k0 + chunk], last[k0:k0 + chunk]
             # The tiles' boxes round their cell centres, widened by a quarter cell so that
             # a one-cell tile is still a box; the tests below hold for the wider box too.
-            boxes = shapely.box(xs[lo] - pad, ys[0] - pad, xs[hi] + pad, ys[-1] + pad)
+            boxes = (xs[lo] - pad, ys[0] - pad, xs[hi] + pad, ys[-1] + pad)
             if world.region.is_empty:
                 inside = outside = None
             else:
-                inside = shapely.contains_properly(world.region, boxes)
-                outside = ~shapely.intersects(world.region, boxes)
+                inside, outside = _sort_tiles(world.region, *boxes)
             free = _free_tiles(free_region, boxes)
             # Each box's middle and half-diagonal: what the tiles' queries reach round (occtool.fuse._tile_queries).
             half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
@@ -142,15 +141,41 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
     return cells, probability, explored
 
 
-def _free_tiles(free_region: Any, boxes: Any) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
-    """The tiles (``boxes``) wholly inside and wholly outside the part of the observed region
-    the raster may call free (:attr:`WorldMap.free_region`; ``None``: a map without one,
-    whose cells each ask :meth:`WorldMap.free_space`), as the region's own tiles are sorted."""
-    import shapely
-
+def _free_tiles(free_region: Any, boxes: tuple[Any, ...]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The tiles (``boxes``: :func:`_sort_tiles`' left and right sides, bottom and top) wholly
+    inside and wholly outside the part of the observed region the raster may call free
+    (:attr:`WorldMap.free_region`; ``None``: a map without one, whose cells each ask
+    :meth:`WorldMap.free_space`), as the region's own tiles are sorted."""
     if free_region is None:
         return None
-    return shapely.contains_properly(free_region, boxes), ~shapely.intersects(free_region, boxes)
+    return _sort_tiles(free_region, *boxes)
+
+
+def _sort_tiles(geometry: Any, left: NDArray[np.floating[Any]], bottom: float, right: NDArray[np.floating[Any]],
+                top: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """The tiles of a row (boxes from ``left`` to ``right``, ``bottom`` to ``top``) whose box
+    lies in the interior of a prepared ``geometry``, and those whose box misses it.
+
+    Runs of tiles are tested first, the whole row and then halves of the undecided runs: a
+    run's box inside (outside) the geometry holds each of its tiles' inside (outside), so
+    only the tiles along the geometry's boundary are tested one by one, with the same answers."""
+    import shapely
+
+    count = left.size
+    inside, outside = np.zeros(count + 1, dtype=np.int64), np.zeros(count + 1, dtype=np.int64)
+    starts, ends = np.zeros(1, dtype=np.intp), np.full(1, count, dtype=np.intp)
+    while starts.size:
+        boxes = shapely.box(left[starts], bottom, right[ends - 1], top)
+        held = shapely.contains_properly(geometry, boxes)
+        missed = ~shapely.intersects(geometry, boxes)
+        # Each decided run's tiles marked at once: +1 at its start, -1 past its end, summed below.
+        for marks, decided in ((inside, held), (outside, missed)):
+            np.add.at(marks, starts[decided], 1)
+            np.add.at(marks, ends[decided], -1)
+        split = ~held & ~missed & (ends - starts > 1)
+        middle = (starts[split] + ends[split]) // 2
+        starts, ends = np.concatenate([starts[split], middle]), np.concatenate([middle, ends[split]])
+    return np.cumsum(inside[:-1]) > 0, np.cumsum(outside[:-1]) > 0
 
 
 def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],

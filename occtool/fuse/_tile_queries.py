@@ -46,7 +46,7 @@ _SLACK = 1e-6
 POSITION_CANDIDATES = 32
 #: A crowded tile is split in four while its sides are longer than this (cells): its
 #: quarters list fewer segments, and the tree is asked about fewer cells.
-SMALLEST_SIDE = 2
+SMALLEST_SIDE = 4
 
 
 def influence(world: Any, within: float) -> FloatArray:
