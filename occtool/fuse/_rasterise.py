@@ -62,7 +62,7 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
     probability = np.empty((ny, nx), dtype=np.float32) if occupancy else None
     explored = PackedFlags((ny, nx))  # an eighth of a byte a cell
     for low, high, strip in raster_bands(world, resolution, nx, ny, origin, within, doubted_trust, tile=tile,
-                                         strip_cells=strip_cells, executor=executor):
+                                         strip_cells=strip_cells, executor=executor, occupancy=occupancy):
         cells[low:high], explored[low:high] = strip[0], strip[2]
         if probability is not None:
             probability[low:high] = strip[1]
@@ -83,30 +83,31 @@ BAND_STRIPS = 4
 
 def raster_bands(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
                  within: float, doubted_trust: float, *, tile: int = TILE, strip_cells: int = STRIP_CELLS,
-                 executor: Any = None) -> Any:
+                 executor: Any = None, occupancy: bool = True) -> Any:
     """``(low, high, (cells, probability, explored))`` of each band of rows of the raster
     :func:`rasterise` computes, bottom to top, each band :func:`tile_rows` on ``executor``
-    (``None``: this process), yielded in order as they finish."""
+    (``None``: this process), yielded in order as they finish (``probability`` ``None``
+    without ``occupancy``)."""
     from occtool.executor import in_order
 
     rows = max(tile, (BAND_STRIPS * strip_cells // max(nx * tile, 1)) * tile)
     bands = [(low, min(low + rows, ny)) for low in range(0, ny, rows)]
-    arguments = ((world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells)
+    arguments = ((world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells, occupancy)
                  for low, high in bands)
     for (low, high), strip in zip(bands, in_order(executor, "drawing the raster", tile_rows, arguments)):
         yield low, high, strip
 
 
 def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float], low: int, high: int,
-              within: float, doubted_trust: float, tile: int = TILE,
-              strip_cells: int = STRIP_CELLS) -> tuple[NDArray[np.uint8], NDArray[np.float32], NDArray[np.bool_]]:
+              within: float, doubted_trust: float, tile: int = TILE, strip_cells: int = STRIP_CELLS,
+              occupancy: bool = True) -> tuple[NDArray[np.uint8], NDArray[np.float32] | None, NDArray[np.bool_]]:
     """Rows ``low`` to ``high`` (``low`` a whole number of tiles) of :func:`rasterise`'s cells,
-    occupancy and explored flags, a row of tiles at a time, at most ``strip_cells`` cells
-    at once (runs in this process or on a worker)."""
+    occupancy (``None`` without ``occupancy``) and explored flags, a row of tiles at a time,
+    at most ``strip_cells`` cells at once (runs in this process or on a worker)."""
     import shapely
 
     cells = np.full((high - low, nx), UNKNOWN, dtype=np.uint8)
-    probability = np.empty((high - low, nx), dtype=np.float32)
+    probability = np.empty((high - low, nx), dtype=np.float32) if occupancy else None
     explored = np.zeros((high - low, nx), dtype=bool)
     xs = origin[0] + (np.arange(nx) + 0.5) * resolution
     first = np.arange(0, nx, tile)
@@ -114,7 +115,13 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
     free_region = getattr(world, "free_region", None)
     if free_region is not None:
         shapely.prepare(free_region)
-    matters = influence(world, within) if len(world) else None  # how far each segment can matter to a cell
+    matters = None
+    if len(world):
+        # How far each segment can matter to a cell: its ridge above what the cells' base
+        # reads anyway, and without the occupancy kept, above what the cells draw free (a
+        # trusted ridge at or below RASTER_FREE is drawn as none; the others' are not drawn).
+        floor = world.floor_level() if occupancy else max(world.floor_level(), RASTER_FREE)
+        matters = influence(world, within, floor, doubted_trust, all_ridges=occupancy)
     # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
     chunk = max(1, strip_cells // (tile * tile))
     pad = 0.25 * resolution
@@ -136,7 +143,8 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
             middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
             r0, r1 = t0 - low, t1 - low
-            _strip(world, cells[r0:r1, c0:c1], probability[r0:r1, c0:c1], explored[r0:r1, c0:c1], xs[c0:c1], ys,
+            _strip(world, cells[r0:r1, c0:c1], None if probability is None else probability[r0:r1, c0:c1],
+                   explored[r0:r1, c0:c1], xs[c0:c1], ys,
                    lo - c0, hi - c0, inside, outside, (middles, half), within, doubted_trust, free, matters)
     return cells, probability, explored
 
@@ -178,35 +186,36 @@ def _sort_tiles(geometry: Any, left: NDArray[np.floating[Any]], bottom: float, r
     return np.cumsum(inside[:-1]) > 0, np.cumsum(outside[:-1]) > 0
 
 
-def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
+def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32] | None, explored: NDArray[np.bool_],
            xs: NDArray[np.floating[Any]], ys: NDArray[np.floating[Any]], first: NDArray[np.intp],
            last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
            boxes: tuple[FloatArray, FloatArray], within: float, doubted_trust: float,
            free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None = None, matters: FloatArray | None = None) -> None:
-    """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``boxes``:
+    """One row of tiles (``ys`` its cells' rows), written into the raster's views (no
+    occupancy where ``probability`` is ``None``); ``boxes``:
     the tiles' middles and half-diagonals; ``free``: the tiles inside and outside the world's
     :attr:`~WorldMap.free_region` (``None``: each cell asks :meth:`~WorldMap.free_space`);
     ``matters``: the segments' :func:`~occtool.fuse._tile_queries.influence` (``None``: computed here)."""
 
     h, nx = ys.size, xs.size
+    # The strip's cells row by row, each row padded to whole tiles (the last tile's missing
+    # columns repeat its last one, and are dropped when written), and as (tiles, columns)
+    # and (tiles, rows) for the tiles' queries.
     width = int(last[0] - first[0]) + 1
-    tile_of = np.repeat(np.arange(first.size), last - first + 1)
-    shape = (h, nx)
-    x = np.broadcast_to(xs, shape).ravel()
-    y = np.broadcast_to(ys[:, None], shape).ravel()
-    column_tile = np.broadcast_to(tile_of, shape).ravel()
-    # The tiles' cell centres as (tiles, columns) and (tiles, rows), the last tile's missing
-    # columns repeating its last one.
-    tile_x = np.pad(np.asarray(xs, dtype=np.float64), (0, first.size * width - nx), mode="edge").reshape(-1, width)
+    shape = (h, first.size * width)
+    tile_x = np.pad(np.asarray(xs, dtype=np.float64), (0, shape[1] - nx), mode="edge").reshape(-1, width)
     tile_y = np.broadcast_to(np.asarray(ys, dtype=np.float64), (first.size, h))
+    x = np.broadcast_to(tile_x.ravel(), shape).ravel()
+    y = np.broadcast_to(ys[:, None], shape).ravel()
+    column_tile = np.broadcast_to(np.repeat(np.arange(first.size), width), shape).ravel()
     if inside is None or outside is None:
-        observed = np.zeros(h * nx, dtype=bool)
+        observed = np.zeros(x.size, dtype=bool)
     else:
         observed = inside[column_tile]
         edge = np.flatnonzero(~inside[column_tile] & ~outside[column_tile])
         if edge.size:
             observed[edge] = world.observed(np.column_stack([x[edge], y[edge]]))
-    base = np.full(h * nx, world.unknown_level)
+    base = np.full(x.size, world.unknown_level)
     if observed.any():
         seen = np.flatnonzero(observed)
         xy = np.column_stack([x[seen], y[seen]])
@@ -218,7 +227,7 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
             nearest = np.full((first.size, h, width), np.inf)
             nearest[wanted] = tile_position_distances(world, tile_x[wanted], tile_y[wanted], boxes[0][wanted],
                                                       boxes[1][wanted])
-            base[seen] = world.free_values(_in_rows(nearest, nx)[seen])
+            base[seen] = world.free_values(_in_rows(nearest)[seen])
         # Only the part of it the raster may call free counts as observed (WorldMap.rasterise).
         if free is None:
             observed[seen] = world.free_space(xy)
@@ -231,23 +240,24 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
                 decided[edge] = world.free_space(xy[edge])
             observed[seen] = decided
     every, of_trusted, near_doubted, near_trusted = (
-        _in_rows(answer, nx) for answer in tile_walls(world, tile_x, tile_y, *boxes, within, doubted_trust, matters))
+        _in_rows(answer) for answer in tile_walls(world, tile_x, tile_y, *boxes, within, doubted_trust, matters,
+                                                      all_ridges=probability is not None))
     wall = near_trusted <= world.wall_half_width
     rim = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
     drawn = np.maximum(base, of_trusted)
-    out = np.full(h * nx, UNKNOWN, dtype=np.uint8)
+    out = np.full(x.size, UNKNOWN, dtype=np.uint8)
     # Never free near a trusted wall, nor right at a doubted one (WorldMap.rasterise says why).
     out[observed & ~rim & (drawn <= RASTER_FREE)] = FREE
     out[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
-    cells[...] = out.reshape(shape)
-    probability[...] = np.maximum(base, every).reshape(shape)
-    explored[...] = (observed | rim | wall).reshape(shape)
+    cells[...] = out.reshape(shape)[:, :nx]
+    if probability is not None:
+        probability[...] = np.maximum(base, every).reshape(shape)[:, :nx]
+    explored[...] = (observed | rim | wall).reshape(shape)[:, :nx]
 
 
-def _in_rows(tiled: FloatArray, nx: int) -> FloatArray:
+def _in_rows(tiled: FloatArray) -> FloatArray:
     """A ``(tiles, rows, columns)`` answer of a row of tiles as the strip's cells, row by row."""
-    count, h, width = tiled.shape
-    return tiled.transpose(1, 0, 2).reshape(h, count * width)[:, :nx].ravel()
+    return tiled.transpose(1, 0, 2).ravel()
 
 
 __all__ = ["BAND_STRIPS", "STRIP_CELLS", "TILE", "raster_bands", "raster_shape", "rasterise", "tile_rows"]

@@ -49,21 +49,25 @@ POSITION_CANDIDATES = 32
 SMALLEST_SIDE = 4
 
 
-def influence(world: Any, within: float) -> FloatArray:
-    """How far from each segment's middle it can matter to a cell of the raster (metres): its
-    ridge above :meth:`WorldMap.floor_level` or its band within ``within``.
+def influence(world: Any, within: float, floor: float, least_trust: float, *, all_ridges: bool = True) -> FloatArray:
+    """How far from each segment's middle it can matter to a cell of the raster (metres;
+    ``-inf``: nowhere): its ridge above ``floor`` (every segment's, or without ``all_ridges``
+    only the trusted ones': the raster's cells draw no other) or its band within ``within`` (the
+    segments of trust >= ``least_trust``: the bands the cells ask about).
 
-    The ridge (:meth:`WorldMap._ridges`) exceeds a level ``L`` only less than ``w (1 - L / p)``
+    The ridge (:meth:`WorldMap._ridges`) exceeds ``floor`` only less than ``w (1 - floor / p)``
     beyond the thickness across the line (``w`` the widest slope on either side, ``p`` the peak)
-    and ``width (1 - L / p)`` past the half-length along it; the band is within ``within`` only
-    ``within`` beyond both; a point inside either rectangle is nearer the middle than its corner.
+    and ``width (1 - floor / p)`` past the half-length along it; the band is within ``within``
+    only ``within`` beyond both; a point inside either rectangle is nearer the middle than its corner.
     """
     world._segment_tree()  # the segments' frames
     _, _, _, half = world._frames
-    share = 1.0 - world.floor_level() / world.peak
+    share = 1.0 - floor / world.peak
     sloped = np.where(world.facing == 0, world.width, max(world.front_width, world.back_width))
-    ridge = np.hypot(world.thickness + sloped * share, half + world.width * share)
-    band = np.hypot(world.thickness + within, half + within)
+    ridge = np.where(share > 0, np.hypot(world.thickness + sloped * share, half + world.width * share), -np.inf)
+    if not all_ridges:
+        ridge[world.trust < world.wall_share] = -np.inf
+    band = np.where(world.trust >= least_trust, np.hypot(world.thickness + within, half + within), -np.inf)
     return np.maximum(ridge, band)
 
 
@@ -84,8 +88,8 @@ def _rank(tiles: NDArray[np.intp], count: int) -> NDArray[np.intp]:
 
 
 def tile_walls(world: Any, x: FloatArray, y: FloatArray, centres: FloatArray, half: FloatArray,
-               within: float, doubted_trust: float,
-               matters: FloatArray | None = None) -> Walls:
+               within: float, doubted_trust: float, matters: FloatArray | None = None, *,
+               all_ridges: bool = True) -> Walls:
     """The walls' values and band distances at tiles' cells: MAX over the ridges of every
     segment and of the trusted ones (``-inf`` where none matters), and the distances to the
     nearest band of a segment of trust >= ``doubted_trust`` and of a trusted one (``inf``
@@ -93,19 +97,23 @@ def tile_walls(world: Any, x: FloatArray, y: FloatArray, centres: FloatArray, ha
 
     ``x``: ``(tiles, columns)`` and ``y``: ``(tiles, rows)`` the cells' centres; ``centres``
     and ``half`` each tile's middle and the farthest its cells lie from it; ``matters``: the
-    segments' :func:`influence` (``None``: computed here). A value at or below
-    :meth:`WorldMap.floor_level` may read ``-inf`` (the raster draws the same), otherwise the
-    numbers are those of :meth:`WorldMap._wall_values` and :meth:`WorldMap._wall_distances`.
+    segments' :func:`influence` (``None``: above :meth:`WorldMap.floor_level`, every
+    segment's). A value at or below the floor ``matters`` was measured for, or of a segment
+    it leaves out, may read ``-inf`` (the raster draws the same), otherwise the numbers are
+    those of :meth:`WorldMap._wall_values` and :meth:`WorldMap._wall_distances`. Without
+    ``all_ridges`` the MAX over every ridge is not wanted (it is left ``-inf`` where the tiles'
+    lists answer).
     A tile too crowded to list its segments is split in four (while its sides are even and
     longer than :data:`SMALLEST_SIDE`), and what is still crowded asks the tree cell by cell."""
     count, rows, columns = x.shape[0], y.shape[1], x.shape[1]
     shape = (count, rows, columns)
     every, of_trusted = np.full(shape, -np.inf), np.full(shape, -np.inf)
     near_doubted, near_trusted = np.full(shape, np.inf), np.full(shape, np.inf)
-    if not len(world) or not count:
+    if len(world) and matters is None:
+        matters = influence(world, within, world.floor_level(), doubted_trust)
+    if not len(world) or not count or matters is None or not np.isfinite(matters).any():
         return every, of_trusted, near_doubted, near_trusted
     tree = world._segment_tree()
-    matters = influence(world, within) if matters is None else matters
     tiles, segments = _pairs(tree, centres, float(matters.max() + half.max()) + 2 * _SLACK)
     distance = np.hypot(centres[tiles, 0] - world._frames[0][segments, 0],
                         centres[tiles, 1] - world._frames[0][segments, 1])
@@ -118,14 +126,14 @@ def tile_walls(world: Any, x: FloatArray, y: FloatArray, centres: FloatArray, ha
     touched = np.bincount(tiles[relevant], minlength=count) > 0
     listed = touched & (crowd <= min(NEIGHBOURS, len(world)))
     _listed_walls(world, x, y, tiles[relevant & listed[tiles]], segments[relevant & listed[tiles]],
-                  within, doubted_trust, (every, of_trusted, near_doubted, near_trusted))
+                  within, doubted_trust, (every if all_ridges else None, of_trusted, near_doubted, near_trusted))
     crowded = np.flatnonzero(touched & ~listed)
     if not crowded.size:
         return every, of_trusted, near_doubted, near_trusted
     inner = (crowded.size, rows, columns)
     if rows % 2 == 0 and columns % 2 == 0 and min(rows, columns) > SMALLEST_SIDE:
         quarters = _quarters(x[crowded], y[crowded])
-        answers = tile_walls(world, *quarters, within, doubted_trust, matters)
+        answers = tile_walls(world, *quarters, within, doubted_trust, matters, all_ridges=all_ridges)
         # Back from (row half, column half, tile, rows, columns) to the tiles' own cells.
         answers = tuple(a.reshape(2, 2, crowded.size, rows // 2, columns // 2).transpose(2, 0, 3, 1, 4).reshape(inner)
                         for a in answers)
@@ -149,9 +157,11 @@ def _quarters(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray, Flo
 
 
 def _listed_walls(world: Any, x: FloatArray, y: FloatArray, tiles: NDArray[np.intp], segments: NDArray[np.intp],
-                  within: float, doubted_trust: float, out: Walls) -> None:
+                  within: float, doubted_trust: float,
+                  out: tuple[FloatArray | None, FloatArray, FloatArray, FloatArray]) -> None:
     """:func:`tile_walls` of the tiles that list their segments (``tiles``, ``segments``:
-    the pairs, sorted by tile), into ``out``: one pass over the tiles' first segments, one
+    the pairs, sorted by tile), into ``out`` (its first ``None``: every ridge's MAX not
+    wanted): one pass over the tiles' first segments, one
     over their second, and so on (at most :data:`NEIGHBOURS`)."""
     every, of_trusted, near_doubted, near_trusted = out
     middle = world._frames[0]
@@ -169,7 +179,8 @@ def _listed_walls(world: Any, x: FloatArray, y: FloatArray, tiles: NDArray[np.in
         squared = dx * dx + dy * dy
         across, along = world._offsets(cx, cy, s)
         value = np.where(squared < ridge_reach, world._ridges(s, across, along), -np.inf)
-        every[t] = np.maximum(every[t], value)
+        if every is not None:
+            every[t] = np.maximum(every[t], value)
         of_trusted[t] = np.maximum(of_trusted[t], np.where(trusted[s], value, -np.inf))
         gap = np.where(squared < band_reach, world._gaps(s, across, along), np.inf)
         gap[gap > within] = np.inf
