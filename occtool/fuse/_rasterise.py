@@ -205,53 +205,54 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
     shape = (h, first.size * width)
     tile_x = np.pad(np.asarray(xs, dtype=np.float64), (0, shape[1] - nx), mode="edge").reshape(-1, width)
     tile_y = np.broadcast_to(np.asarray(ys, dtype=np.float64), (first.size, h))
-    x = np.broadcast_to(tile_x.ravel(), shape).ravel()
-    y = np.broadcast_to(ys[:, None], shape).ravel()
-    column_tile = np.broadcast_to(np.repeat(np.arange(first.size), width), shape).ravel()
+
+    def centres(index: NDArray[np.intp]) -> FloatArray:  # of cells of the strip, by their index
+        return np.column_stack([tile_x.ravel()[index % shape[1]], tile_y[0][index // shape[1]]])
+
     if inside is None or outside is None:
-        observed = np.zeros(x.size, dtype=bool)
+        observed = np.zeros(h * shape[1], dtype=bool)
     else:
-        observed = inside[column_tile]
-        edge = np.flatnonzero(~inside[column_tile] & ~outside[column_tile])
+        observed = np.tile(np.repeat(inside, width), h)
+        edge = np.flatnonzero(np.tile(np.repeat(~inside & ~outside, width), h))
         if edge.size:
-            observed[edge] = world.observed(np.column_stack([x[edge], y[edge]]))
-    base = np.full(x.size, world.unknown_level)
+            observed[edge] = world.observed(centres(edge))
+    base = np.full(observed.size, world.unknown_level)
     if observed.any():
         seen = np.flatnonzero(observed)
-        xy = np.column_stack([x[seen], y[seen]])
+        xy = centres(seen)
+        tiles = seen % shape[1] // width
         if world.flat_free:
             base[seen] = world.free_value(xy)
         else:
             # The nearest positions of the tiles' cells, those of the tiles with a cell seen.
-            wanted = np.flatnonzero(np.bincount(column_tile[seen], minlength=first.size))
+            wanted = np.flatnonzero(np.bincount(tiles, minlength=first.size))
             nearest = np.full((first.size, h, width), np.inf)
             nearest[wanted] = tile_position_distances(world, tile_x[wanted], tile_y[wanted], boxes[0][wanted],
                                                       boxes[1][wanted])
-            base[seen] = world.free_values(_in_rows(nearest)[seen])
+            base[seen] = world.free_values(nearest[tiles, seen // shape[1], seen % width])
         # Only the part of it the raster may call free counts as observed (WorldMap.rasterise).
         if free is None:
             observed[seen] = world.free_space(xy)
         else:
             # Tiles wholly inside or outside the free region are decided whole, as above.
-            tiles = column_tile[seen]
             decided = free[0][tiles]
             edge = np.flatnonzero(~decided & ~free[1][tiles])
             if edge.size:
                 decided[edge] = world.free_space(xy[edge])
             observed[seen] = decided
-    every, of_trusted, near_doubted, near_trusted = (
-        _in_rows(answer) for answer in tile_walls(world, tile_x, tile_y, *boxes, within, doubted_trust, matters,
-                                                      all_ridges=probability is not None))
+    every, of_trusted, near_doubted, near_trusted = tile_walls(world, tile_x, tile_y, *boxes, within, doubted_trust,
+                                                               matters, all_ridges=probability is not None)
+    of_trusted, near_doubted, near_trusted = (_in_rows(answer) for answer in (of_trusted, near_doubted, near_trusted))
     wall = near_trusted <= world.wall_half_width
     rim = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
     drawn = np.maximum(base, of_trusted)
-    out = np.full(x.size, UNKNOWN, dtype=np.uint8)
+    out = np.full(observed.size, UNKNOWN, dtype=np.uint8)
     # Never free near a trusted wall, nor right at a doubted one (WorldMap.rasterise says why).
     out[observed & ~rim & (drawn <= RASTER_FREE)] = FREE
     out[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
     cells[...] = out.reshape(shape)[:, :nx]
     if probability is not None:
-        probability[...] = np.maximum(base, every).reshape(shape)[:, :nx]
+        probability[...] = np.maximum(base, _in_rows(every)).reshape(shape)[:, :nx]
     explored[...] = (observed | rim | wall).reshape(shape)[:, :nx]
 
 
