@@ -326,7 +326,7 @@ def decode(data: bytes, name: str = "occmap") -> Map3DArrays:
         if to_map is not None:
             to_map = np.vstack([np.array([float(v) for v in to_map], dtype=np.float64).reshape(3, 4),
                                 [0.0, 0.0, 0.0, 1.0]])
-    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+    except (ValueError, KeyError, TypeError, OverflowError, UnicodeDecodeError):
         raise fail("unreadable header") from None
     if version not in VERSIONS or kind != KIND:
         raise fail(f"version {version!r} {kind!r}, this reads {' and '.join(map(str, VERSIONS))} {KIND!r}")

@@ -1,22 +1,22 @@
 """A world map's Nav2 raster computed in row strips, tile by tile (:func:`rasterise`).
 
 Every cell of the raster depends only on its centre (:meth:`WorldMap.rasterise` says how),
-so the raster is built a strip of rows at a time: the temporaries (cell centres, the
-walls' neighbour queries, twelve distances and indices a cell) are those of one strip,
-not of the whole extent, and only the raster itself (uint8 cells, float32 occupancy) is
-held whole. Before a strip's cells are queried its square tiles are sorted by what they
-can meet, so that most cells of a large map cost no query at all:
+so the raster is built a strip of rows at a time: the temporaries (cell centres, what the
+tiles' cells ask of the walls and the positions) are those of one strip, not of the whole
+extent, and only the raster itself (uint8 cells, float32 occupancy) is held whole. Before a
+strip's cells are queried its square tiles are sorted by what they can meet, so that most
+cells of a large map cost no query at all:
 
 * a tile whose box lies inside the observed region is observed in every cell, one outside
   it in none; only the cells of tiles on the region's boundary are tested one by one (and
   the same for the part of it the raster may call free, :attr:`WorldMap.free_region`);
-* a tile with no segment middle within reach of its box (the farthest a wall's ridge or
-  rim spreads, plus the box's half-diagonal) meets no wall: its cells skip the neighbour
-  queries.
+* a tile lists the few segments that can matter to its cells and the positions that can be
+  the nearest to them, and its cells are measured against those alone; a tile no segment
+  reaches skips the walls, and only the cells of a thick of segments ask the k-d tree one
+  by one (:mod:`occtool.fuse._tile_queries`).
 
-Both tests only decide tiles whose every cell would get the same answer from the
-per-cell test, so the raster is the same, byte for byte, as one computed over all cells
-at once.
+Both only decide tiles whose every cell would get the same answer from the per-cell
+queries, so the raster is the same, byte for byte, as one computed over all cells at once.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool.fuse._tile_queries import influence, tile_position_distances, tile_walls
 from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, PackedFlags, Raster
 
 FloatArray = NDArray[np.float64]
@@ -37,8 +38,6 @@ TILE = 16
 #: Cells of one strip (a whole number of tile rows): bounds the temporaries, about 200
 #: bytes a cell queried (a 2**19-cell strip: ~100 MB at most).
 STRIP_CELLS = 1 << 19
-#: Added to a tile's reach so that rounding never drops a segment the cells would meet.
-_SLACK = 1e-6
 
 
 def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], int, int]:
@@ -63,7 +62,7 @@ def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[flo
     probability = np.empty((ny, nx), dtype=np.float32) if occupancy else None
     explored = PackedFlags((ny, nx))  # an eighth of a byte a cell
     for low, high, strip in raster_bands(world, resolution, nx, ny, origin, within, doubted_trust, tile=tile,
-                                         strip_cells=strip_cells, executor=executor):
+                                         strip_cells=strip_cells, executor=executor, occupancy=occupancy):
         cells[low:high], explored[low:high] = strip[0], strip[2]
         if probability is not None:
             probability[low:high] = strip[1]
@@ -84,39 +83,41 @@ BAND_STRIPS = 4
 
 def raster_bands(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
                  within: float, doubted_trust: float, *, tile: int = TILE, strip_cells: int = STRIP_CELLS,
-                 executor: Any = None) -> Any:
+                 executor: Any = None, occupancy: bool = True) -> Any:
     """``(low, high, (cells, probability, explored))`` of each band of rows of the raster
     :func:`rasterise` computes, bottom to top, each band :func:`tile_rows` on ``executor``
-    (``None``: this process), yielded in order as they finish."""
+    (``None``: this process), yielded in order as they finish (``probability`` ``None``
+    without ``occupancy``)."""
     from occtool.executor import in_order
 
     rows = max(tile, (BAND_STRIPS * strip_cells // max(nx * tile, 1)) * tile)
     bands = [(low, min(low + rows, ny)) for low in range(0, ny, rows)]
-    arguments = ((world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells)
+    arguments = ((world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells, occupancy)
                  for low, high in bands)
     for (low, high), strip in zip(bands, in_order(executor, "drawing the raster", tile_rows, arguments)):
         yield low, high, strip
 
 
 def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float], low: int, high: int,
-              within: float, doubted_trust: float, tile: int = TILE,
-              strip_cells: int = STRIP_CELLS) -> tuple[NDArray[np.uint8], NDArray[np.float32], NDArray[np.bool_]]:
+              within: float, doubted_trust: float, tile: int = TILE, strip_cells: int = STRIP_CELLS,
+              occupancy: bool = True) -> tuple[NDArray[np.uint8], NDArray[np.float32] | None, NDArray[np.bool_]]:
     """Rows ``low`` to ``high`` (``low`` a whole number of tiles) of :func:`rasterise`'s cells,
-    occupancy and explored flags, a row of tiles at a time, at most ``strip_cells`` cells
-    at once (runs in this process or on a worker)."""
-    import shapely
+    occupancy (``None`` without ``occupancy``) and explored flags, a row of tiles at a time,
+    at most ``strip_cells`` cells at once (runs in this process or on a worker)."""
 
     cells = np.full((high - low, nx), UNKNOWN, dtype=np.uint8)
-    probability = np.empty((high - low, nx), dtype=np.float32)
+    probability = np.empty((high - low, nx), dtype=np.float32) if occupancy else None
     explored = np.zeros((high - low, nx), dtype=bool)
     xs = origin[0] + (np.arange(nx) + 0.5) * resolution
     first = np.arange(0, nx, tile)
     last = np.minimum(first + tile, nx) - 1
-    walls = len(world) > 0
-    if walls:
-        # How far a ridge spreads (the walls' occupancy) and a band or rim (their distances).
-        reaches = (world._reach(max(world.width, world.front_width, world.back_width)), world._reach(within + 1e-9))
-        tree = world._segment_tree()
+    matters = None
+    if len(world):
+        # How far each segment can matter to a cell: its ridge above what the cells' base
+        # reads anyway, and without the occupancy kept, above what the cells draw free (a
+        # trusted ridge at or below RASTER_FREE is drawn as none; the others' are not drawn).
+        floor = world.floor_level() if occupancy else max(world.floor_level(), RASTER_FREE)
+        matters = influence(world, within, floor, doubted_trust, all_ridges=occupancy)
     # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
     chunk = max(1, strip_cells // (tile * tile))
     pad = 0.25 * resolution
@@ -133,23 +134,20 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
             lo, hi = first[k0:k0 + chunk], last[k0:k0 + chunk]
             # The tiles' boxes round their cell centres, widened by a quarter cell so that
             # a one-cell tile is still a box; the tests below hold for the wider box too.
-            boxes = shapely.box(xs[lo] - pad, ys[0] - pad, xs[hi] + pad, ys[-1] + pad)
+            boxes = (xs[lo] - pad, ys[0] - pad, xs[hi] + pad, ys[-1] + pad)
             if region.is_empty:
                 inside = outside = None
             else:
-                inside = shapely.contains_properly(region, boxes)
-                outside = ~shapely.intersects(region, boxes)
+                inside, outside = _sort_tiles(region, *boxes)
             free = _free_tiles(free_region, boxes)
-            near = [np.zeros(lo.size, dtype=bool), np.zeros(lo.size, dtype=bool)]
-            if walls:
-                half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
-                middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
-                near = [np.asarray(tree.query_ball_point(middles, reach + half + _SLACK, return_length=True)) > 0
-                        for reach in reaches]
+            # Each box's middle and half-diagonal: what the tiles' queries reach round (occtool.fuse._tile_queries).
+            half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
+            middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
             c0, c1 = int(lo[0]), int(hi[-1]) + 1
             r0, r1 = t0 - low, t1 - low
-            _strip(world, cells[r0:r1, c0:c1], probability[r0:r1, c0:c1], explored[r0:r1, c0:c1], xs[c0:c1], ys,
-                   lo - c0, hi - c0, inside, outside, near, within, doubted_trust, free, region, free_region)
+            _strip(world, cells[r0:r1, c0:c1], None if probability is None else probability[r0:r1, c0:c1],
+                   explored[r0:r1, c0:c1], xs[c0:c1], ys, lo - c0, hi - c0, inside, outside, (middles, half),
+                   within, doubted_trust, free, matters, region, free_region)
     return cells, probability, explored
 
 
@@ -171,79 +169,121 @@ def _cut(region: Any, rectangle: tuple[float, float, float, float]) -> Any:
     return part
 
 
-def _free_tiles(free_region: Any, boxes: Any) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
-    """The tiles (``boxes``) wholly inside and wholly outside the part of the observed region
-    the raster may call free (:attr:`WorldMap.free_region`; ``None``: a map without one,
-    whose cells each ask :meth:`WorldMap.free_space`), as the region's own tiles are sorted."""
-    import shapely
-
+def _free_tiles(free_region: Any, boxes: tuple[Any, ...]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The tiles (``boxes``: :func:`_sort_tiles`' left and right sides, bottom and top) wholly
+    inside and wholly outside the part of the observed region the raster may call free
+    (:attr:`WorldMap.free_region`, cut to the band; ``None``: a map without one, whose cells
+    each ask :meth:`WorldMap.free_space`), as the region's own tiles are sorted."""
     if free_region is None:
         return None
-    return shapely.contains_properly(free_region, boxes), ~shapely.intersects(free_region, boxes)
+    return _sort_tiles(free_region, *boxes)
 
 
-def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32], explored: NDArray[np.bool_],
+def _sort_tiles(geometry: Any, left: NDArray[np.floating[Any]], bottom: float, right: NDArray[np.floating[Any]],
+                top: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """The tiles of a row (boxes from ``left`` to ``right``, ``bottom`` to ``top``) whose box
+    lies in the interior of a prepared ``geometry``, and those whose box misses it.
+
+    Runs of tiles are tested first, the whole row and then halves of the undecided runs: a
+    run's box inside (outside) the geometry holds each of its tiles' inside (outside), so
+    only the tiles along the geometry's boundary are tested one by one, with the same answers."""
+    import shapely
+
+    count = left.size
+    inside, outside = np.zeros(count + 1, dtype=np.int64), np.zeros(count + 1, dtype=np.int64)
+    starts, ends = np.zeros(1, dtype=np.intp), np.full(1, count, dtype=np.intp)
+    while starts.size:
+        boxes = shapely.box(left[starts], bottom, right[ends - 1], top)
+        held = shapely.contains_properly(geometry, boxes)
+        missed = ~shapely.intersects(geometry, boxes)
+        # Each decided run's tiles marked at once: +1 at its start, -1 past its end, summed below.
+        for marks, decided in ((inside, held), (outside, missed)):
+            np.add.at(marks, starts[decided], 1)
+            np.add.at(marks, ends[decided], -1)
+        split = ~held & ~missed & (ends - starts > 1)
+        middle = (starts[split] + ends[split]) // 2
+        starts, ends = np.concatenate([starts[split], middle]), np.concatenate([middle, ends[split]])
+    return np.cumsum(inside[:-1]) > 0, np.cumsum(outside[:-1]) > 0
+
+
+def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32] | None, explored: NDArray[np.bool_],
            xs: NDArray[np.floating[Any]], ys: NDArray[np.floating[Any]], first: NDArray[np.intp],
            last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
-           near: list[NDArray[np.bool_]], within: float, doubted_trust: float,
-           free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None, region: Any, free_region: Any) -> None:
-    """One row of tiles (``ys`` its cells' rows), written into the raster's views; ``near``:
-    the tiles a ridge reaches, and those a wall's band or rim reaches; ``free``: the tiles
-    inside and outside the world's :attr:`~WorldMap.free_region` (``None``: each cell asks
-    :meth:`~WorldMap.free_space`); ``region`` and ``free_region``: the world's observed
-    region and free region cut to the strip's band (:func:`_cut`)."""
+           boxes: tuple[FloatArray, FloatArray], within: float, doubted_trust: float,
+           free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None, matters: FloatArray | None,
+           region: Any, free_region: Any) -> None:
+    """One row of tiles (``ys`` its cells' rows), written into the raster's views (no
+    occupancy where ``probability`` is ``None``); ``boxes``:
+    the tiles' middles and half-diagonals; ``free``: the tiles inside and outside the world's
+    :attr:`~WorldMap.free_region` (``None``: each cell asks :meth:`~WorldMap.free_space`);
+    ``matters``: the segments' :func:`~occtool.fuse._tile_queries.influence` (``None``: computed
+    here); ``region`` and ``free_region``: the world's observed region and free region cut
+    to the strip's band (:func:`_cut`)."""
     import shapely
 
     h, nx = ys.size, xs.size
-    tile_of = np.repeat(np.arange(first.size), last - first + 1)
-    shape = (h, nx)
-    x = np.broadcast_to(xs, shape).ravel()
-    y = np.broadcast_to(ys[:, None], shape).ravel()
-    column_tile = np.broadcast_to(tile_of, shape).ravel()
+    # The strip's cells row by row, each row padded to whole tiles (the last tile's missing
+    # columns repeat its last one, and are dropped when written), and as (tiles, columns)
+    # and (tiles, rows) for the tiles' queries.
+    width = int(last[0] - first[0]) + 1
+    shape = (h, first.size * width)
+    tile_x = np.pad(np.asarray(xs, dtype=np.float64), (0, shape[1] - nx), mode="edge").reshape(-1, width)
+    tile_y = np.broadcast_to(np.asarray(ys, dtype=np.float64), (first.size, h))
+
+    def centres(index: NDArray[np.intp]) -> FloatArray:  # of cells of the strip, by their index
+        return np.column_stack([tile_x.ravel()[index % shape[1]], tile_y[0][index // shape[1]]])
+
     if inside is None or outside is None:
-        observed = np.zeros(h * nx, dtype=bool)
+        observed = np.zeros(h * shape[1], dtype=bool)
     else:
-        observed = inside[column_tile]
-        edge = np.flatnonzero(~inside[column_tile] & ~outside[column_tile])
+        observed = np.tile(np.repeat(inside, width), h)
+        edge = np.flatnonzero(np.tile(np.repeat(~inside & ~outside, width), h))
         if edge.size:
-            observed[edge] = shapely.contains_xy(region, x[edge], y[edge])  # as world.observed
-    base = np.full(h * nx, world.unknown_level)
+            edge_xy = centres(edge)
+            observed[edge] = shapely.contains_xy(region, edge_xy[:, 0], edge_xy[:, 1])  # as world.observed
+    base = np.full(observed.size, world.unknown_level)
     if observed.any():
         seen = np.flatnonzero(observed)
-        xy = np.column_stack([x[seen], y[seen]])
-        base[seen] = world.free_value(xy)
+        xy = centres(seen)
+        tiles = seen % shape[1] // width
+        if world.flat_free:
+            base[seen] = world.free_value(xy)
+        else:
+            # The nearest positions of the tiles' cells, those of the tiles with a cell seen.
+            wanted = np.flatnonzero(np.bincount(tiles, minlength=first.size))
+            nearest = np.full((first.size, h, width), np.inf)
+            nearest[wanted] = tile_position_distances(world, tile_x[wanted], tile_y[wanted], boxes[0][wanted],
+                                                      boxes[1][wanted])
+            base[seen] = world.free_values(nearest[tiles, seen // shape[1], seen % width])
         # Only the part of it the raster may call free counts as observed (WorldMap.rasterise).
         if free is None:
             observed[seen] = world.free_space(xy)
         else:
             # Tiles wholly inside or outside the free region are decided whole, as above.
-            tiles = column_tile[seen]
             decided = free[0][tiles]
             edge = np.flatnonzero(~decided & ~free[1][tiles])
             if edge.size:
                 decided[edge] = shapely.contains_xy(free_region, xy[edge, 0], xy[edge, 1])  # as world.free_space
             observed[seen] = decided
-    every = np.full(h * nx, -np.inf)
-    of_trusted = every.copy()
-    wall = np.zeros(h * nx, dtype=bool)
-    rim = wall.copy()
-    queried = np.flatnonzero(near[1][column_tile])
-    if queried.size:
-        near_doubted, near_trusted = world._wall_distances(np.column_stack([x[queried], y[queried]]), within,
-                                                           doubted_trust)
-        wall[queried] = near_trusted <= world.wall_half_width
-        rim[queried] = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
-    queried = np.flatnonzero(near[0][column_tile])
-    if queried.size:
-        every[queried], of_trusted[queried] = world._wall_values(np.column_stack([x[queried], y[queried]]))
+    every, of_trusted, near_doubted, near_trusted = tile_walls(world, tile_x, tile_y, *boxes, within, doubted_trust,
+                                                               matters, all_ridges=probability is not None)
+    of_trusted, near_doubted, near_trusted = (_in_rows(answer) for answer in (of_trusted, near_doubted, near_trusted))
+    wall = near_trusted <= world.wall_half_width
+    rim = (near_trusted <= world.wall_rim) | (near_doubted <= world.doubted_wall_rim)
     drawn = np.maximum(base, of_trusted)
-    out = np.full(h * nx, UNKNOWN, dtype=np.uint8)
+    out = np.full(observed.size, UNKNOWN, dtype=np.uint8)
     # Never free near a trusted wall, nor right at a doubted one (WorldMap.rasterise says why).
     out[observed & ~rim & (drawn <= RASTER_FREE)] = FREE
     out[wall | (drawn >= RASTER_OCCUPIED)] = OCCUPIED
-    cells[...] = out.reshape(shape)
-    probability[...] = np.maximum(base, every).reshape(shape)
-    explored[...] = (observed | rim | wall).reshape(shape)
+    cells[...] = out.reshape(shape)[:, :nx]
+    if probability is not None:
+        probability[...] = np.maximum(base, _in_rows(every)).reshape(shape)[:, :nx]
+    explored[...] = (observed | rim | wall).reshape(shape)[:, :nx]
+
+
+def _in_rows(tiled: FloatArray) -> FloatArray:
+    """A ``(tiles, rows, columns)`` answer of a row of tiles as the strip's cells, row by row."""
+    return tiled.transpose(1, 0, 2).ravel()
 
 
 __all__ = ["BAND_STRIPS", "STRIP_CELLS", "TILE", "raster_bands", "raster_shape", "rasterise", "tile_rows"]

@@ -46,8 +46,9 @@ from occtool.formats.occmap import decode as occmap_decode
 from occtool.raster import Raster
 
 FloatArray = NDArray[np.float64]
-#: What :meth:`WorldMap._near_segments` yields: points' rows, segments, offsets across and along.
-_Nearby = tuple[NDArray[np.intp], NDArray[np.intp], FloatArray, FloatArray]
+#: What :meth:`WorldMap._near_segments` yields: a block's rows, its points' segments and
+#: whether each was found, their offsets across and along.
+_Nearby = tuple[slice, NDArray[np.intp], NDArray[np.bool_], FloatArray, FloatArray]
 
 #: Occupancy falls from a wall's trust to 0 over this distance from it (metres, past its thickness) ...
 WIDTH = 0.2
@@ -92,6 +93,9 @@ DOUBTED_TRUST = 0.3
 WALL_SHARE = 0.5
 #: Segment middles searched around a query point (the ridges of more never overlap there).
 NEIGHBOURS = 12
+#: Points a neighbour query answers at once: its ``(points, NEIGHBOURS)`` temporaries stay
+#: a few megabytes.
+_BLOCK = 1 << 15
 #: A raster of at most this many cells keeps its float32 occupancy by default
 #: (:meth:`WorldMap.rasterise`); a larger one holds two bytes a cell (cells, explored): the
 #: Freiburg campus at 0.02 m (129 M cells) would need 0.5 GB more for it.
@@ -285,19 +289,36 @@ class WorldMap:
         every, of_trusted = self._wall_values(xy)
         return of_trusted if trusted else every
 
-    def _near_segments(self, xy: FloatArray, reach: float) -> Iterator[_Nearby]:
-        """For each of the few nearest segments of every point (their middles within
-        ``reach``), at once: the points' rows, the segments, and the points' signed offset
-        across each segment's line and their offset along it past its half-length."""
-        distance, index = self._neighbours(xy, reach)
+    def _offsets(self, x: FloatArray, y: FloatArray, s: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+        """World points' (``x``, ``y``) signed offsets across segments ``s`` (the three broadcast
+        together) from their lines, and along them past their half-lengths."""
         middle, axis, normal, half = self._frames
-        for j in range(index.shape[1]):
-            rows = np.flatnonzero(np.isfinite(distance[:, j]))
-            s = index[rows, j]
-            rel = xy[rows] - middle[s]
-            across = rel[:, 0] * normal[s, 0] + rel[:, 1] * normal[s, 1]
-            along = np.abs(rel[:, 0] * axis[s, 0] + rel[:, 1] * axis[s, 1]) - half[s]
-            yield rows, s, across, along
+        dx, dy = x - middle[s, 0], y - middle[s, 1]
+        return dx * normal[s, 0] + dy * normal[s, 1], np.abs(dx * axis[s, 0] + dy * axis[s, 1]) - half[s]
+
+    def _ridges(self, s: NDArray[np.intp], across: FloatArray, along: FloatArray) -> FloatArray:
+        """Segments' ``s`` ridges at points this far across and along them (:meth:`_offsets`)."""
+        peak = 0.5 + 0.5 * self.trust[s]
+        # Across a one-sided wall the slope differs in front (the side it was seen from) and behind.
+        facing = self.facing[s]
+        width = np.where(facing == 0, self.width, np.where(across * facing >= 0, self.front_width, self.back_width))
+        return np.minimum(peak, np.minimum(peak - peak / width * (np.abs(across) - self.thickness[s]),
+                                           peak - peak / self.width * along))
+
+    def _gaps(self, s: NDArray[np.intp], across: FloatArray, along: FloatArray) -> FloatArray:
+        """Distances from points this far across and along segments ``s`` to their bands."""
+        return np.hypot(np.maximum(np.abs(across) - self.thickness[s], 0.0), np.maximum(along, 0.0))
+
+    def _near_segments(self, xy: FloatArray, reach: float) -> Iterator[_Nearby]:
+        """The points' few nearest segments (their middles within ``reach``), a block of points
+        at a time (bounded temporaries): the block's rows, the segments (``(n, k)``, ``0`` where
+        none), whether one was found there, and the offsets (:meth:`_offsets`)."""
+        for low in range(0, xy.shape[0], _BLOCK):
+            block = xy[low:low + _BLOCK]
+            distance, index = self._neighbours(block, reach)
+            found = np.isfinite(distance)
+            s = np.where(found, index, 0)
+            yield slice(low, low + block.shape[0]), s, found, *self._offsets(block[:, :1], block[:, 1:], s)
 
     def _wall_values(self, xy: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:meth:`wall_value` over every segment and over the trusted ones, in one neighbour query."""
@@ -306,19 +327,12 @@ class WorldMap:
         of_trusted = every.copy()
         if not len(self) or not xy.shape[0]:
             return every, of_trusted
-        peak = self.peak
         trusted = self.trust >= self.wall_share
         reach = self._reach(max(self.width, self.front_width, self.back_width))
-        for rows, s, across, along in self._near_segments(xy, reach):
-            # Across a one-sided wall the slope differs in front (the side it was seen from) and behind.
-            facing = self.facing[s]
-            width = np.where(facing == 0, self.width,
-                             np.where(across * facing >= 0, self.front_width, self.back_width))
-            value = np.minimum(peak[s], np.minimum(peak[s] - peak[s] / width * (np.abs(across) - self.thickness[s]),
-                                                   peak[s] - peak[s] / self.width * along))
-            every[rows] = np.maximum(every[rows], value)
-            held = trusted[s]
-            of_trusted[rows[held]] = np.maximum(of_trusted[rows[held]], value[held])
+        for rows, s, found, across, along in self._near_segments(xy, reach):
+            value = np.where(found, self._ridges(s, across, along), -np.inf)
+            every[rows] = value.max(axis=1)
+            of_trusted[rows] = np.where(trusted[s], value, -np.inf).max(axis=1)
         return every, of_trusted
 
     def wall_distance(self, xy: ArrayLike, *, trusted: bool = True, within: float | None = None) -> FloatArray:
@@ -338,12 +352,10 @@ class WorldMap:
             return every, of_trusted
         trusted = self.trust >= self.wall_share
         counted = self.trust >= least_trust
-        for rows, s, across, along in self._near_segments(xy, self._reach(within + 1e-9)):
-            gap = np.hypot(np.maximum(np.abs(across) - self.thickness[s], 0.0), np.maximum(along, 0.0))
-            kept = counted[s]
-            every[rows[kept]] = np.minimum(every[rows[kept]], gap[kept])
-            held = trusted[s]
-            of_trusted[rows[held]] = np.minimum(of_trusted[rows[held]], gap[held])
+        for rows, s, found, across, along in self._near_segments(xy, self._reach(within + 1e-9)):
+            gap = np.where(found, self._gaps(s, across, along), np.inf)
+            every[rows] = np.where(counted[s], gap, np.inf).min(axis=1)
+            of_trusted[rows] = np.where(trusted[s], gap, np.inf).min(axis=1)
         every[every > within] = np.inf
         of_trusted[of_trusted > within] = np.inf
         return every, of_trusted
@@ -353,16 +365,34 @@ class WorldMap:
         :attr:`free_level` plus :attr:`free_slope` a metre from the nearest position, under
         :data:`FREE_CAP`; flat without positions."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        if not self.positions.shape[0] or self.free_slope == 0.0 or not xy.shape[0]:
+        if self.flat_free or not xy.shape[0]:
             return np.full(xy.shape[0], min(self.free_level, FREE_CAP))
-        return np.minimum(self.free_level + self.free_slope * self._position_distance(xy), FREE_CAP)
+        return self.free_values(self._position_distance(xy))
 
-    def _position_distance(self, xy: FloatArray) -> FloatArray:
+    @property
+    def flat_free(self) -> bool:
+        """Whether observed space reads one level everywhere (no positions kept, or no slope)."""
+        return not self.positions.shape[0] or self.free_slope == 0.0
+
+    def free_values(self, distance: FloatArray) -> FloatArray:
+        """:meth:`free_value` at points this far from the nearest position (metres)."""
+        return np.minimum(self.free_level + self.free_slope * distance, FREE_CAP)
+
+    def floor_level(self) -> float:
+        """The least occupancy :meth:`predict` reads anywhere before the walls (observed or not):
+        a ridge at or below it changes nothing there."""
+        return min(self.free_level, FREE_CAP, self.unknown_level)
+
+    def _position_tree(self) -> Any:
+        """The k-d tree of the positions (built once)."""
         from scipy.spatial import cKDTree
 
         if self._position_index is None:
             self._position_index = cKDTree(self.positions)
-        return np.asarray(self._position_index.query(xy)[0], dtype=np.float64)
+        return self._position_index
+
+    def _position_distance(self, xy: FloatArray) -> FloatArray:
+        return np.asarray(self._position_tree().query(xy)[0], dtype=np.float64)
 
     def free_space(self, xy: ArrayLike) -> NDArray[np.bool_]:
         """Whether the Nav2 raster may call observed space free at world ``(K, 2)`` points
