@@ -9,7 +9,9 @@ cells of a large map cost no query at all:
 
 * a tile whose box lies inside the observed region is observed in every cell, one outside
   it in none; only the cells of tiles on the region's boundary are tested one by one (and
-  the same for the part of it the raster may call free, :attr:`WorldMap.free_region`);
+  the same for the part of it the raster may call free, :attr:`WorldMap.free_region`),
+  against the regions cut to the band of rows (:func:`_cut`: a box's test costs time with
+  every ring of the region it is tested against);
 * a tile lists the few segments that can matter to its cells and the positions that can be
   the nearest to them, and its cells are measured against those alone; a tile no segment
   reaches skips the walls, and only the cells of a thick of segments ask the k-d tree one
