@@ -91,6 +91,11 @@ DOUBTED_TRUST = 0.3
 #: A wall is drawn in the raster when at least this share of the positions that returned
 #: from it or saw through it returned from it.
 WALL_SHARE = 0.5
+def _peak_of(trust: FloatArray) -> FloatArray:
+    """Ridge heights of walls of this ``trust`` (:attr:`WorldMap.peak`)."""
+    return 0.5 + 0.5 * trust
+
+
 #: Segment middles searched around a query point (the ridges of more never overlap there).
 NEIGHBOURS = 12
 #: Points a neighbour query answers at once: its ``(points, NEIGHBOURS)`` temporaries stay
@@ -220,7 +225,7 @@ class WorldMap:
     @property
     def peak(self) -> FloatArray:
         """Each segment's ridge height: its trust lifted to [0.5, 1] (a wall never reads free)."""
-        return 0.5 + 0.5 * self.trust
+        return _peak_of(self.trust)
 
     @property
     def bounds(self) -> tuple[FloatArray, FloatArray]:
@@ -298,7 +303,7 @@ class WorldMap:
 
     def _ridges(self, s: NDArray[np.intp], across: FloatArray, along: FloatArray) -> FloatArray:
         """Segments' ``s`` ridges at points this far across and along them (:meth:`_offsets`)."""
-        peak = 0.5 + 0.5 * self.trust[s]
+        peak = _peak_of(self.trust[s])
         # Across a one-sided wall the slope differs in front (the side it was seen from) and behind.
         facing = self.facing[s]
         width = np.where(facing == 0, self.width, np.where(across * facing >= 0, self.front_width, self.back_width))
