@@ -102,7 +102,8 @@ def test_each_position_is_a_scene_entity_on_its_stamp(plain):
         for line, ring in zip(entity.lines, rings):
             # A loop: the ring without its closing point.
             assert line.type == LinePrimitive_pb2.LinePrimitive.LINE_LOOP
-            np.testing.assert_allclose([(p.x, p.y) for p in line.points], np.asarray(ring.coords)[:-1])
+            np.testing.assert_array_equal([(p.x, p.y, p.z) for p in line.points],
+                                          np.c_[np.asarray(ring.coords)[:-1], np.zeros(len(ring.coords) - 1)])
         obstacles, exploration = item.nav.obstacle_points, item.nav.exploration_points
         assert len(obstacles) > 0 and len(exploration) > 0
         assert len(entity.spheres) == len(obstacles) + len(exploration)

@@ -95,6 +95,34 @@ def _nanoseconds(stamp: float | None, fallback: int) -> int:
     return round(stamp * 1e9) if stamp is not None and 0 <= stamp < _LAST_STAMP else fallback
 
 
+def _point3_records(field: Any, point3: Any) -> Any:
+    """A function of ``xy`` ``(N, 2)`` giving the protobuf wire bytes of ``N`` values of the
+    repeated ``foxglove.Point3`` field ``field`` (a field descriptor), z = 0: each a
+    length-delimited record of its x and y as 64-bit doubles, little-endian as the wire
+    format has them. A message parses them in one call (``MergeFromString``, the same message
+    as one built point by point): a Python object a point took three of the four seconds of
+    the campus's MCAP (1.1 M outline points)."""
+
+    def tag(number: int, wire_type: int) -> int:
+        value = number << 3 | wire_type
+        assert value < 0x80, "one-byte tags: the field numbers of foxglove.Point3 and its parents are small"
+        return value
+
+    x, y = point3.DESCRIPTOR.fields_by_name["x"].number, point3.DESCRIPTOR.fields_by_name["y"].number
+    record = np.dtype([("tag", "u1"), ("length", "u1"), ("x_tag", "u1"), ("x", "<f8"), ("y_tag", "u1"),
+                       ("y", "<f8")])
+    length, fixed64 = 2, 1  # the wire types of a length-delimited field and of a double
+    head = (tag(field.number, length), record.itemsize - 2, tag(x, fixed64), tag(y, fixed64))
+
+    def records(xy: Any) -> bytes:
+        out = np.empty(len(xy), dtype=record)
+        out["tag"], out["length"], out["x_tag"], out["y_tag"] = head
+        out["x"], out["y"] = xy[:, 0], xy[:, 1]
+        return out.tobytes()
+
+    return records
+
+
 def run_map_mcap_bytes(run: Any) -> bytes:
     """The MCAP file of a :class:`occtool.fuse.RunMap`, as bytes (:func:`write_run_map_mcap`)."""
     buffer = io.BytesIO()
@@ -119,6 +147,8 @@ def write_run_map_mcap(run: Any, buffer: Any) -> None:
     green = Color_pb2.Color(r=0.1, g=0.7, b=0.2, a=1.0)
     blue = Color_pb2.Color(r=0.1, g=0.4, b=0.9, a=1.0)
     size = Vector3_pb2.Vector3(x=POINT_DIAMETER, y=POINT_DIAMETER, z=POINT_DIAMETER)
+    point_records = _point3_records(LinePrimitive_pb2.LinePrimitive.DESCRIPTOR.fields_by_name["points"],
+                                    Point3_pb2.Point3)
     writer = Writer(buffer)
     last = 0
     for k, item in enumerate(run.placed):
@@ -131,12 +161,12 @@ def write_run_map_mcap(run: Any, buffer: Any) -> None:
             if polygon.is_empty:
                 continue
             for ring in [polygon.exterior, *polygon.interiors]:
-                xy = np.asarray(ring.coords)[:-1]
-                entity.lines.append(LinePrimitive_pb2.LinePrimitive(
+                line = LinePrimitive_pb2.LinePrimitive(
                     type=LinePrimitive_pb2.LinePrimitive.LINE_LOOP,
                     pose=Pose_pb2.Pose(position=Vector3_pb2.Vector3(x=0.0, y=0.0, z=0.0), orientation=identity),
-                    thickness=0.03, scale_invariant=False, color=blue,
-                    points=[Point3_pb2.Point3(x=float(x), y=float(y), z=0.0) for x, y in xy]))
+                    thickness=0.03, scale_invariant=False, color=blue)
+                line.MergeFromString(point_records(np.asarray(ring.coords)[:-1]))
+                entity.lines.append(line)
         for points, color in ((item.nav.obstacle_points, red), (item.nav.exploration_points, green)):
             for x, y in np.asarray(points, dtype=np.float64).reshape(-1, 2):
                 entity.spheres.append(SpherePrimitive_pb2.SpherePrimitive(
