@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -64,12 +66,104 @@ class PackedFlags:
         return whole if dtype is None else whole.astype(dtype)  # type: ignore[call-overload]
 
 
+class SpilledCells:
+    """A ``(rows, cols)`` uint8 array kept in an unnamed temporary file instead of memory: a
+    large raster's cells (:attr:`Raster.cells`), which a run otherwise holds whole while it
+    writes its files (a byte a cell: 0.3 GB for ten campuses at 0.05 m).
+
+    The file holds the rows as a PGM image holds its pixels, the top row (the highest y)
+    first, and nothing else; it has no name (``tempfile.TemporaryFile``), so it goes with the
+    object or the process, however the process ends. Rows are read and written with
+    ``os.pread``/``os.pwrite``, never mapped: what was read is not held in the process.
+
+    Read as numpy reads an array: ``cells[low:high]`` (rows, bottom first as in memory),
+    ``cells[row, col]`` (index arrays), ``numpy.asarray(cells)`` and comparisons with a
+    number (all of it); written a band of rows at a time (``cells[low:high] = rows``). It
+    pickles as the array it holds.
+    """
+
+    ndim = 2
+    dtype = np.dtype(np.uint8)
+    __hash__ = None  # type: ignore[assignment]
+
+    def __init__(self, shape: tuple[int, int], fill: int, folder: str | os.PathLike[str] | None = None) -> None:
+        import tempfile
+
+        self.shape = (int(shape[0]), int(shape[1]))
+        self._file = tempfile.TemporaryFile(dir=folder)
+        row = np.full(self.shape[1], fill, dtype=np.uint8).tobytes()
+        step = max(1, (1 << 22) // max(1, self.shape[1]))  # about 4 MB written at a time
+        for low in range(0, self.shape[0], step):
+            self._file.write(row * min(step, self.shape[0] - low))
+        self._file.flush()
+
+    @property
+    def size(self) -> int:
+        return self.shape[0] * self.shape[1]
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def _rows(self, low: int, high: int) -> NDArray[np.uint8]:
+        """Rows ``low`` to ``high`` (clipped), bottom first."""
+        low, high = max(0, low), min(high, self.shape[0])
+        if high <= low:
+            return np.zeros((0, self.shape[1]), dtype=np.uint8)
+        cols = self.shape[1]
+        data = os.pread(self._file.fileno(), (high - low) * cols, (self.shape[0] - high) * cols)
+        return np.frombuffer(data, dtype=np.uint8).reshape(high - low, cols)[::-1].copy()
+
+    def __setitem__(self, rows: slice, values: ArrayLike) -> None:
+        low, high, stride = rows.indices(self.shape[0]) if isinstance(rows, slice) else (0, 0, 0)
+        if stride != 1:
+            raise TypeError("spilled cells are written a slice of whole rows at a time")
+        block = np.broadcast_to(np.asarray(values, dtype=np.uint8), (high - low, self.shape[1]))
+        os.pwrite(self._file.fileno(), np.ascontiguousarray(block[::-1]).tobytes(),
+                  (self.shape[0] - high) * self.shape[1])
+
+    def __getitem__(self, key: object) -> Any:
+        if isinstance(key, slice):
+            low, high, stride = key.indices(self.shape[0])
+            return self._rows(low, high)[::stride] if stride > 0 else self[:][key]
+        if isinstance(key, tuple) and len(key) == 2 and not isinstance(key[0], slice):
+            # Index arrays: the rows they name, each read once.
+            row, col = np.broadcast_arrays(np.asarray(key[0], dtype=np.intp), np.asarray(key[1]))
+            row = np.where(row < 0, row + self.shape[0], row)
+            out = np.empty(row.shape, dtype=np.uint8)
+            if row.size and (row.min() < 0 or row.max() >= self.shape[0]):
+                raise IndexError(f"row index out of range for {self.shape[0]} rows")
+            for r in np.unique(row).tolist():
+                at = row == r
+                out[at] = self._rows(r, r + 1)[0][col[at]]
+            return out
+        if isinstance(key, (int, np.integer)):
+            r = int(key) + (self.shape[0] if key < 0 else 0)
+            if not 0 <= r < self.shape[0]:
+                raise IndexError(f"row {key} out of range for {self.shape[0]} rows")
+            return self._rows(r, r + 1)[0]
+        return np.asarray(self)[key]  # type: ignore[call-overload]
+
+    def __array__(self, dtype: object = None, copy: object = None) -> NDArray[np.uint8]:
+        whole = self._rows(0, self.shape[0])
+        return whole if dtype is None else whole.astype(dtype)  # type: ignore[call-overload]
+
+    def __eq__(self, other: object) -> Any:
+        return np.asarray(self) == other
+
+    def __ne__(self, other: object) -> Any:
+        return np.asarray(self) != other
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (np.asarray, (np.asarray(self),))
+
+
 @dataclass
 class Raster:
     """A free / occupied / unknown grid in the world (map) frame.
 
-    ``cells`` is ``(ny, nx)`` uint8 with :data:`FREE`, :data:`OCCUPIED`, :data:`UNKNOWN`,
-    row 0 at ``origin[1]`` (the bottom: y grows with the row); cell ``(j, i)`` spans
+    ``cells`` is ``(ny, nx)`` uint8 with :data:`FREE`, :data:`OCCUPIED`, :data:`UNKNOWN`
+    (an array, or a large run's :class:`SpilledCells`, read as one), row 0 at ``origin[1]``
+    (the bottom: y grows with the row); cell ``(j, i)`` spans
     ``origin + (i, j) * resolution`` to one resolution more. ``conflict`` marks cells where
     positions contradicted each other (a read-only view of one ``False`` where no cell can:
     it costs no memory); ``probability`` is the fused occupancy (0.5 unknown), ``None``
@@ -80,7 +174,7 @@ class Raster:
     map's raster the same flags packed eight a byte (:class:`PackedFlags`, read as one).
     """
 
-    cells: NDArray[np.uint8]
+    cells: NDArray[np.uint8] | SpilledCells
     resolution: float
     origin: tuple[float, float]
     probability: NDArray[np.float32] | None

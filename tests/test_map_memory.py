@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from _room_log import ROOM, write_room_log
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from occtool.errors import InputError
 from occtool.fuse import load_map
@@ -17,7 +19,7 @@ from occtool.fuse._rasterise import raster_shape, rasterise
 from occtool.fuse._world import DOUBTED_TRUST
 from occtool.io import read_log
 from occtool.limits import memory_bytes
-from occtool.raster import FREE
+from occtool.raster import FREE, SpilledCells
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 
@@ -242,3 +244,73 @@ def test_a_trinary_run_holds_no_occupancy_and_a_scale_map_of_it_is_drawn_again(r
     assert np.array_equal(trinary.run.raster.cells, scale.run.raster.cells)
     write_run_map(trinary.run, tmp_path / "again", nav2_mode="scale", mcap=False)
     assert (tmp_path / "again" / "map.png").read_bytes() == (tmp_path / "s" / "map.png").read_bytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(rows=st.integers(1, 40), cols=st.integers(1, 9), seed=st.integers(0, 2**16), step=st.integers(1, 7))
+def test_spilled_cells_read_as_the_array_they_hold(tmp_path_factory, rows, cols, seed, step):
+    """Cells kept in a file (a large raster's) answer slices, index arrays, comparisons and
+    pickling as the array written into them a band at a time, and leave no file behind."""
+    import pickle
+
+    folder = tmp_path_factory.mktemp("spill")
+    rng = np.random.default_rng(seed)
+    array = rng.choice(np.array([0, 205, 254], dtype=np.uint8), size=(rows, cols))
+    cells = SpilledCells((rows, cols), 205, folder)
+    assert np.array_equal(np.asarray(cells), np.full((rows, cols), 205))
+    for low in range(0, rows, step):
+        cells[low:low + step] = array[low:low + step]
+    assert cells.shape == array.shape and cells.size == array.size and len(cells) == rows
+    assert np.array_equal(np.asarray(cells), array)
+    low, high = sorted(rng.integers(0, rows + 1, size=2).tolist())
+    assert np.array_equal(cells[low:high], array[low:high])
+    row, col = rng.integers(0, rows, size=15), rng.integers(0, cols, size=15)
+    assert np.array_equal(cells[row, col], array[row, col])
+    assert np.array_equal(cells[-1], array[-1]) and np.array_equal(cells == 254, array == 254)
+    assert np.array_equal(pickle.loads(pickle.dumps(cells)), array)
+    assert not list(folder.iterdir())  # an unnamed file
+
+
+def test_a_spilled_raster_is_the_raster_in_memory_in_every_file(tmp_path):
+    """A raster whose cells wait in a file gives the same cells, counts, frontiers, Nav2 map
+    and MCAP grid as the one held in memory."""
+    from occtool.formats.foxglove import grid_values
+    from occtool.formats.nav2 import write_nav2
+    from occtool.fuse._frontiers import frontiers_in_strips
+
+    world = load_map(FIXTURES / "maps" / "intel.occmap")
+    origin, nx, ny = raster_shape(world, 0.1)
+    within = max(world.wall_half_width, world.wall_rim, world.doubted_wall_rim)
+    held = rasterise(world, 0.1, nx, ny, origin, within, DOUBTED_TRUST, occupancy=False)
+    spilled = rasterise(world, 0.1, nx, ny, origin, within, DOUBTED_TRUST, occupancy=False, spill=tmp_path,
+                        spill_cells=0)
+    assert isinstance(spilled.cells, SpilledCells) and isinstance(held.cells, np.ndarray)
+    assert np.array_equal(spilled.cells, held.cells) and spilled.counts() == held.counts()
+    assert np.array_equal(frontiers_in_strips(spilled, 0.5, strip_cells=nx * 7),
+                          frontiers_in_strips(held, 0.5, strip_cells=nx * 7))
+    assert np.array_equal(grid_values(spilled, max_cells=nx * ny // 5)[0], grid_values(held, max_cells=nx * ny // 5)[0])
+    for name in ("held", "spilled"):
+        (tmp_path / name).mkdir()
+    _, held_image = write_nav2(held.cells, 0.1, origin, tmp_path / "held" / "map.yaml")
+    _, spilled_image = write_nav2(spilled.cells, 0.1, origin, tmp_path / "spilled" / "map.yaml")
+    assert held_image.read_bytes() == spilled_image.read_bytes()
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["held", "spilled"]
+
+
+def test_a_lean_run_keeps_its_large_raster_in_a_file_and_writes_the_same_map(room_log, tmp_path, monkeypatch):
+    """``map_log(lean=True)`` keeps a raster larger than SPILL_CELLS in the output's folder
+    (no file left there) and writes the files of a run that held it."""
+    import occtool.fuse._rasterise as rasterising
+    from occtool.fit import OccupancyRegressor
+    from occtool.fuse import map_log
+    from occtool.robot import Robot
+
+    estimator = OccupancyRegressor(pieces=8, robot=Robot(sensor_height=0.3, body_height=0.5))
+    options = {"estimator": estimator, "read_options": {"no_return_range": 5.0}, "mcap": False}
+    held = map_log(room_log, tmp_path / "held", **options)
+    monkeypatch.setattr(rasterising, "SPILL_CELLS", 0)
+    spilled = map_log(room_log, tmp_path / "spilled", lean=True, **options)
+    assert isinstance(spilled.run.raster.cells, SpilledCells) and isinstance(held.run.raster.cells, np.ndarray)
+    for name in ("map.pgm", "world.occmap", "navigation.geojson", "frontiers.geojson"):
+        assert (tmp_path / "held" / name).read_bytes() == (tmp_path / "spilled" / name).read_bytes()
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["held", "spilled"]

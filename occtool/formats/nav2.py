@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from occtool._files import atomic_write
 from occtool.errors import InputError
 from occtool.limits import DEFAULT_MEMORY_LIMIT, MAX_DISTANCE, memory_bytes
+from occtool.raster import SpilledCells
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
@@ -74,14 +75,16 @@ class Nav2Map:
     decimation: int = 1
 
 
-def write_nav2(pixels: NDArray[np.uint8], resolution: float, origin: tuple[float, float], yaml_path: str | os.PathLike[str],
+def write_nav2(pixels: NDArray[np.uint8] | SpilledCells, resolution: float, origin: tuple[float, float], yaml_path: str | os.PathLike[str],
                *, image_name: str | None = None, overwrite: bool = True) -> tuple[Path, Path]:
-    """Write ``pixels`` (``(rows, cols)`` uint8, row 0 at the bottom, y = ``origin[1]``) as a Nav2 map.
+    """Write ``pixels`` (``(rows, cols)`` uint8, row 0 at the bottom, y = ``origin[1]``; an
+    array or a raster's :class:`~occtool.raster.SpilledCells`) as a Nav2 map.
 
     Writes the PGM next to the YAML (``image_name``, default the YAML's stem + ``.pgm``),
     each file atomically. Returns the two paths.
     """
-    pixels = np.asarray(pixels)
+    if not isinstance(pixels, SpilledCells):  # read back a strip at a time below, never whole
+        pixels = np.asarray(pixels)
     if pixels.ndim != 2 or pixels.size == 0 or pixels.dtype != np.uint8:
         raise InputError(f"a Nav2 map needs a non-empty 2D uint8 image, got {pixels.dtype} {pixels.shape}")
     if not (np.isfinite(resolution) and resolution > 0):

@@ -69,6 +69,15 @@ def _write(run: RunMap, output: str | os.PathLike[str], extra: dict[str, Any], r
                           georeference=georeference, extra_summary=extra, nav2_mode=nav2_mode, also=poses_csv)
 
 
+def _existing_folder(output: str | os.PathLike[str]) -> Path:
+    """The output folder, or its nearest existing parent: where a lean run keeps its large
+    raster's cells while it writes its files (an unnamed file, on the disk the map goes to)."""
+    folder = Path(output).absolute()
+    while not folder.is_dir() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
 def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | RangeLog,
             output: str | os.PathLike[str], *,
             estimator: Any | None = None, read_options: Mapping[str, Any] | None = None,
@@ -139,7 +148,10 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         ``consume``), the models go once their navigation maps are placed, before the world
         map is built (:attr:`MapResult.models` is then empty), every position's sightings
         once the world map is built (the report's :attr:`~FuseReport.sightings` is
-        ``None``), and the placed navigation maps keep no per-height slices. The files are
+        ``None``), the placed navigation maps keep no per-height slices, and a large 2D
+        raster's cells wait in an unnamed temporary file in the output folder (or its
+        nearest existing parent) while the files are written (:class:`occtool.raster.SpilledCells`;
+        :attr:`MapResult.run`'s raster reads them from there). The files are
         the same; a large run's memory is less (the command line maps lean).
 
     Raises
@@ -172,7 +184,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
                                                    settings=registration or RegistrationSettings())
         name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
     three_d = world == "3d" or (world == "auto" and is_3d_log(log))
-    check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d)
+    check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d,
+                     spill=lean)
     with make_executor(jobs, scheduler) as executor:  # an unreachable scheduler is refused before any fit
         # A log read here is used up as it is fitted when mapped lean (a 3D map reads it again).
         fused, models, report = fuse_log(log, estimator, combination=combination, threshold=threshold,
@@ -204,7 +217,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         # it: four bytes a cell a trinary map would hold for nothing.
         run = map_of_run(fused, models, positions, resolution=resolution, navigation=navigation,
                          sightings=report.sightings, world3d=world3d, sensor_positions=sensors, executor=executor,
-                         occupancy=nav2_mode == "scale", world=world2d, release_models=lean, placed=placed)
+                         occupancy=nav2_mode == "scale", world=world2d, release_models=lean, placed=placed,
+                         spill=_existing_folder(output) if lean else None)
     run.seconds["world_map"] = seconds
     if navigation_seconds is not None:
         run.seconds["navigation"] = navigation_seconds

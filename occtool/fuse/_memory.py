@@ -6,11 +6,12 @@ What a run holds at its peak grows with two things a log says up front:
 * its **positions** (scans): each one's features while it is fitted, its keyframe model,
   its returns per pan bin (:class:`occtool.fuse.RunReturns`), its navigation map and its
   share of the navigation region;
-* the **raster** of its extent: the world map's Nav2 cells and explored flags (a byte
-  each), held whole, with the MCAP grid (at most 2**25 cells) and the strips' temporaries
-  beside them at the peak (a ``scale`` map's and a 3D map's raster hold their occupancy
-  too). The world map's walls reach :data:`WALL_REACH` from each position, so the extent
-  is the box of every position and of its features within that reach.
+* the **raster** of its extent: the world map's Nav2 cells (a byte each, held whole or,
+  in a lean run, kept in a file) and explored flags (an eighth), with the MCAP grid (at
+  most 2**25 cells) and the strips' temporaries beside them at the peak (a ``scale``
+  map's and a 3D map's raster hold their occupancy too). The world map's walls reach
+  :data:`WALL_REACH` from each position, so the extent is the box of every position and
+  of its features within that reach.
 
 The figures are from runs on the project's 2-core machine (:data:`BASE_BYTES`, ...); the
 estimate errs high, so a run it passes fits.
@@ -45,6 +46,10 @@ SCALE_CELL_BYTES = 28
 #: Per cell of a 2D map's trinary raster, which keeps no occupancy (:func:`occtool.fuse.map_log`):
 #: its cells and explored flags, held whole ...
 TRINARY_CELL_BYTES = 2
+#: ... or, kept in a file while the files are written (:func:`occtool.fuse.map_log`'s ``lean``,
+#: over :data:`occtool.fuse._rasterise.SPILL_CELLS` cells), its explored flags (an eighth) and
+#: the strips read back ...
+SPILLED_CELL_BYTES = 1
 #: ... per cell of its MCAP grid (at most :data:`occtool.formats.foxglove.MAX_GRID_CELLS`):
 #: the int8 values, their bytes, the message and the MCAP's buffer ...
 GRID_CELL_BYTES = 4
@@ -99,11 +104,12 @@ def raster_extent(log: Any, reach: float | None = None) -> tuple[np.ndarray, np.
 
 
 def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = "trinary",
-                        world3d: bool = False) -> MemoryEstimate:
+                        world3d: bool = False, spill: bool = False) -> MemoryEstimate:
     """The peak memory ``occtool map`` needs for ``log`` (a :class:`~occtool.features.RangeLog`),
     in bytes, from its positions, its features and the raster of its extent at
     ``resolution`` metres (``nav2_mode`` ``"scale"`` costs more a cell), and with
-    ``world3d`` the build of its 3D world map (:data:`RAY_BYTES` a feature)."""
+    ``world3d`` the build of its 3D world map (:data:`RAY_BYTES` a feature); ``spill``: a
+    large 2D trinary raster's cells wait in a file (:func:`occtool.fuse.map_log`'s ``lean``)."""
     if not resolution > 0:
         raise InputError(f"resolution must be a positive number of metres, got {resolution}")
     positions = len(log.positions)
@@ -116,6 +122,7 @@ def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = 
         origin = np.floor(lower / resolution) * resolution
         columns, rows = (np.ceil((upper - origin) / resolution).astype(np.int64) + 1).tolist()
     from occtool.formats.foxglove import MAX_GRID_CELLS
+    from occtool.fuse._rasterise import SPILL_CELLS
 
     cells = int(rows) * int(columns)
     if nav2_mode == "scale":
@@ -123,7 +130,8 @@ def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = 
     elif world3d:
         raster = cells * RASTER_CELL_BYTES
     else:
-        raster = (cells * TRINARY_CELL_BYTES + min(cells, MAX_GRID_CELLS) * GRID_CELL_BYTES
+        held = SPILLED_CELL_BYTES if spill and cells > SPILL_CELLS else TRINARY_CELL_BYTES
+        raster = (cells * held + min(cells, MAX_GRID_CELLS) * GRID_CELL_BYTES
                   + min(cells * STRIP_CELL_BYTES, STRIP_BYTES))
     parts = {"base": BASE_BYTES, "positions": positions * POSITION_BYTES + features * FEATURE_BYTES,
              "raster": raster}
@@ -133,12 +141,13 @@ def estimate_map_memory(log: Any, *, resolution: float = 0.05, nav2_mode: str = 
 
 
 def check_map_memory(log: Any, *, memory_limit: int | float | str | None = DEFAULT_MEMORY_LIMIT,
-                     resolution: float = 0.05, nav2_mode: str = "trinary", world3d: bool = False) -> MemoryEstimate:
+                     resolution: float = 0.05, nav2_mode: str = "trinary", world3d: bool = False,
+                     spill: bool = False) -> MemoryEstimate:
     """:func:`estimate_map_memory`, refused with an :class:`InputError` naming
     ``memory_limit=`` (the command line's ``--memory-limit``) when the estimate is over
     ``memory_limit`` (bytes, or a size such as ``"8G"``; ``None``: no limit). Returns the estimate."""
     limit = memory_bytes(memory_limit)
-    estimate = estimate_map_memory(log, resolution=resolution, nav2_mode=nav2_mode, world3d=world3d)
+    estimate = estimate_map_memory(log, resolution=resolution, nav2_mode=nav2_mode, world3d=world3d, spill=spill)
     if limit is not None and estimate.total > limit:
         rows, columns = estimate.raster_shape
         wanted = max(1, -(-estimate.total // 10**9))  # whole gigabytes, rounded up

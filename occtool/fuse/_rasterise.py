@@ -24,13 +24,14 @@ queries, so the raster is the same, byte for byte, as one computed over all cell
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from occtool.fuse._tile_queries import influence, tile_position_distances, tile_walls
-from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, PackedFlags, Raster
+from occtool.raster import FREE, OCCUPIED, RASTER_FREE, RASTER_OCCUPIED, UNKNOWN, PackedFlags, Raster, SpilledCells
 
 FloatArray = NDArray[np.float64]
 
@@ -40,6 +41,9 @@ TILE = 16
 #: Cells of one strip (a whole number of tile rows): bounds the temporaries, about 200
 #: bytes a cell queried (a 2**19-cell strip: ~100 MB at most).
 STRIP_CELLS = 1 << 19
+#: Cells of a raster whose cells are kept in a file when a folder is given for them
+#: (:func:`rasterise`'s ``spill``): below it the file's cost is not worth the memory saved.
+SPILL_CELLS = 1 << 24
 
 
 def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], int, int]:
@@ -52,15 +56,23 @@ def raster_shape(world: Any, resolution: float) -> tuple[tuple[float, float], in
 
 def rasterise(world: Any, resolution: float, nx: int, ny: int, origin: tuple[float, float],
               within: float, doubted_trust: float, *, tile: int = TILE,
-              strip_cells: int = STRIP_CELLS, executor: Any = None, occupancy: bool = True) -> Raster:
+              strip_cells: int = STRIP_CELLS, executor: Any = None, occupancy: bool = True,
+              spill: str | os.PathLike[str] | None = None, spill_cells: int | None = None) -> Raster:
     """The raster of ``world`` (a :class:`WorldMap`), ``ny`` rows of ``nx`` cells from
     ``origin``, strip by strip; ``within`` is the widest wall band or rim the cells ask
     about and ``doubted_trust`` the least trust of a doubted wall (:meth:`WorldMap.rasterise`).
     ``executor`` (an :class:`occtool.executor.Executor`; ``None``: this process) computes
     the bands of rows (:func:`tile_rows`); the raster is the same wherever they ran.
     Without ``occupancy`` the raster keeps no float32 occupancy (``probability`` ``None``):
-    a byte and an eighth a cell held (the cells, the explored flags packed), not five and an eighth."""
-    cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
+    a byte and an eighth a cell held (the cells, the explored flags packed), not five and an eighth.
+    ``spill``: a folder where the cells of a raster of more than ``spill_cells`` cells
+    (``None``: :data:`SPILL_CELLS`) are kept in an unnamed temporary file
+    (:class:`occtool.raster.SpilledCells`), not in memory: the explored flags' eighth of a
+    byte a cell held (``None``: in memory)."""
+    if spill is not None and nx * ny > (SPILL_CELLS if spill_cells is None else spill_cells):
+        cells: NDArray[np.uint8] | SpilledCells = SpilledCells((ny, nx), UNKNOWN, spill)
+    else:
+        cells = np.full((ny, nx), UNKNOWN, dtype=np.uint8)
     probability = np.empty((ny, nx), dtype=np.float32) if occupancy else None
     explored = PackedFlags((ny, nx))  # an eighth of a byte a cell
     for low, high, strip in raster_bands(world, resolution, nx, ny, origin, within, doubted_trust, tile=tile,
@@ -288,4 +300,5 @@ def _in_rows(tiled: FloatArray) -> FloatArray:
     return tiled.transpose(1, 0, 2).ravel()
 
 
-__all__ = ["BAND_STRIPS", "STRIP_CELLS", "TILE", "raster_bands", "raster_shape", "rasterise", "tile_rows"]
+__all__ = ["BAND_STRIPS", "SPILL_CELLS", "STRIP_CELLS", "TILE", "raster_bands", "raster_shape", "rasterise",
+           "tile_rows"]

@@ -8,6 +8,7 @@ people look.
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from collections.abc import Mapping
@@ -136,7 +137,8 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
                robot_overrides: Mapping[str, float] | None = None, world3d: Any | None = None,
                sensor_positions: Any | None = None, executor: Any = None,
                occupancy: bool | None = None, world: WorldMap | None = None,
-               release_models: bool = False, placed: list[PlacedMap] | None = None) -> RunMap:
+               release_models: bool = False, placed: list[PlacedMap] | None = None,
+               spill: str | os.PathLike[str] | None = None) -> RunMap:
     """Rasterise ``fused`` and place each model's navigation map in the world.
 
     Parameters
@@ -184,6 +186,10 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     placed
         The models' navigation maps placed already (:func:`place_navigation`; ``models``
         are then not used and may be empty); ``None``: placed here.
+    spill
+        A folder where a large 2D raster's cells are kept in an unnamed temporary file
+        instead of memory (:class:`occtool.raster.SpilledCells`, read back a strip of rows
+        at a time as the files are written); ``None``: in memory.
     """
     if placed is None and len(models) != len(positions):
         raise InputError(f"{len(models)} models but {len(positions)} positions")
@@ -210,7 +216,7 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
         seconds["navigation"] = 0.0
     started = time.perf_counter()
     if world3d is None:
-        raster = the_world.rasterise(resolution, executor=executor, occupancy=occupancy)
+        raster = the_world.rasterise(resolution, executor=executor, occupancy=occupancy, spill=spill)
     else:
         from occtool.fuse._projection import project_band
 

@@ -441,7 +441,7 @@ class WorldMap:
         return out
 
     def rasterise(self, resolution: float = 0.05, *, max_cells: int | None = None, executor: Any = None,
-                  occupancy: bool | None = None) -> Raster:
+                  occupancy: bool | None = None, spill: Any = None) -> Raster:
         """Free / occupied / unknown cells, as Nav2 loads them, from the occupancy of the
         trusted walls (:meth:`predict` without the walls most positions saw through, which the
         trinary map does not draw) at the cell's centre: occupied where it reaches
@@ -459,7 +459,9 @@ class WorldMap:
         the raster is the same wherever they ran. ``occupancy``: keep ``probability`` (four
         bytes a cell); ``None``: when the raster has at most :data:`OCCUPANCY_CELLS` cells.
         ``max_cells``: refuse a larger raster (``None``: any; a run's memory is checked
-        before it starts, :func:`occtool.fuse.check_map_memory`)."""
+        before it starts, :func:`occtool.fuse.check_map_memory`). ``spill``: a folder where a
+        large raster's cells are kept in a temporary file rather than in memory
+        (:func:`occtool.fuse._rasterise.rasterise`)."""
         from occtool.fuse._rasterise import raster_shape
         from occtool.fuse._rasterise import rasterise as rasterise_strips
 
@@ -474,7 +476,7 @@ class WorldMap:
         # one query for the bands round the trusted and the doubted walls (exact up to the widest).
         return rasterise_strips(self, float(resolution), nx, ny, origin,
                                 max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST,
-                                executor=executor, occupancy=occupancy)
+                                executor=executor, occupancy=occupancy, spill=spill)
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays; a file
