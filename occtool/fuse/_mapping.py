@@ -27,7 +27,7 @@ from occtool.fuse._memory import check_map_memory
 from occtool.fuse._outputs import _write_run_map, check_outputs
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._run import RunMap, map_of_run, place_navigation
-from occtool.limits import DEFAULT_MEMORY_LIMIT
+from occtool.limits import DEFAULT_MEMORY_LIMIT, release_free_memory
 
 #: The kinds of world map :func:`map_log` writes.
 WORLD_KINDS = ("auto", "2d", "3d")
@@ -208,6 +208,9 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
             # Read here and fused: the features of every scan are of no more use (a large run's
             # raster needs the memory they held).
             del log
+        # The scans' features and the models, gone: their pages of the C heap back to the
+        # system before the world map is built (campus x2: 183 -> 140 MB after the fits).
+        release_free_memory()
         if not three_d:
             world2d = build_world_map(fused, sightings=report.sightings)
             if lean:

@@ -71,7 +71,9 @@ def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach
     near walls stay as they were."""
     from scipy.spatial import cKDTree
 
-    points, owner = run.return_points(far_reach)
+    # The returns beyond reach, measured as before from the world points (the range itself
+    # can round to the other side of reach; a micrometre below it takes those in).
+    points, owner = run.return_points(far_reach, beyond=reach - 1e-6)
     far = np.hypot(*(points - run.poses[owner, :2]).T) > reach
     if far.any() and near.shape[0]:
         far[far] = np.isinf(cKDTree(near).query(points[far], distance_upper_bound=FAR_WALL_GAP)[0])
@@ -124,6 +126,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     segments: Segments = fit_segments(points, owner, viewpoints=run.poses[owner, :2] if one_sided else None, **fit)
     if far_reach > reach:
         segments = _with_far_walls(segments, run, points, reach, far_reach, one_sided, fit)
+    del points, owner  # a large run's returns: not held through the unions below
     through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
     trust = segments.hits / np.maximum(segments.hits + through, 1)
     regions = [_observed_region(own.ranges, own.poses, r) for r in (observed_reach, min(region_reach, observed_reach))]

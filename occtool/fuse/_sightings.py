@@ -52,14 +52,16 @@ class RunReturns:
     def __len__(self) -> int:
         return int(self.poses.shape[0])
 
-    def return_points(self, within: float) -> tuple[FloatArray, NDArray[np.int64]]:
-        """World ``(N, 2)`` returns no farther than ``within`` from their position, and the
-        position of each (a block of positions at a time: the temporaries are a block's)."""
+    def return_points(self, within: float, beyond: float = -math.inf) -> tuple[FloatArray, NDArray[np.int64]]:
+        """World ``(N, 2)`` returns no farther than ``within`` from their position (and farther
+        than ``beyond``), and the position of each (a block of positions at a time: the
+        temporaries are a block's)."""
         bins = self.ranges.shape[1]
         points, owners = [], []
         for low in range(0, len(self), _POSITIONS_AT_ONCE):
             high = low + _POSITIONS_AT_ONCE
-            k, b = np.nonzero(self.returned[low:high] & (self.ranges[low:high] <= within))
+            ranges = self.ranges[low:high]
+            k, b = np.nonzero(self.returned[low:high] & (ranges <= within) & (ranges > beyond))
             k += low
             alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
             r = self.ranges[k, b]
