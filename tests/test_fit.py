@@ -479,3 +479,25 @@ def test_pieces_none_fits_the_count_s_default_and_a_number_overrides_it():
         OccupancyRegressor(groups=65).fit(small)
     with pytest.raises(InputError, match="pieces must be a whole number"):
         OccupancyRegressor(pieces=float("nan")).fit(small)
+
+
+@pytest.mark.parametrize("basis", ["trig", "linear"])
+def test_projecting_rows_at_once_equals_projecting_each(basis):
+    """_Refitter.project_rows is project row by row, bit for bit (the construction projects
+    its pieces at once)."""
+    from types import SimpleNamespace
+
+    from occtool.fit._construction import _Fitter
+
+    k = 2 if basis == "trig" else 1
+    lower = np.array([-12.0] * k + [-8.0, 0.25, -np.inf])
+    upper = np.array([12.0] * k + [8.0, np.inf, np.inf])
+    fitter = SimpleNamespace(k_angle=k, lower=lower, upper=upper, p=SimpleNamespace(a_max=12.0))
+    rng = np.random.default_rng(7)
+    W = rng.normal(0.0, 10.0, (4000, k + 3))
+    # A pair one ulp over the disc once scaled (the loader's regression), and rows on it.
+    W[0, :2] = [-6.3453855919518025, -10.185091147822414]
+    W[1, :k] = 12.0
+    expected = np.array([_Fitter.project(fitter, row.copy()) for row in W])
+    got = _Fitter.project_rows(fitter, W.copy())
+    assert got.tobytes() == expected.tobytes()

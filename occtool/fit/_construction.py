@@ -142,7 +142,7 @@ class _Fitter(_Refitter):
         a1, a2 = W[:, 0].copy(), W[:, 1].copy()
         W[:, 0] = a1 * co - a2 * so
         W[:, 1] = a1 * so + a2 * co
-        W = np.array([self.project(row) for row in W])
+        W = self.project_rows(W)
         return MinMaxTree(tree.basis, W, tree.root)
 
     # ---------------------------------------------------------------- initial tree
@@ -227,18 +227,25 @@ class _Fitter(_Refitter):
                 centres_per_group[int(order[i])] += 1
 
         programmes = self.centre_programmes(profile, segments, centres_per_group)
-        for g, ((first, end), centres) in enumerate(zip(segments, self.place_centres(programmes))):
+        centres = self.place_centres(programmes)
+        # Each segment's centres (in programme order: segment by segment), then its two sides.
+        segment_of = np.asarray(programmes.segment_of, dtype=np.intp)
+        first_centre = np.searchsorted(segment_of, np.arange(len(segments)))
+        if len(segments) > 1:
+            # Side pieces start at the segment's edges and switch the group off beyond
+            # them; where neighbouring groups overlap, the MAX keeps the nearer obstacle.
+            bases = centres[first_centre]
+            start_angles = [first * width - np.pi for first, _ in segments]
+            end_angles = [end * width - np.pi for _, end in segments]
+            sides = self.side_pieces(np.concatenate([bases, bases]), start_angles + end_angles,
+                                     [+1] * len(segments) + [-1] * len(segments))
+        for g, count in enumerate(centres_per_group):
             group: list[int] = []
-            for piece in centres:
+            for i in range(int(first_centre[g]), int(first_centre[g]) + count):
                 group.append(len(pieces))
-                pieces.append(piece)
+                pieces.append(centres[i])
             if len(segments) > 1:
-                # Side pieces start at the segment's edges and switch the group off beyond
-                # them; where neighbouring groups overlap, the MAX keeps the nearer obstacle.
-                start_angle = first * width - np.pi
-                end_angle = end * width - np.pi
-                base = centres[0]
-                for side in (self.side_piece(base, start_angle, +1), self.side_piece(base, end_angle, -1)):
+                for side in (sides[g], sides[len(segments) + g]):
                     group.append(len(pieces))
                     pieces.append(side)
             members.append(group)
@@ -375,8 +382,9 @@ class _Fitter(_Refitter):
         body = -np.minimum(keep_off, cap)
         return _CentreProgrammes(segments_out, segment_of, objective, rows, own, bound, chosen, flat, body)
 
-    def place_centres(self, programmes: _CentreProgrammes) -> list[list[FloatArray]]:
-        """Every segment's centre pieces: the optima of their programmes (:meth:`centre_programmes`).
+    def place_centres(self, programmes: _CentreProgrammes) -> FloatArray:
+        """Every centre piece, one row each in the programmes' order: the optima of their
+        programmes (:meth:`centre_programmes`).
 
         A centre's programme is tried with the flat floor, then the body floor, then none,
         each only if the one before is infeasible. The programmes are independent, so they
@@ -396,33 +404,40 @@ class _Fitter(_Refitter):
                                     segment.lower, segment.upper) for i, segment in zip(bare, segments)])
             for i, result in zip(bare, unfloored):
                 optima[i] = result.x if result.status == 0 else None
-        placed: list[list[FloatArray]] = [[] for _ in programmes.segments]
-        for g, q in zip(programmes.segment_of, optima):
-            placed[g].append(self.centre_piece(programmes.segments[g], q))
-        return placed
+        return self.centre_pieces([programmes.segments[g] for g in programmes.segment_of], optima)
 
-    def centre_piece(self, plan: _Segment, q: FloatArray | None) -> FloatArray:
-        """The piece of a centre programme's optimum ``q`` (None: every floor infeasible, a
-        flat crossing at the segment's nearest obstacle)."""
-        if q is None:
-            q = np.zeros(self.k_angle + 2)
-            q[0] = plan.nearest
-        middle, c = plan.middle, plan.c
+    def centre_pieces(self, plans: list[_Segment], optima: list[FloatArray | None]) -> FloatArray:
+        """The pieces of centre programmes' optima (a row each; an optimum None: every floor
+        infeasible, a flat crossing at its segment's nearest obstacle).
+
+        All of them at once, each element by the same operations as one piece at a time
+        (a few dozen pieces one by one were mostly numpy's per-call overhead)."""
+        k = self.k_angle
+        Q = np.zeros((len(optima), k + 2))
+        for i, (plan, q) in enumerate(zip(plans, optima)):
+            if q is None:
+                Q[i, 0] = plan.nearest
+            else:
+                Q[i] = q
+        middle = np.array([plan.middle for plan in plans])
+        c = np.array([plan.c for plan in plans])
         # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
-        if self.k_angle == 1:
-            p_angle = np.array([q[1]])
-            p0 = q[0] - q[1] * middle
+        if k == 1:
+            p_angle = Q[:, 1:2]
+            p0 = Q[:, 0] - Q[:, 1] * middle
         else:
-            cm, sm = math.cos(middle), math.sin(middle)
-            p_angle = np.array([q[1] * cm - q[2] * sm, q[1] * sm + q[2] * cm])
-            p0 = q[0] - q[1]
+            # (math's cosine and sine, as for one piece: numpy's may differ in the last bit.)
+            cm = np.array([math.cos(m) for m in middle.tolist()])
+            sm = np.array([math.sin(m) for m in middle.tolist()])
+            p_angle = np.column_stack([Q[:, 1] * cm - Q[:, 2] * sm, Q[:, 1] * sm + Q[:, 2] * cm])
+            p0 = Q[:, 0] - Q[:, 1]
         # F = level + c (r - r*): angle and height weights -c p, offset level - c p0.
-        piece = np.empty(self.n_terms)
-        piece[: self.k_angle] = -c * p_angle
-        piece[self.k_angle] = -c * q[-1]
-        piece[self.k_angle + 1] = c
-        piece[-1] = self.p.level - c * p0
-        return self.project(piece)
+        pieces = np.empty((len(optima), self.n_terms))
+        pieces[:, :k] = -c[:, None] * p_angle
+        pieces[:, k] = -c * Q[:, -1]
+        pieces[:, k + 1] = c
+        pieces[:, -1] = self.p.level - c * p0
+        return self.project_rows(pieces)
 
     def segment_ray_samples(self, first: int, end: int, n_bins: int) -> NDArray[np.intp]:
         """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
@@ -462,32 +477,40 @@ class _Fitter(_Refitter):
             w = self.irls_weights(c * x - y, base, hit)
         return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
 
-    def side_piece(self, centre: FloatArray, angle: float, direction: int) -> FloatArray:
-        """A piece that lets the centre's group recede steeply in range beyond ``angle``.
+    def side_pieces(self, centres: FloatArray, angles: list[float], directions: list[int]) -> FloatArray:
+        """Pieces that let each centre's group recede steeply in range beyond its angle
+        (a row each: centre ``centres[i]``, angle ``angles[i]``, direction ``directions[i]``).
 
-        The side crosses ``level`` where the centre does at ``angle``, with the least slope
+        A side crosses ``level`` where its centre does at the angle, with the least slope
         in ``r`` (``c_min``) and the full pan weight left within ``a_max``: its crossing then
         moves away from the robot at ``(a_max - |a_centre|) / c_min`` metres per radian
         outside the segment, and inside it stays nearer than the centre's crossing, so the
         group (a MIN: its crossing is the farthest of its pieces') keeps the centre's there.
-        ``direction`` +1: the side rises for pan angles above ``angle`` (segment start);
+        Direction +1: the side rises for pan angles above the angle (segment start);
         -1: below it (segment end).
+
+        All of them at once, each element by the same operations as one piece at a time.
         """
-        scale = min(1.0, self.p.c_min / centre[self.k_angle + 1])
+        k = self.k_angle
+        scale = np.minimum(1.0, self.p.c_min / centres[:, k + 1])
         level = self.p.level
-        piece = centre * scale
-        piece[-1] = centre[-1] * scale + level * (1.0 - scale)
+        pieces = centres * scale[:, None]
+        pieces[:, -1] = centres[:, -1] * scale + level * (1.0 - scale)
         A = self.p.a_max
-        if self.k_angle == 1:
-            a = piece[0]
-            gain = (A - a) if direction > 0 else (A + a)
-            piece[0] = a + direction * gain
-            piece[-1] -= direction * gain * angle
+        direction = np.array(directions, dtype=np.float64)
+        angle = np.array(angles, dtype=np.float64)
+        if k == 1:
+            a = pieces[:, 0]
+            gain = np.where(direction > 0, A - a, A + a)
+            pieces[:, 0] = a + direction * gain
+            pieces[:, -1] -= direction * gain * angle
         else:
             # direction * sin(alpha - angle) = direction * (cos(angle) sin(alpha) - sin(angle) cos(alpha))
-            u = direction * np.array([-math.sin(angle), math.cos(angle)])
-            v = piece[:2].copy()
-            vu = float(v @ u)
-            gain = -vu + math.sqrt(max(vu * vu - float(v @ v) + A * A, 0.0))
-            piece[:2] = v + gain * u
-        return self.project(piece)
+            u = direction[:, None] * np.array([[-math.sin(t), math.cos(t)] for t in angles])
+            v = pieces[:, :2]
+            # (Two-term dot products as numpy's v @ u rounds them: each product, then their sum.)
+            vu = v[:, 0] * u[:, 0] + v[:, 1] * u[:, 1]
+            vv = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]
+            gain = -vu + np.sqrt(np.maximum(vu * vu - vv + A * A, 0.0))
+            pieces[:, :2] = v + gain[:, None] * u
+        return self.project_rows(pieces)
