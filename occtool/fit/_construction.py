@@ -51,17 +51,18 @@ SLOPE_SAMPLES = 8192
 
 
 @dataclass
-class _Segment:
-    """What turns a segment's centre programmes' optima into pieces."""
+class _Segments:
+    """What turns the segments' centre programmes' optima into pieces (a row or an entry
+    a segment)."""
 
     lower: FloatArray
     upper: FloatArray
     #: Pan angle of the segment's middle (the programmes' local angle terms are about it).
-    middle: float
-    #: The centres' slope in r (:meth:`_Fitter.crossing_slope`).
-    c: float
+    middle: FloatArray
+    #: The centres' slope in r (:meth:`_Fitter.crossing_slopes`).
+    c: FloatArray
     #: The nearest crossing of the segment's obstacles (where every floor is infeasible).
-    nearest: float
+    nearest: FloatArray
 
 
 @dataclass
@@ -69,38 +70,59 @@ class _CentreProgrammes:
     """Every centre's programmes, stacked (:func:`~occtool.linear_program_batch.solve_stacked`).
 
     Centre ``i`` (of segment ``segment_of[i]``) minimises ``objective[i] @ q`` (its gains,
-    negated) under its segment's rows ``rows[own[i]]`` (``r* <= bound[i]``), with the flat
-    or the body floor on its emphasised rows ``rows[chosen[i]]`` (``-r* <= flat[chosen[i]]``,
-    ``body[...]`` alike: both hold the floors negated), or none.
+    negated) under its segment's rows (``r* <= bound``), with the flat or the body floor on
+    its emphasised rows (``-r* <= flat[...]``, ``body[...]`` alike: both hold the floors
+    negated), or none. Its rows are the ``own_count[i]`` entries of ``own`` (indices into
+    ``rows``, with their ``bound``) after the earlier centres', its emphasised rows the
+    ``chosen_count[i]`` entries of ``chosen`` alike.
     """
 
-    segments: list[_Segment]
-    segment_of: list[int]
+    segments: _Segments
+    segment_of: NDArray[np.intp]
     objective: FloatArray
     rows: FloatArray
-    own: list[NDArray[np.intp]]
-    bound: list[FloatArray]
-    chosen: list[NDArray[np.intp]]
+    own: NDArray[np.intp]
+    own_count: NDArray[np.intp]
+    bound: FloatArray
+    chosen: NDArray[np.intp]
+    chosen_count: NDArray[np.intp]
     flat: FloatArray
     body: FloatArray
 
+    def unfloored(self, i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Centre ``i``'s programme without a floor: ``cost, A_ub, b_ub, lower, upper``."""
+        end = int(self.own_count[: i + 1].sum())
+        own = slice(end - int(self.own_count[i]), end)
+        g = int(self.segment_of[i])
+        return (self.objective[i], self.rows[self.own[own]], self.bound[own], self.segments.lower[g],
+                self.segments.upper[g])
+
     def floored(self) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.intp], FloatArray, FloatArray]:
         """Each centre's programme with the flat floor, then with the body floor, stacked:
-        ``cost, A_ub, b_ub, rows, lower, upper``."""
-        index, negate, values, counts = [], [], [], []
-        for own, bound, chosen in zip(self.own, self.bound, self.chosen):
-            for floor in (self.flat, self.body):
-                index += [own, chosen]
-                negate += [own.size, chosen.size]
-                values += [bound, floor[chosen]]
-                counts.append(own.size + chosen.size)
-        A = self.rows[np.concatenate(index)]
-        # The floor rows are the emphasised rows negated (-r* <= -floor).
-        floor_rows = np.repeat(np.tile([False, True], len(negate) // 2), negate)
-        A[floor_rows] = -A[floor_rows]
-        lower = np.array([self.segments[g].lower for g in self.segment_of])
-        upper = np.array([self.segments[g].upper for g in self.segment_of])
-        return (np.repeat(self.objective, 2, axis=0), A, np.concatenate(values), np.array(counts, dtype=np.intp),
+        ``cost, A_ub, b_ub, rows, lower, upper``.
+
+        Programme ``2 i + f`` is centre ``i``'s own rows, then its chosen rows negated
+        (floor ``f``); formed for all of them at once by where each block starts."""
+        own_count, chosen_count = self.own_count, self.chosen_count
+        n_own, n_chosen = self.own.size, self.chosen.size
+        # The rows and bounds every block reads from: the own rows, then the chosen rows
+        # negated (-r* <= -floor), with their bounds and their two floors.
+        pool_rows = np.concatenate([self.rows[self.own], -self.rows[self.chosen]])
+        pool_values = np.concatenate([self.bound, self.flat[self.chosen], self.body[self.chosen]])
+        # Blocks, in order: own, chosen (flat), own, chosen (body) of each centre, and where
+        # each starts in the pools.
+        sizes = np.column_stack([own_count, chosen_count, own_count, chosen_count]).ravel()
+        own_from = np.cumsum(own_count) - own_count
+        chosen_from = n_own + np.cumsum(chosen_count) - chosen_count
+        sources = np.column_stack([own_from, chosen_from, own_from, chosen_from]).ravel()
+        entry = np.arange(int(sizes.sum())) + np.repeat(sources - (np.cumsum(sizes) - sizes), sizes)
+        A = pool_rows[entry]
+        # The body floor's bounds lie after the flat floor's.
+        values = pool_values[entry + np.repeat(np.tile([0, 0, 0, n_chosen], own_count.size), sizes)]
+        counts = np.repeat(own_count + chosen_count, 2)
+        lower = self.segments.lower[self.segment_of]
+        upper = self.segments.upper[self.segment_of]
+        return (np.repeat(self.objective, 2, axis=0), A, values, counts,
                 np.repeat(lower, 2, axis=0), np.repeat(upper, 2, axis=0))
 
 
@@ -320,39 +342,47 @@ class _Fitter(_Refitter):
             rows[:, column] = np.repeat(values, PROFILE_HEIGHTS)
         rows[:, -1] = np.tile(heights, edges.size)
 
-        segments_out = []
-        segment_of: list[int] = []
-        own: list[NDArray[np.intp]] = []
-        emphasised: list[NDArray[np.bool_]] = []
+        # Each centre's programme: its segment's rows (own) and, of them, those at the
+        # heights of its part of the band (chosen), for all centres at once.
+        G = len(counts)
+        segment_of = np.repeat(np.arange(G), counts)
+        n_centres = segment_of.size
+        # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex in h,
+        # and the group's crossing (the farthest of its pieces') follows it with one tangent
+        # line per part.
+        count_of = np.repeat(np.asarray(counts, dtype=np.intp), counts)
+        part = np.arange(n_centres) - np.repeat(np.cumsum(counts) - counts, counts)
         low, high = self.robot.floor_h, self.robot.body_band[1]
-        for g, count in enumerate(counts):
-            span = np.arange(int(estart[g]) * PROFILE_HEIGHTS, int(estart[g] + n_edges[g]) * PROFILE_HEIGHTS)
-            samples = self.segment_ray_samples(int(first[g]), int(end[g]), n_bins)
-            c = self.crossing_slope(samples, median(D_bins[seg == g]))
-            # Half the pan-weight budget is left to the side pieces that switch the group off.
-            bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
-            bound_h = self.p.b_max / c
-            # The offset is free.
-            if self.k_angle == 1:
-                lower = np.array([-np.inf, -bound_angle, -bound_h])
-                upper = np.array([np.inf, bound_angle, bound_h])
-            else:
-                # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
-                # weight <= 0): far from its segment a group then recedes, and its sides can
-                # switch it off.
-                lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
-                upper = np.array([np.inf, 0.0, bound_angle, bound_h])
-            segments_out.append(_Segment(lower, upper, float(middle[g]), c, float(target[span].min())))
-            for j in range(count):
-                # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
-                # in h, and the group's crossing (the farthest of its pieces') follows it with one
-                # tangent line per part.
-                part_lo = low + (max(high, 0.0) - low) * j / count
-                part_hi = low + (max(high, 0.0) - low) * (j + 1) / count
-                segment_of.append(g)
-                own.append(span)
-                emphasised.append(np.tile((heights >= part_lo - 1e-9) & (heights <= part_hi + 1e-9), int(n_edges[g])))
-        chosen = [span[emphasis] for span, emphasis in zip(own, emphasised)]
+        part_lo = low + (max(high, 0.0) - low) * part / count_of
+        part_hi = low + (max(high, 0.0) - low) * (part + 1) / count_of
+        emphasis = (heights >= (part_lo - 1e-9)[:, None]) & (heights <= (part_hi + 1e-9)[:, None])
+        own_start = (estart * PROFILE_HEIGHTS)[segment_of]
+        own_count = (n_edges * PROFILE_HEIGHTS)[segment_of]
+        own_first = np.cumsum(own_count) - own_count
+        owner = np.repeat(np.arange(n_centres), own_count)
+        own = np.arange(owner.size) - np.repeat(own_first - own_start, own_count)
+        # A segment's rows start at a whole edge: row i is at height i % PROFILE_HEIGHTS.
+        emphasised = emphasis[owner, own % PROFILE_HEIGHTS]
+        chosen = own[emphasised]
+        chosen_count = np.bincount(owner[emphasised], minlength=n_centres)
+
+        ray_rows = [self.segment_ray_samples(int(first[g]), int(end[g]), n_bins) for g in range(G)]
+        distance = [median(D_bins[seg == g]) for g in range(G)]
+        c = self.crossing_slopes(ray_rows, distance)
+        # Half the pan-weight budget is left to the side pieces that switch the group off.
+        bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
+        bound_h = self.p.b_max / c
+        # The offset is free.
+        if self.k_angle == 1:
+            lower = np.column_stack([np.full(G, -np.inf), -bound_angle, -bound_h])
+            upper = np.column_stack([np.full(G, np.inf), bound_angle, bound_h])
+        else:
+            # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
+            # weight <= 0): far from its segment a group then recedes, and its sides can
+            # switch it off.
+            lower = np.column_stack([np.full(G, -np.inf), -bound_angle, -bound_angle, -bound_h])
+            upper = np.column_stack([np.full(G, np.inf), np.zeros(G), bound_angle, bound_h])
+        segments_out = _Segments(lower, upper, middle, c, np.minimum.reduceat(target, estart * PROFILE_HEIGHTS))
         # Maximise the emphasised crossings, but only up to the range the map looks at
         # (t_i <= min(r*_i, cap_i)): pushing out far walls must not tilt the line into a
         # near obstacle. Relative gains: a centimetre near the robot counts more. (Maximising
@@ -361,15 +391,18 @@ class _Fitter(_Refitter):
         # range the map looks at (r*_i <= cap_i) as constraints. (An auxiliary variable
         # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
         # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
-        every = np.concatenate(chosen)
-        gains = rows[every] / cap[every, None] ** 2
-        ends = np.cumsum([part.size for part in chosen])
-        # (One sum a centre: a sum over all of them at once, np.add.reduceat, rounds differently.)
-        objective = np.array([-gains[e - part.size:e].sum(axis=0) for part, e in zip(chosen, ends.tolist())])
+        gains = rows[chosen] / cap[chosen, None] ** 2
+        # One sum a centre, row after row as sum(axis=0) adds them (np.add.reduceat rounds
+        # differently): each centre's gains padded with zeros after its own rows, summed
+        # along the rows (x + 0.0 is x, and a sum from 0 is never -0.0).
+        at = np.arange(chosen.size) - np.repeat(np.cumsum(chosen_count) - chosen_count, chosen_count)
+        padded = np.zeros((n_centres, int(chosen_count.max(initial=0)), rows.shape[1]))
+        padded[owner[emphasised], at] = gains
+        objective = -padded.sum(axis=1)
         # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
         # each, bounded by the smaller.
         capped = np.minimum(target, cap)
-        bound = [np.where(emphasis, capped[span], target[span]) for span, emphasis in zip(own, emphasised)]
+        bound = np.where(emphasised, capped[own], target[own])
         # Keep the crossing off the robot's body wherever the obstacle allows: at the
         # floor, a crossing a few centimetres too near in r is a body in collision.
         # Only this centre's part of the band: the group's crossing is the farthest of its
@@ -380,7 +413,8 @@ class _Fitter(_Refitter):
         # (place_centres), the flat one first.
         flat = -np.minimum(np.maximum(keep_off, floor_flat), cap)
         body = -np.minimum(keep_off, cap)
-        return _CentreProgrammes(segments_out, segment_of, objective, rows, own, bound, chosen, flat, body)
+        return _CentreProgrammes(segments_out, segment_of, objective, rows, own, own_count, bound, chosen,
+                                 chosen_count, flat, body)
 
     def place_centres(self, programmes: _CentreProgrammes) -> FloatArray:
         """Every centre piece, one row each in the programmes' order: the optima of their
@@ -399,28 +433,27 @@ class _Fitter(_Refitter):
             optima.append(flat.x if flat.status == 0 else body.x if body.status == 0 else None)
         bare = [i for i, q in enumerate(optima) if q is None]
         if bare:
-            segments = [programmes.segments[programmes.segment_of[i]] for i in bare]
-            unfloored = solve_lps([(programmes.objective[i], programmes.rows[programmes.own[i]], programmes.bound[i],
-                                    segment.lower, segment.upper) for i, segment in zip(bare, segments)])
+            unfloored = solve_lps([programmes.unfloored(i) for i in bare])
             for i, result in zip(bare, unfloored):
                 optima[i] = result.x if result.status == 0 else None
-        return self.centre_pieces([programmes.segments[g] for g in programmes.segment_of], optima)
+        segments, of = programmes.segments, programmes.segment_of
+        return self.centre_pieces(optima, segments.middle[of], segments.c[of], segments.nearest[of])
 
-    def centre_pieces(self, plans: list[_Segment], optima: list[FloatArray | None]) -> FloatArray:
+    def centre_pieces(self, optima: list[FloatArray | None], middle: FloatArray, c: FloatArray,
+                      nearest: FloatArray) -> FloatArray:
         """The pieces of centre programmes' optima (a row each; an optimum None: every floor
-        infeasible, a flat crossing at its segment's nearest obstacle).
+        infeasible, a flat crossing at ``nearest``), whose segments' middles are ``middle``
+        and slopes ``c``.
 
         All of them at once, each element by the same operations as one piece at a time
         (a few dozen pieces one by one were mostly numpy's per-call overhead)."""
         k = self.k_angle
         Q = np.zeros((len(optima), k + 2))
-        for i, (plan, q) in enumerate(zip(plans, optima)):
+        for i, q in enumerate(optima):
             if q is None:
-                Q[i, 0] = plan.nearest
+                Q[i, 0] = nearest[i]
             else:
                 Q[i] = q
-        middle = np.array([plan.middle for plan in plans])
-        c = np.array([plan.c for plan in plans])
         # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
         if k == 1:
             p_angle = Q[:, 1:2]
@@ -457,25 +490,43 @@ class _Fitter(_Refitter):
             return grouped[bounds[start]:bounds[start + length]]
         return np.concatenate([grouped[bounds[start]:], grouped[:bounds[start + length - n_bins]]])
 
-    def crossing_slope(self, rows: NDArray[np.intp], distance: float) -> float:
-        """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples
-        (an even subsample of at most :data:`SLOPE_SAMPLES` of them: one number needs no
-        more, and at a million features the full segments took 1.3 s of a 6 s fit)."""
-        rows = rows[:: max(1, -(-rows.size // SLOPE_SAMPLES))]
+    def crossing_slopes(self, segment_rows: list[NDArray[np.intp]], distances: list[float]) -> FloatArray:
+        """Robust estimates of ``c`` in ``F = level + c (r - r*)``, one a segment, from its
+        samples ``segment_rows[g]`` and its obstacles' distance ``distances[g]`` (an even
+        subsample of at most :data:`SLOPE_SAMPLES` samples a segment: one number needs no
+        more, and at a million features the full segments took 1.3 s of a 6 s fit).
+
+        Reweighted least squares, four steps: each segment's two sums by its own dot
+        products (their rounding is np.dot's), the samples' residuals and weights for all
+        segments at once (element by element as one segment at a time)."""
+        rows_of = [rows[:: max(1, -(-rows.size // SLOPE_SAMPLES))] for rows in segment_rows]
+        sizes = [rows.size for rows in rows_of]
+        rows = np.concatenate(rows_of)
         s = self.samples
-        r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
+        r_star = np.sqrt(np.repeat([d**2 for d in distances], sizes) + s.h[rows] ** 2)
         x = s.r[rows] - r_star
         y = s.m[rows] - self.p.level
         w = base = self.w[rows]
         hit = self.hit[rows]
-        c = 1.0
+        xx, xy = x * x, x * y
+        ends = np.cumsum(sizes).tolist()
+        parts = [slice(end - size, end) for size, end in zip(sizes, ends)]
+        c = [1.0] * len(parts)
+        running = list(range(len(parts)))
         for _ in range(4):
-            denominator = float(np.dot(w, x * x))
-            if denominator <= 0:
+            still = []
+            for g in running:
+                part = parts[g]
+                denominator = float(np.dot(w[part], xx[part]))
+                if denominator <= 0:
+                    continue
+                c[g] = float(np.dot(w[part], xy[part])) / denominator
+                still.append(g)
+            running = still
+            if not running:
                 break
-            c = float(np.dot(w, x * y)) / denominator
-            w = self.irls_weights(c * x - y, base, hit)
-        return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
+            w = self.irls_weights(np.repeat(c, sizes) * x - y, base, hit)
+        return np.clip(np.maximum(c, self.p.c_floor), self.p.c_min, self.p.c_max)
 
     def side_pieces(self, centres: FloatArray, angles: list[float], directions: list[int]) -> FloatArray:
         """Pieces that let each centre's group recede steeply in range beyond its angle
