@@ -479,3 +479,47 @@ def test_pieces_none_fits_the_count_s_default_and_a_number_overrides_it():
         OccupancyRegressor(groups=65).fit(small)
     with pytest.raises(InputError, match="pieces must be a whole number"):
         OccupancyRegressor(pieces=float("nan")).fit(small)
+
+
+@pytest.mark.parametrize("basis", ["trig", "linear"])
+def test_projecting_rows_at_once_equals_projecting_each(basis):
+    """_Refitter.project_rows is project row by row, bit for bit (the construction projects
+    its pieces at once)."""
+    from types import SimpleNamespace
+
+    from occtool.fit._construction import _Fitter
+
+    k = 2 if basis == "trig" else 1
+    lower = np.array([-12.0] * k + [-8.0, 0.25, -np.inf])
+    upper = np.array([12.0] * k + [8.0, np.inf, np.inf])
+    fitter = SimpleNamespace(k_angle=k, lower=lower, upper=upper, p=SimpleNamespace(a_max=12.0))
+    rng = np.random.default_rng(7)
+    W = rng.normal(0.0, 10.0, (4000, k + 3))
+    # A pair one ulp over the disc once scaled (the loader's regression), and rows on it.
+    W[0, :2] = [-6.3453855919518025, -10.185091147822414]
+    W[1, :k] = 12.0
+    expected = np.array([_Fitter.project(fitter, row.copy()) for row in W])
+    got = _Fitter.project_rows(fitter, W.copy())
+    assert got.tobytes() == expected.tobytes()
+
+
+def test_a_planar_frontier_stands_past_each_bin_s_farthest_end():
+    """_frontier's planar extent (one reduction over the bins) is each bin's farthest ray
+    end, as the rank-th farthest by partition gives it for rank 1."""
+    from occtool.fit._focus import FRONTIER_MARGIN, UNSEEN_CLEARANCE, _frontier
+    from occtool.fit._profile import FOCUS_ANGLE_BINS
+
+    rng = np.random.default_rng(3)
+    bins = rng.integers(0, FOCUS_ANGLE_BINS, 700)
+    bins = bins[(bins % 7 != 0)]  # some bins without ends
+    distance = rng.uniform(0.2, 3.0, bins.size)
+    frontier = _frontier([(distance[:300], bins[:300]), (distance[300:], bins[300:])], 700, ROBOT, 4.0, True)
+    extent = np.zeros(FOCUS_ANGLE_BINS)
+    for b in range(FOCUS_ANGLE_BINS):
+        if (bins == b).any():
+            extent[b] = np.partition(distance[bins == b], -1)[-1]
+    extent = np.maximum(extent, np.minimum(np.roll(extent, 1), np.roll(extent, -1)))
+    short = np.flatnonzero(extent < 4.0)
+    reach = np.maximum(extent[short] * (1.0 + FRONTIER_MARGIN), ROBOT.radius + UNSEEN_CLEARANCE)
+    D = np.sqrt(frontier.r**2 - frontier.h**2)
+    assert np.allclose(D, np.repeat(reach, D.size // short.size), rtol=0, atol=1e-12)

@@ -51,17 +51,18 @@ SLOPE_SAMPLES = 8192
 
 
 @dataclass
-class _Segment:
-    """What turns a segment's centre programmes' optima into pieces."""
+class _Segments:
+    """What turns the segments' centre programmes' optima into pieces (a row or an entry
+    a segment)."""
 
     lower: FloatArray
     upper: FloatArray
     #: Pan angle of the segment's middle (the programmes' local angle terms are about it).
-    middle: float
-    #: The centres' slope in r (:meth:`_Fitter.crossing_slope`).
-    c: float
+    middle: FloatArray
+    #: The centres' slope in r (:meth:`_Fitter.crossing_slopes`).
+    c: FloatArray
     #: The nearest crossing of the segment's obstacles (where every floor is infeasible).
-    nearest: float
+    nearest: FloatArray
 
 
 @dataclass
@@ -69,38 +70,59 @@ class _CentreProgrammes:
     """Every centre's programmes, stacked (:func:`~occtool.linear_program_batch.solve_stacked`).
 
     Centre ``i`` (of segment ``segment_of[i]``) minimises ``objective[i] @ q`` (its gains,
-    negated) under its segment's rows ``rows[own[i]]`` (``r* <= bound[i]``), with the flat
-    or the body floor on its emphasised rows ``rows[chosen[i]]`` (``-r* <= flat[chosen[i]]``,
-    ``body[...]`` alike: both hold the floors negated), or none.
+    negated) under its segment's rows (``r* <= bound``), with the flat or the body floor on
+    its emphasised rows (``-r* <= flat[...]``, ``body[...]`` alike: both hold the floors
+    negated), or none. Its rows are the ``own_count[i]`` entries of ``own`` (indices into
+    ``rows``, with their ``bound``) after the earlier centres', its emphasised rows the
+    ``chosen_count[i]`` entries of ``chosen`` alike.
     """
 
-    segments: list[_Segment]
-    segment_of: list[int]
+    segments: _Segments
+    segment_of: NDArray[np.intp]
     objective: FloatArray
     rows: FloatArray
-    own: list[NDArray[np.intp]]
-    bound: list[FloatArray]
-    chosen: list[NDArray[np.intp]]
+    own: NDArray[np.intp]
+    own_count: NDArray[np.intp]
+    bound: FloatArray
+    chosen: NDArray[np.intp]
+    chosen_count: NDArray[np.intp]
     flat: FloatArray
     body: FloatArray
 
+    def unfloored(self, i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Centre ``i``'s programme without a floor: ``cost, A_ub, b_ub, lower, upper``."""
+        end = int(self.own_count[: i + 1].sum())
+        own = slice(end - int(self.own_count[i]), end)
+        g = int(self.segment_of[i])
+        return (self.objective[i], self.rows[self.own[own]], self.bound[own], self.segments.lower[g],
+                self.segments.upper[g])
+
     def floored(self) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.intp], FloatArray, FloatArray]:
         """Each centre's programme with the flat floor, then with the body floor, stacked:
-        ``cost, A_ub, b_ub, rows, lower, upper``."""
-        index, negate, values, counts = [], [], [], []
-        for own, bound, chosen in zip(self.own, self.bound, self.chosen):
-            for floor in (self.flat, self.body):
-                index += [own, chosen]
-                negate += [own.size, chosen.size]
-                values += [bound, floor[chosen]]
-                counts.append(own.size + chosen.size)
-        A = self.rows[np.concatenate(index)]
-        # The floor rows are the emphasised rows negated (-r* <= -floor).
-        floor_rows = np.repeat(np.tile([False, True], len(negate) // 2), negate)
-        A[floor_rows] = -A[floor_rows]
-        lower = np.array([self.segments[g].lower for g in self.segment_of])
-        upper = np.array([self.segments[g].upper for g in self.segment_of])
-        return (np.repeat(self.objective, 2, axis=0), A, np.concatenate(values), np.array(counts, dtype=np.intp),
+        ``cost, A_ub, b_ub, rows, lower, upper``.
+
+        Programme ``2 i + f`` is centre ``i``'s own rows, then its chosen rows negated
+        (floor ``f``); formed for all of them at once by where each block starts."""
+        own_count, chosen_count = self.own_count, self.chosen_count
+        n_own, n_chosen = self.own.size, self.chosen.size
+        # The rows and bounds every block reads from: the own rows, then the chosen rows
+        # negated (-r* <= -floor), with their bounds and their two floors.
+        pool_rows = np.concatenate([self.rows[self.own], -self.rows[self.chosen]])
+        pool_values = np.concatenate([self.bound, self.flat[self.chosen], self.body[self.chosen]])
+        # Blocks, in order: own, chosen (flat), own, chosen (body) of each centre, and where
+        # each starts in the pools.
+        sizes = np.column_stack([own_count, chosen_count, own_count, chosen_count]).ravel()
+        own_from = np.cumsum(own_count) - own_count
+        chosen_from = n_own + np.cumsum(chosen_count) - chosen_count
+        sources = np.column_stack([own_from, chosen_from, own_from, chosen_from]).ravel()
+        entry = np.arange(int(sizes.sum())) + np.repeat(sources - (np.cumsum(sizes) - sizes), sizes)
+        A = pool_rows[entry]
+        # The body floor's bounds lie after the flat floor's.
+        values = pool_values[entry + np.repeat(np.tile([0, 0, 0, n_chosen], own_count.size), sizes)]
+        counts = np.repeat(own_count + chosen_count, 2)
+        lower = self.segments.lower[self.segment_of]
+        upper = self.segments.upper[self.segment_of]
+        return (np.repeat(self.objective, 2, axis=0), A, values, counts,
                 np.repeat(lower, 2, axis=0), np.repeat(upper, 2, axis=0))
 
 
@@ -142,7 +164,7 @@ class _Fitter(_Refitter):
         a1, a2 = W[:, 0].copy(), W[:, 1].copy()
         W[:, 0] = a1 * co - a2 * so
         W[:, 1] = a1 * so + a2 * co
-        W = np.array([self.project(row) for row in W])
+        W = self.project_rows(W)
         return MinMaxTree(tree.basis, W, tree.root)
 
     # ---------------------------------------------------------------- initial tree
@@ -227,18 +249,25 @@ class _Fitter(_Refitter):
                 centres_per_group[int(order[i])] += 1
 
         programmes = self.centre_programmes(profile, segments, centres_per_group)
-        for g, ((first, end), centres) in enumerate(zip(segments, self.place_centres(programmes))):
+        centres = self.place_centres(programmes)
+        # Each segment's centres (in programme order: segment by segment), then its two sides.
+        segment_of = np.asarray(programmes.segment_of, dtype=np.intp)
+        first_centre = np.searchsorted(segment_of, np.arange(len(segments)))
+        if len(segments) > 1:
+            # Side pieces start at the segment's edges and switch the group off beyond
+            # them; where neighbouring groups overlap, the MAX keeps the nearer obstacle.
+            bases = centres[first_centre]
+            start_angles = [first * width - np.pi for first, _ in segments]
+            end_angles = [end * width - np.pi for _, end in segments]
+            sides = self.side_pieces(np.concatenate([bases, bases]), start_angles + end_angles,
+                                     [+1] * len(segments) + [-1] * len(segments))
+        for g, count in enumerate(centres_per_group):
             group: list[int] = []
-            for piece in centres:
+            for i in range(int(first_centre[g]), int(first_centre[g]) + count):
                 group.append(len(pieces))
-                pieces.append(piece)
+                pieces.append(centres[i])
             if len(segments) > 1:
-                # Side pieces start at the segment's edges and switch the group off beyond
-                # them; where neighbouring groups overlap, the MAX keeps the nearer obstacle.
-                start_angle = first * width - np.pi
-                end_angle = end * width - np.pi
-                base = centres[0]
-                for side in (self.side_piece(base, start_angle, +1), self.side_piece(base, end_angle, -1)):
+                for side in (sides[g], sides[len(segments) + g]):
                     group.append(len(pieces))
                     pieces.append(side)
             members.append(group)
@@ -313,39 +342,47 @@ class _Fitter(_Refitter):
             rows[:, column] = np.repeat(values, PROFILE_HEIGHTS)
         rows[:, -1] = np.tile(heights, edges.size)
 
-        segments_out = []
-        segment_of: list[int] = []
-        own: list[NDArray[np.intp]] = []
-        emphasised: list[NDArray[np.bool_]] = []
+        # Each centre's programme: its segment's rows (own) and, of them, those at the
+        # heights of its part of the band (chosen), for all centres at once.
+        G = len(counts)
+        segment_of = np.repeat(np.arange(G), counts)
+        n_centres = segment_of.size
+        # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex in h,
+        # and the group's crossing (the farthest of its pieces') follows it with one tangent
+        # line per part.
+        count_of = np.repeat(np.asarray(counts, dtype=np.intp), counts)
+        part = np.arange(n_centres) - np.repeat(np.cumsum(counts) - counts, counts)
         low, high = self.robot.floor_h, self.robot.body_band[1]
-        for g, count in enumerate(counts):
-            span = np.arange(int(estart[g]) * PROFILE_HEIGHTS, int(estart[g] + n_edges[g]) * PROFILE_HEIGHTS)
-            samples = self.segment_ray_samples(int(first[g]), int(end[g]), n_bins)
-            c = self.crossing_slope(samples, median(D_bins[seg == g]))
-            # Half the pan-weight budget is left to the side pieces that switch the group off.
-            bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
-            bound_h = self.p.b_max / c
-            # The offset is free.
-            if self.k_angle == 1:
-                lower = np.array([-np.inf, -bound_angle, -bound_h])
-                upper = np.array([np.inf, bound_angle, bound_h])
-            else:
-                # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
-                # weight <= 0): far from its segment a group then recedes, and its sides can
-                # switch it off.
-                lower = np.array([-np.inf, -bound_angle, -bound_angle, -bound_h])
-                upper = np.array([np.inf, 0.0, bound_angle, bound_h])
-            segments_out.append(_Segment(lower, upper, float(middle[g]), c, float(target[span].min())))
-            for j in range(count):
-                # Several centres split the height band: the crossing sqrt(D^2 + h^2) is convex
-                # in h, and the group's crossing (the farthest of its pieces') follows it with one
-                # tangent line per part.
-                part_lo = low + (max(high, 0.0) - low) * j / count
-                part_hi = low + (max(high, 0.0) - low) * (j + 1) / count
-                segment_of.append(g)
-                own.append(span)
-                emphasised.append(np.tile((heights >= part_lo - 1e-9) & (heights <= part_hi + 1e-9), int(n_edges[g])))
-        chosen = [span[emphasis] for span, emphasis in zip(own, emphasised)]
+        part_lo = low + (max(high, 0.0) - low) * part / count_of
+        part_hi = low + (max(high, 0.0) - low) * (part + 1) / count_of
+        emphasis = (heights >= (part_lo - 1e-9)[:, None]) & (heights <= (part_hi + 1e-9)[:, None])
+        own_start = (estart * PROFILE_HEIGHTS)[segment_of]
+        own_count = (n_edges * PROFILE_HEIGHTS)[segment_of]
+        own_first = np.cumsum(own_count) - own_count
+        owner = np.repeat(np.arange(n_centres), own_count)
+        own = np.arange(owner.size) - np.repeat(own_first - own_start, own_count)
+        # A segment's rows start at a whole edge: row i is at height i % PROFILE_HEIGHTS.
+        emphasised = emphasis[owner, own % PROFILE_HEIGHTS]
+        chosen = own[emphasised]
+        chosen_count = np.bincount(owner[emphasised], minlength=n_centres)
+
+        ray_rows = [self.segment_ray_samples(int(first[g]), int(end[g]), n_bins) for g in range(G)]
+        distance = [median(D_bins[seg == g]) for g in range(G)]
+        c = self.crossing_slopes(ray_rows, distance)
+        # Half the pan-weight budget is left to the side pieces that switch the group off.
+        bound_angle = 0.5 * self.p.a_max / c / (math.sqrt(2.0) if self.k_angle == 2 else 1.0)
+        bound_h = self.p.b_max / c
+        # The offset is free.
+        if self.k_angle == 1:
+            lower = np.column_stack([np.full(G, -np.inf), -bound_angle, -bound_h])
+            upper = np.column_stack([np.full(G, np.inf), bound_angle, bound_h])
+        else:
+            # The crossing may only curve away from the robot off the middle (cos - 1 <= 0 with a
+            # weight <= 0): far from its segment a group then recedes, and its sides can
+            # switch it off.
+            lower = np.column_stack([np.full(G, -np.inf), -bound_angle, -bound_angle, -bound_h])
+            upper = np.column_stack([np.full(G, np.inf), np.zeros(G), bound_angle, bound_h])
+        segments_out = _Segments(lower, upper, middle, c, np.minimum.reduceat(target, estart * PROFILE_HEIGHTS))
         # Maximise the emphasised crossings, but only up to the range the map looks at
         # (t_i <= min(r*_i, cap_i)): pushing out far walls must not tilt the line into a
         # near obstacle. Relative gains: a centimetre near the robot counts more. (Maximising
@@ -354,15 +391,18 @@ class _Fitter(_Refitter):
         # range the map looks at (r*_i <= cap_i) as constraints. (An auxiliary variable
         # per row, t_i <= min(r*_i, cap_i), gave the same maps on 4 scenes x 3 seeds at
         # 2k and 10k features, and took twice as long: 19 programmes of ~400 variables were most of the fit's time.)
-        every = np.concatenate(chosen)
-        gains = rows[every] / cap[every, None] ** 2
-        ends = np.cumsum([part.size for part in chosen])
-        # (One sum a centre: a sum over all of them at once, np.add.reduceat, rounds differently.)
-        objective = np.array([-gains[e - part.size:e].sum(axis=0) for part, e in zip(chosen, ends.tolist())])
+        gains = rows[chosen] / cap[chosen, None] ** 2
+        # One sum a centre, row after row as sum(axis=0) adds them (np.add.reduceat rounds
+        # differently): each centre's gains padded with zeros after its own rows, summed
+        # along the rows (x + 0.0 is x, and a sum from 0 is never -0.0).
+        at = np.arange(chosen.size) - np.repeat(np.cumsum(chosen_count) - chosen_count, chosen_count)
+        padded = np.zeros((n_centres, int(chosen_count.max(initial=0)), rows.shape[1]))
+        padded[owner[emphasised], at] = gains
+        objective = -padded.sum(axis=1)
         # r*_i <= target_i everywhere and r*_i <= cap_i on the emphasised rows: one row
         # each, bounded by the smaller.
         capped = np.minimum(target, cap)
-        bound = [np.where(emphasis, capped[span], target[span]) for span, emphasis in zip(own, emphasised)]
+        bound = np.where(emphasised, capped[own], target[own])
         # Keep the crossing off the robot's body wherever the obstacle allows: at the
         # floor, a crossing a few centimetres too near in r is a body in collision.
         # Only this centre's part of the band: the group's crossing is the farthest of its
@@ -373,10 +413,12 @@ class _Fitter(_Refitter):
         # (place_centres), the flat one first.
         flat = -np.minimum(np.maximum(keep_off, floor_flat), cap)
         body = -np.minimum(keep_off, cap)
-        return _CentreProgrammes(segments_out, segment_of, objective, rows, own, bound, chosen, flat, body)
+        return _CentreProgrammes(segments_out, segment_of, objective, rows, own, own_count, bound, chosen,
+                                 chosen_count, flat, body)
 
-    def place_centres(self, programmes: _CentreProgrammes) -> list[list[FloatArray]]:
-        """Every segment's centre pieces: the optima of their programmes (:meth:`centre_programmes`).
+    def place_centres(self, programmes: _CentreProgrammes) -> FloatArray:
+        """Every centre piece, one row each in the programmes' order: the optima of their
+        programmes (:meth:`centre_programmes`).
 
         A centre's programme is tried with the flat floor, then the body floor, then none,
         each only if the one before is infeasible. The programmes are independent, so they
@@ -391,38 +433,44 @@ class _Fitter(_Refitter):
             optima.append(flat.x if flat.status == 0 else body.x if body.status == 0 else None)
         bare = [i for i, q in enumerate(optima) if q is None]
         if bare:
-            segments = [programmes.segments[programmes.segment_of[i]] for i in bare]
-            unfloored = solve_lps([(programmes.objective[i], programmes.rows[programmes.own[i]], programmes.bound[i],
-                                    segment.lower, segment.upper) for i, segment in zip(bare, segments)])
+            unfloored = solve_lps([programmes.unfloored(i) for i in bare])
             for i, result in zip(bare, unfloored):
                 optima[i] = result.x if result.status == 0 else None
-        placed: list[list[FloatArray]] = [[] for _ in programmes.segments]
-        for g, q in zip(programmes.segment_of, optima):
-            placed[g].append(self.centre_piece(programmes.segments[g], q))
-        return placed
+        segments, of = programmes.segments, programmes.segment_of
+        return self.centre_pieces(optima, segments.middle[of], segments.c[of], segments.nearest[of])
 
-    def centre_piece(self, plan: _Segment, q: FloatArray | None) -> FloatArray:
-        """The piece of a centre programme's optimum ``q`` (None: every floor infeasible, a
-        flat crossing at the segment's nearest obstacle)."""
-        if q is None:
-            q = np.zeros(self.k_angle + 2)
-            q[0] = plan.nearest
-        middle, c = plan.middle, plan.c
+    def centre_pieces(self, optima: list[FloatArray | None], middle: FloatArray, c: FloatArray,
+                      nearest: FloatArray) -> FloatArray:
+        """The pieces of centre programmes' optima (a row each; an optimum None: every floor
+        infeasible, a flat crossing at ``nearest``), whose segments' middles are ``middle``
+        and slopes ``c``.
+
+        All of them at once, each element by the same operations as one piece at a time
+        (a few dozen pieces one by one were mostly numpy's per-call overhead)."""
+        k = self.k_angle
+        Q = np.zeros((len(optima), k + 2))
+        for i, q in enumerate(optima):
+            if q is None:
+                Q[i, 0] = nearest[i]
+            else:
+                Q[i] = q
         # Back to the global basis: the crossing r* = p0 + p_angle . angle terms + p_h h.
-        if self.k_angle == 1:
-            p_angle = np.array([q[1]])
-            p0 = q[0] - q[1] * middle
+        if k == 1:
+            p_angle = Q[:, 1:2]
+            p0 = Q[:, 0] - Q[:, 1] * middle
         else:
-            cm, sm = math.cos(middle), math.sin(middle)
-            p_angle = np.array([q[1] * cm - q[2] * sm, q[1] * sm + q[2] * cm])
-            p0 = q[0] - q[1]
+            # (math's cosine and sine, as for one piece: numpy's may differ in the last bit.)
+            cm = np.array([math.cos(m) for m in middle.tolist()])
+            sm = np.array([math.sin(m) for m in middle.tolist()])
+            p_angle = np.column_stack([Q[:, 1] * cm - Q[:, 2] * sm, Q[:, 1] * sm + Q[:, 2] * cm])
+            p0 = Q[:, 0] - Q[:, 1]
         # F = level + c (r - r*): angle and height weights -c p, offset level - c p0.
-        piece = np.empty(self.n_terms)
-        piece[: self.k_angle] = -c * p_angle
-        piece[self.k_angle] = -c * q[-1]
-        piece[self.k_angle + 1] = c
-        piece[-1] = self.p.level - c * p0
-        return self.project(piece)
+        pieces = np.empty((len(optima), self.n_terms))
+        pieces[:, :k] = -c[:, None] * p_angle
+        pieces[:, k] = -c * Q[:, -1]
+        pieces[:, k + 1] = c
+        pieces[:, -1] = self.p.level - c * p0
+        return self.project_rows(pieces)
 
     def segment_ray_samples(self, first: int, end: int, n_bins: int) -> NDArray[np.intp]:
         """Indices of the hit and near samples in bins ``first`` to ``end`` - 1 (wrapping).
@@ -442,52 +490,78 @@ class _Fitter(_Refitter):
             return grouped[bounds[start]:bounds[start + length]]
         return np.concatenate([grouped[bounds[start]:], grouped[:bounds[start + length - n_bins]]])
 
-    def crossing_slope(self, rows: NDArray[np.intp], distance: float) -> float:
-        """Robust estimate of ``c`` in ``F = level + c (r - r*)`` from a segment's samples
-        (an even subsample of at most :data:`SLOPE_SAMPLES` of them: one number needs no
-        more, and at a million features the full segments took 1.3 s of a 6 s fit)."""
-        rows = rows[:: max(1, -(-rows.size // SLOPE_SAMPLES))]
+    def crossing_slopes(self, segment_rows: list[NDArray[np.intp]], distances: list[float]) -> FloatArray:
+        """Robust estimates of ``c`` in ``F = level + c (r - r*)``, one a segment, from its
+        samples ``segment_rows[g]`` and its obstacles' distance ``distances[g]`` (an even
+        subsample of at most :data:`SLOPE_SAMPLES` samples a segment: one number needs no
+        more, and at a million features the full segments took 1.3 s of a 6 s fit).
+
+        Reweighted least squares, four steps: each segment's two sums by its own dot
+        products (their rounding is np.dot's), the samples' residuals and weights for all
+        segments at once (element by element as one segment at a time)."""
+        rows_of = [rows[:: max(1, -(-rows.size // SLOPE_SAMPLES))] for rows in segment_rows]
+        sizes = [rows.size for rows in rows_of]
+        rows = np.concatenate(rows_of)
         s = self.samples
-        r_star = np.sqrt(distance**2 + s.h[rows] ** 2)
+        r_star = np.sqrt(np.repeat([d**2 for d in distances], sizes) + s.h[rows] ** 2)
         x = s.r[rows] - r_star
         y = s.m[rows] - self.p.level
         w = base = self.w[rows]
         hit = self.hit[rows]
-        c = 1.0
+        xx, xy = x * x, x * y
+        ends = np.cumsum(sizes).tolist()
+        parts = [slice(end - size, end) for size, end in zip(sizes, ends)]
+        c = [1.0] * len(parts)
+        running = list(range(len(parts)))
         for _ in range(4):
-            denominator = float(np.dot(w, x * x))
-            if denominator <= 0:
+            still = []
+            for g in running:
+                part = parts[g]
+                denominator = float(np.dot(w[part], xx[part]))
+                if denominator <= 0:
+                    continue
+                c[g] = float(np.dot(w[part], xy[part])) / denominator
+                still.append(g)
+            running = still
+            if not running:
                 break
-            c = float(np.dot(w, x * y)) / denominator
-            w = self.irls_weights(c * x - y, base, hit)
-        return float(np.clip(max(c, self.p.c_floor), self.p.c_min, self.p.c_max))
+            w = self.irls_weights(np.repeat(c, sizes) * x - y, base, hit)
+        return np.clip(np.maximum(c, self.p.c_floor), self.p.c_min, self.p.c_max)
 
-    def side_piece(self, centre: FloatArray, angle: float, direction: int) -> FloatArray:
-        """A piece that lets the centre's group recede steeply in range beyond ``angle``.
+    def side_pieces(self, centres: FloatArray, angles: list[float], directions: list[int]) -> FloatArray:
+        """Pieces that let each centre's group recede steeply in range beyond its angle
+        (a row each: centre ``centres[i]``, angle ``angles[i]``, direction ``directions[i]``).
 
-        The side crosses ``level`` where the centre does at ``angle``, with the least slope
+        A side crosses ``level`` where its centre does at the angle, with the least slope
         in ``r`` (``c_min``) and the full pan weight left within ``a_max``: its crossing then
         moves away from the robot at ``(a_max - |a_centre|) / c_min`` metres per radian
         outside the segment, and inside it stays nearer than the centre's crossing, so the
         group (a MIN: its crossing is the farthest of its pieces') keeps the centre's there.
-        ``direction`` +1: the side rises for pan angles above ``angle`` (segment start);
+        Direction +1: the side rises for pan angles above the angle (segment start);
         -1: below it (segment end).
+
+        All of them at once, each element by the same operations as one piece at a time.
         """
-        scale = min(1.0, self.p.c_min / centre[self.k_angle + 1])
+        k = self.k_angle
+        scale = np.minimum(1.0, self.p.c_min / centres[:, k + 1])
         level = self.p.level
-        piece = centre * scale
-        piece[-1] = centre[-1] * scale + level * (1.0 - scale)
+        pieces = centres * scale[:, None]
+        pieces[:, -1] = centres[:, -1] * scale + level * (1.0 - scale)
         A = self.p.a_max
-        if self.k_angle == 1:
-            a = piece[0]
-            gain = (A - a) if direction > 0 else (A + a)
-            piece[0] = a + direction * gain
-            piece[-1] -= direction * gain * angle
+        direction = np.array(directions, dtype=np.float64)
+        angle = np.array(angles, dtype=np.float64)
+        if k == 1:
+            a = pieces[:, 0]
+            gain = np.where(direction > 0, A - a, A + a)
+            pieces[:, 0] = a + direction * gain
+            pieces[:, -1] -= direction * gain * angle
         else:
             # direction * sin(alpha - angle) = direction * (cos(angle) sin(alpha) - sin(angle) cos(alpha))
-            u = direction * np.array([-math.sin(angle), math.cos(angle)])
-            v = piece[:2].copy()
-            vu = float(v @ u)
-            gain = -vu + math.sqrt(max(vu * vu - float(v @ v) + A * A, 0.0))
-            piece[:2] = v + gain * u
-        return self.project(piece)
+            u = direction[:, None] * np.array([[-math.sin(t), math.cos(t)] for t in angles])
+            v = pieces[:, :2]
+            # (Two-term dot products as numpy's v @ u rounds them: each product, then their sum.)
+            vu = v[:, 0] * u[:, 0] + v[:, 1] * u[:, 1]
+            vv = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]
+            gain = -vu + np.sqrt(np.maximum(vu * vu - vv + A * A, 0.0))
+            pieces[:, :2] = v + gain[:, None] * u
+        return self.project_rows(pieces)

@@ -264,10 +264,18 @@ def _frontier(ends: list[tuple[FloatArray, NDArray[np.intp]]], n_robot: int, rob
     order, bounds = group_by_bin(ray_bins, FOCUS_ANGLE_BINS)
     distance = distance[order]
     extent = np.zeros(FOCUS_ANGLE_BINS)
-    for b, (first, end) in enumerate(zip(bounds[:-1], bounds[1:])):  # a loop over bins
-        if counts[b] >= rank:
-            # The rank-th farthest ray end: a partition, not a sort, of the bin's ends.
-            extent[b] = np.partition(distance[first:end], end - first - rank)[end - first - rank]
+    if rank == 1:
+        # A planar scan's extent is each bin's farthest end: one reduction over the bins
+        # that have ends (a partition a bin was most of a planar fit's frontier). Those are
+        # the bins whose count reaches the rank.
+        filled = np.flatnonzero(bounds[1:] > bounds[:-1])
+        if filled.size:
+            extent[filled] = np.maximum.reduceat(distance, bounds[filled])
+    else:
+        for b, (first, end) in enumerate(zip(bounds[:-1], bounds[1:])):  # a loop over bins
+            if counts[b] >= rank:
+                # The rank-th farthest ray end: a partition, not a sort, of the bin's ends.
+                extent[b] = np.partition(distance[first:end], end - first - rank)[end - first - rank]
     # A bin short of both its neighbours is a gap between sparse rays, not an edge of the
     # seen space: it takes the nearer neighbour's extent. (At 2k features one such bin in
     # the office doorway, 6 floor features ending at 1.7 m, closed the doorway in two of

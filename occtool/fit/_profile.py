@@ -291,41 +291,48 @@ def segment_near_runs(profile: FloatArray, far: NDArray[np.bool_], n_segments: i
     best = np.full(n + 1, np.inf)
     best[: leading + 1] = 0.0
     layers = [best]
-    # Layer 0 has no runs to trace back.
-    run_from = [np.zeros(0, dtype=np.intp)]
+    # Layer 0 has no runs to trace back. A layer's runs are kept as the index of their
+    # length (the start is found again on the way back, for the few cuts it passes).
+    run_pick = [np.zeros(0, dtype=np.intp)]
     skip_from = [np.zeros(0, dtype=np.intp)]
     rows = np.arange(n + 1)
+    # layer[starts] without a gather: a window over the layer behind `longest` infinities
+    # (padded[j + l] = layer[j - lengths[l]], infinite before cut 0 as cost is there).
+    padded = np.full(longest + n + 1, np.inf)
+    window = np.lib.stride_tricks.sliding_window_view(padded, longest)[: n + 1]
     # A skip from a far run [a, b) to cut j + 1 costs the least run-ending cost in [a, j],
-    # from its earliest cut: a running minimum within each far run, found for all of them
-    # at once by doubling (log2 of the longest run steps, not a step a run).
+    # from its earliest cut: a running minimum within each far run, all runs at once as
+    # the rows of a (runs x longest run) block (padded at the rows' ends, after what is read).
     member = np.concatenate([np.arange(a, b) for a, b in far_runs]) if far_runs else np.zeros(0, dtype=np.intp)
     run_start = np.repeat([a for a, _ in far_runs], [b - a for a, b in far_runs]).astype(np.intp)
     offset = member - run_start
-    shifts = []
-    shift = 1
-    while shift <= int(offset.max(initial=0)):
-        shifts.append((shift, np.flatnonzero(offset >= shift)))
-        shift *= 2
+    run_of = np.repeat(np.arange(len(far_runs)), [b - a for a, b in far_runs])
+    block_width = int(offset.max(initial=0)) + 1
+    block = np.zeros((len(far_runs), block_width), dtype=np.intp)
+    block[run_of, offset] = member
+    in_block = run_of * block_width + offset
+    position_in_run = np.arange(block_width)
+    after_skip = np.full(n + 1, np.inf)
+    from_skip = np.zeros(n + 1, dtype=np.intp)
     for _ in range(n_segments):
-        total = layers[-1][starts] + cost
+        padded[longest:] = layers[-1]
+        total = window + cost
         pick = np.argmin(total, axis=1)
         after_run = total[rows, pick]
-        from_run = rows - lengths[pick]
-        after_skip = np.full(n + 1, np.inf)
-        from_skip = np.zeros(n + 1, dtype=np.intp)
-        least, earliest = after_run[member], offset.copy()
-        for shift, later in shifts:
-            # (least, earliest) over [i - 2 shift + 1, i]: the lexicographic minimum of the
-            # two halves; an earlier cut wins a tie, as a strict improvement would keep it.
-            before_least, before_earliest = least[later - shift], earliest[later - shift]
-            take = before_least <= least[later]
-            least[later] = np.where(take, before_least, least[later])
-            earliest[later] = np.where(take, before_earliest, earliest[later])
-        after_skip[member + 1] = least
-        from_skip[member + 1] = run_start + earliest
+        if member.size:
+            values = after_run[block]
+            least = np.minimum.accumulate(values, axis=1)
+            # The earliest cut of the least cost is the last at which the running minimum
+            # fell (a tie keeps the earlier cut, as a strict improvement would).
+            fell = np.empty(values.shape, dtype=bool)
+            fell[:, 0] = True
+            np.less(values[:, 1:], least[:, :-1], out=fell[:, 1:])
+            earliest = np.maximum.accumulate(np.where(fell, position_in_run, 0), axis=1)
+            after_skip[member + 1] = least.ravel()[in_block]
+            from_skip[member + 1] = run_start + earliest.ravel()[in_block]
         use_skip = after_skip < after_run
         layers.append(np.where(use_skip, after_skip, after_run))
-        run_from.append(from_run)
+        run_pick.append(pick)
         skip_from.append(np.where(use_skip, from_skip, -1))
     finals = [layer[n] for layer in layers]
     g = int(np.argmin(finals))
@@ -337,7 +344,7 @@ def segment_near_runs(profile: FloatArray, far: NDArray[np.bool_], n_segments: i
         source = int(skip_from[g][position])
         if source >= 0:
             position = source
-        start = int(run_from[g][position])
+        start = position - int(lengths[run_pick[g][position]])
         segments.append((start, position))
         position = start
         g -= 1
