@@ -183,6 +183,9 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         log, report_of_registration = read_map_log(source, read_options, register=register,
                                                    settings=registration or RegistrationSettings())
         name = str(source) if isinstance(source, (str, os.PathLike)) else log.source
+        # The reader's parsed lines and scans, gone once grouped into positions (campus x2:
+        # 100 MB read, 53 MB of it the positions).
+        release_free_memory()
     three_d = world == "3d" or (world == "auto" and is_3d_log(log))
     check_map_memory(log, memory_limit=memory_limit, resolution=resolution, nav2_mode=nav2_mode, world3d=three_d,
                      spill=lean)
