@@ -230,6 +230,7 @@ def test_region_agrees_with_a_direct_segment_check(seed: int, radius: float, max
 @settings(max_examples=20)
 @given(yaw=st.floats(-math.pi, math.pi), name=st.sampled_from(sorted(SCENES)))
 @example(yaw=3.048988447567546, name="aisle")  # a ray slips past the beam's tip in one sweep only
+@example(yaw=1.1959773690841713, name="aisle")  # the grown shelves by the 0.5 m gap: an overlay went wrong
 def test_region_turns_with_the_scene(yaw: float, name: str) -> None:
     scene = build_scene(name)
     max_range, n_rays = 1.5, 1440
@@ -241,6 +242,24 @@ def test_region_turns_with_the_scene(yaw: float, name: str) -> None:
     # and not in the other (a few, each at most half the max range squared times the step).
     wedge = 0.5 * max_range**2 * 2 * math.pi / n_rays
     assert shapely.symmetric_difference(expected, turned).area < 5e-3 * region.area + 4 * wedge
+
+
+def test_touching_footprints_grow_into_their_union() -> None:
+    # Two shelves a robot's diameter apart grow into footprints sharing an edge; turned, its
+    # two copies end an ulp apart, and GEOS's floating-precision overlay then went wrong
+    # without a word (their intersection came out 3.3 m^2, the aisle's obstacles lost 8.7 m^2
+    # and the robot saw through the shelves). The overlays snap-round to a grid instead.
+    yaw = 1.1959773690841713
+    left = [o for o in build_scene("aisle").obstacles if o.name.startswith("shelf left")]
+    straight, turned = Scene(tuple(left), ROBOT), Scene(tuple(left), ROBOT).rotated(yaw)
+    grown = [shapely.buffer(o.polygon, ROBOT.radius, quad_segs=16) for o in turned.obstacles]
+    assert sum(g.area for g in grown) == pytest.approx(configuration_obstacles(turned).area, rel=1e-9)
+    assert configuration_obstacles(turned).area == pytest.approx(configuration_obstacles(straight).area, rel=1e-9)
+    # The scores of the truth itself stay exact in the turned aisle.
+    scene = build_scene("aisle").rotated(yaw)
+    result = evaluate_navigation(reachable_region(scene, max_range=1.5, n_rays=1440), scene, max_range=1.5,
+                                 n_rays=1440)
+    assert result.iou == pytest.approx(1.0, abs=1e-9) and result.violation < 1e-9
 
 
 def test_office_truth_passes_the_doorway_and_stops_at_the_table() -> None:

@@ -15,6 +15,15 @@ from occtool._stats import roc_auc
 
 FloatArray = NDArray[np.float64]
 
+#: Grid (metres) every overlay of the scoring snap-rounds to. GEOS's overlay in floating
+#: precision can return a wildly wrong result, silently, when two inputs have nearly
+#: coincident edges (locationtech/jts#1000, shapely/shapely#1871): the intersection of two
+#: polygons that only share an edge, its ends an ulp apart, can come out with square metres
+#: of area. The scoring makes such edges by construction (grown footprints that touch, a
+#: region traced to the obstacles it then has removed); snap-rounding to a fixed grid is
+#: robust, and a nanometre changes no area measurably.
+OVERLAY_GRID = 1e-9
+
 
 def grouped_auc(values: NDArray[np.floating[Any]], occupied: FloatArray, free: FloatArray) -> float:
     """ROC AUC of points grouped by score: ``occupied[g]`` and ``free[g]`` points score
@@ -34,9 +43,9 @@ def polygon_iou(a: shapely.Geometry, b: shapely.Geometry) -> float:
     area_a, area_b = float(a.area), float(b.area)
     if area_a == 0.0 and area_b == 0.0:
         return 1.0
-    overlap = float(shapely.intersection(a, b).area)
+    overlap = float(shapely.intersection(a, b, grid_size=OVERLAY_GRID).area)
     union = area_a + area_b - overlap
     return overlap / union if union > 0 else 0.0
 
 
-__all__ = ["grouped_auc", "polygon_iou", "roc_auc"]
+__all__ = ["OVERLAY_GRID", "grouped_auc", "polygon_iou", "roc_auc"]

@@ -30,6 +30,7 @@ from occtool.guard import guard_candidates
 from occtool.limits import MAX_RAYS
 from occtool.navigation._raycast import first_hits
 from occtool.robot import Robot
+from occtool.scoring._metrics import OVERLAY_GRID
 from occtool.simulate import Obstacle, Scene
 
 FloatArray = NDArray[np.float64]
@@ -60,7 +61,9 @@ def configuration_obstacles(scene: Scene, *, robot_radius: float | None = None) 
         return shapely.Polygon()
     grown = shapely.buffer(np.asarray(footprints, dtype=object), radius, quad_segs=_QUAD_SEGS) if radius > 0 \
         else np.asarray(footprints, dtype=object)
-    return shapely.union_all(grown)
+    # Footprints that touch (shelves either side of a gap of the robot's diameter) give
+    # nearly coincident edges once grown: see OVERLAY_GRID.
+    return shapely.union_all(grown, grid_size=OVERLAY_GRID)
 
 
 def _check_nonnegative(what: str, value: float) -> None:
@@ -168,7 +171,7 @@ def reachable_region(
     # Chords between neighbouring rays that meet a convex arc of an obstacle cut a sliver
     # into it; removing the obstacles keeps the truth free of any body contact.
     if not obstacles.is_empty:
-        region = shapely.difference(region, obstacles)
+        region = shapely.difference(region, obstacles, grid_size=OVERLAY_GRID)
     if region.geom_type != "Polygon":
         # Only the part around the robot is reachable; any other crumb is an artefact.
         parts = [p for p in shapely.get_parts(region) if p.geom_type == "Polygon" and p.intersects(_ORIGIN)]
@@ -249,7 +252,7 @@ def _polygonal(geometry: BaseGeometry) -> BaseGeometry:
     if geometry.geom_type in ("Polygon", "MultiPolygon"):
         return geometry
     parts = [p for p in shapely.get_parts(geometry) if p.geom_type in ("Polygon", "MultiPolygon")]
-    return shapely.union_all(parts) if parts else shapely.Polygon()
+    return shapely.union_all(parts, grid_size=OVERLAY_GRID) if parts else shapely.Polygon()
 
 
 def evaluate_navigation(
@@ -301,9 +304,9 @@ def evaluate_navigation(
     obstacles = configuration_obstacles(scene, robot_radius=radius)
     area = float(geometry.area)
     truth_area = float(truth.area)
-    overlap = float(shapely.intersection(geometry, truth).area) if area and truth_area else 0.0
+    overlap = _overlap(geometry, truth)
     union = area + truth_area - overlap
-    blocked = float(shapely.intersection(geometry, obstacles).area) if area and not obstacles.is_empty else 0.0
+    blocked = _overlap(geometry, obstacles)
     return Evaluation(
         iou=_share(overlap, union, empty=1.0),
         violation=_share(blocked, area, empty=0.0),
@@ -360,8 +363,8 @@ def observable_footprints(scene: Scene, *, tilt_range: tuple[float, float],
         if radius > 0.0:
             # 256 segments a quarter: the disk's chords cut inside the circle by < 20 um at 1 m,
             # so next to nothing blind is counted as seen.
-            polygon = polygon.difference(_ORIGIN.buffer(radius, quad_segs=256)) if np.isfinite(radius) \
-                else shapely.Polygon()
+            polygon = shapely.difference(polygon, _ORIGIN.buffer(radius, quad_segs=256), grid_size=OVERLAY_GRID) \
+                if np.isfinite(radius) else shapely.Polygon()
         out.append((obstacle, polygon))
     return out
 
@@ -389,10 +392,11 @@ def violation_by_observability(
     obstacles = configuration_obstacles(scene, robot_radius=radius)
     seen = [part for _, part in observable_footprints(scene, tilt_range=tilt_range, min_range=min_range)
             if not part.is_empty]
-    seen_space = shapely.union_all(shapely.buffer(np.asarray(seen, dtype=object), radius, quad_segs=_QUAD_SEGS)) \
+    seen_space = shapely.union_all(shapely.buffer(np.asarray(seen, dtype=object), radius, quad_segs=_QUAD_SEGS),
+                                   grid_size=OVERLAY_GRID) \
         if seen else shapely.Polygon()
-    blocked = float(shapely.intersection(geometry, obstacles).area) if area and not obstacles.is_empty else 0.0
-    observable = float(shapely.intersection(geometry, seen_space).area) if area and not seen_space.is_empty else 0.0
+    blocked = _overlap(geometry, obstacles)
+    observable = _overlap(geometry, seen_space)
     return {"violation": _share(blocked, area, empty=0.0), "observable": _share(observable, area, empty=0.0),
             "unobservable": _share(max(blocked - observable, 0.0), area, empty=0.0)}
 
@@ -410,6 +414,13 @@ def _point_accuracy(points: ArrayLike | None, scene: Scene, radius: float, max_r
     reach = true_reach(scene, np.arctan2(xy[:, 1], xy[:, 0]), robot_radius=radius, max_range=max_range)
     reaches_range = reach >= max_range - tolerance
     return float(np.mean(reaches_range if open_ else ~reaches_range))
+
+
+def _overlap(a: BaseGeometry, b: BaseGeometry) -> float:
+    """Area of ``a`` ∩ ``b``, snap-rounded (see OVERLAY_GRID); 0 when either is empty."""
+    if a.is_empty or b.is_empty:
+        return 0.0
+    return float(shapely.intersection(a, b, grid_size=OVERLAY_GRID).area)
 
 
 def _share(part: float, whole: float, *, empty: float) -> float:
