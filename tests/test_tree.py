@@ -224,7 +224,7 @@ def test_the_horizontal_lower_bound_in_blocks_is_every_piece_in_every_box(monkey
     import occtool.tree._inverse
 
     if block is not None:
-        monkeypatch.setattr(occtool.tree._inverse, "INVERSE_BLOCK", block)
+        monkeypatch.setattr(occtool.tree._inverse, "BOUND_BLOCK", block)
     rng = np.random.default_rng(block or 0)
     for make in (random_tree, shared_weight_tree):
         model = make(3, basis)
