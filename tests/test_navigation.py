@@ -411,6 +411,26 @@ def test_the_horizontal_lower_bound_of_one_piece_is_reached():
     assert bound == pytest.approx(math.sqrt(1.0 - 0.36))
 
 
+@pytest.mark.parametrize("exact", [True, False])
+def test_a_map_without_its_slices_is_the_same_map_and_spares_the_inverse(exact):
+    model = RealTreeModel(table_top(-0.33, -0.28))
+    calls = []
+
+    def inverse_range(alpha, h, level):
+        calls.append(np.shape(h))
+        return model.inverse_range(alpha, h, level)
+
+    bounds = {"free_bounds": model.inverse.horizontal_lower_bound} if exact else {}
+    full = navigation_map(inverse_range, robot=ROBOT, heights=[-0.9, -0.5, -0.1], **bounds)
+    calls.clear()
+    bare = navigation_map(inverse_range, robot=ROBOT, heights=[-0.9, -0.5, -0.1], slices=False, **bounds)
+    assert len(full.slices) == 3 and bare.slices == []
+    assert len(calls) == (0 if exact else 1)  # with exact bounds nothing asks the inverse
+    assert shapely.to_wkb(bare.polygon) == shapely.to_wkb(full.polygon)
+    for name in ("obstacle_points", "exploration_points"):
+        assert getattr(bare, name).tobytes() == getattr(full, name).tobytes()
+
+
 def test_slice_spacing_trades_slices_for_margin():
     model = table_top(-0.33, -0.28)
     with pytest.warns(NavigationWarning, match="margin"):  # 10 cm is too coarse for this table

@@ -169,6 +169,25 @@ def test_the_inverse_in_blocks_and_flattened(monkeypatch, block):
         )
 
 
+@pytest.mark.parametrize("basis", ["trig", "linear"])
+@pytest.mark.parametrize("make", [random_tree, shared_weight_tree])
+def test_the_inverse_of_a_small_sweep_as_rows_is_the_compiled_programs(monkeypatch, make, basis):
+    """A sweep of at most INVERSE_BLOCK piece values goes through the tree's rows
+    (_range_rows), a larger one through its compiled program: the same numbers, bit for bit."""
+    import occtool.tree._inverse
+
+    inverse = make(5, basis).inverse()
+    sweeps = [*SWEEPS.values(), (np.linspace(-3, 3, 8)[None, :], np.array([[-0.5], [np.inf], [np.nan]]), 0.6),
+              (0.3, np.array([[-0.5], [0.0]]), np.array([np.inf, np.nan, 0.2]))]
+    for alpha, h, m in sweeps:
+        shape = np.broadcast_shapes(np.shape(alpha), np.shape(h), np.shape(m))
+        row = int(np.prod(shape[1:]))  # a block of one row: the program, not flattened
+        monkeypatch.setattr(occtool.tree._inverse, "INVERSE_BLOCK", max(row, 1))
+        expected = inverse.range(alpha, h, m)
+        monkeypatch.setattr(occtool.tree._inverse, "INVERSE_BLOCK", 1 << 30)
+        np.testing.assert_array_equal(inverse.range(alpha, h, m), expected)
+
+
 def plain_horizontal_bound(inverse: InverseTree, lo, hi, h_edges, m) -> np.ndarray:
     """Every piece's least ``r^2 - h^2`` over every box at once, then the tree, then the
     root: the numbers :meth:`InverseTree.horizontal_lower_bound` must give, bit for bit."""
@@ -205,7 +224,7 @@ def test_the_horizontal_lower_bound_in_blocks_is_every_piece_in_every_box(monkey
     import occtool.tree._inverse
 
     if block is not None:
-        monkeypatch.setattr(occtool.tree._inverse, "INVERSE_BLOCK", block)
+        monkeypatch.setattr(occtool.tree._inverse, "BOUND_BLOCK", block)
     rng = np.random.default_rng(block or 0)
     for make in (random_tree, shared_weight_tree):
         model = make(3, basis)

@@ -10,6 +10,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+import shapely
 from numpy.typing import NDArray
 from shapely.geometry import Polygon
 
@@ -43,7 +44,7 @@ def circle_sectors(polygon: Polygon, max_range: float, circle_vertices: int) -> 
         Start angle (radians, counter-clockwise from x) and angular span of each sector;
         one sector ``(0, 2 pi)`` when the polygon is the whole disk.
     """
-    ring = np.asarray(polygon.exterior.coords)[:-1]
+    ring = shapely.get_coordinates(polygon.exterior)[:-1]
     if len(ring) < 3:
         return []
     tolerance = max_range * (1.0 - math.cos(math.pi / circle_vertices)) * 1.01 + 1e-9 * max_range
@@ -52,7 +53,6 @@ def circle_sectors(polygon: Polygon, max_range: float, circle_vertices: int) -> 
     middle = (ring + following) / 2.0
     # Both ends on the circle is not enough: an obstacle's chord can join two of its points.
     is_arc = on_circle & cyclic_next(on_circle) & (np.hypot(middle[:, 0], middle[:, 1]) >= max_range - tolerance)
-    theta = np.arctan2(ring[:, 1], ring[:, 0])
     if is_arc.all():
         return [(0.0, 2.0 * np.pi)]
     if not is_arc.any():
@@ -60,12 +60,13 @@ def circle_sectors(polygon: Polygon, max_range: float, circle_vertices: int) -> 
     # Rotate the ring to start on an edge off the circle, so no run wraps around the end.
     shift = int(np.flatnonzero(~is_arc)[0])
     is_arc = np.concatenate((is_arc[shift:], is_arc[:shift]))
-    theta = np.concatenate((theta[shift:], theta[:shift]))
     edges = np.diff(np.concatenate([[0], is_arc.astype(np.int8), [0]]))
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    # The angles of the runs' ends only (a few of the ring's hundreds of vertices).
+    ends = ring[(np.concatenate([starts, stops]) + shift) % len(ring)]
+    theta = np.arctan2(ends[:, 1], ends[:, 0])
     sectors = []
-    for first, last in zip(starts, stops):  # a run of arc edges from vertex first to vertex last
-        start, end = theta[first], theta[last % len(theta)]
+    for start, end in zip(theta[:len(starts)], theta[len(starts):]):  # a run of arc edges, vertex to vertex
         span = (end - start) % (2.0 * np.pi)
         if span * max_range >= MIN_SECTOR_LENGTH:
             sectors.append((float(start), float(span)))
