@@ -282,6 +282,85 @@ def test_true_reach_along_known_directions() -> None:
     assert (true_reach(wall_ahead(0.2), angles, max_range=1.5) == 0).all()
 
 
+def test_true_reach_in_a_square_room_of_side_two() -> None:
+    # Inner half-width 1 + radius: the walls grown by the radius leave the square |x|, |y| <= 1
+    # (its corners sharp: the inner corners of the grown walls), so the reach along a is
+    # min(1/|cos a|, 1/|sin a|), sqrt(2) at the corners. Angles past +-pi turn the same way.
+    scene = room(1.0 + ROBOT.radius)
+    angles = np.concatenate([np.linspace(-math.pi, math.pi, 721), [k * math.pi / 4 for k in range(-12, 13)],
+                             np.linspace(-4 * math.pi, 4 * math.pi, 333)])
+    with np.errstate(divide="ignore"):
+        expected = np.minimum(1.0 / np.abs(np.cos(angles)), 1.0 / np.abs(np.sin(angles)))
+    np.testing.assert_allclose(true_reach(scene, angles, max_range=5.0), expected, rtol=0, atol=1e-9)
+    # Capped at the max range: the disk of radius 1.2 pokes out of the square only by its corners.
+    np.testing.assert_allclose(true_reach(scene, angles, max_range=1.2), np.minimum(expected, 1.2), rtol=0, atol=1e-9)
+
+
+def test_true_reach_grazes_vertices_and_follows_edges() -> None:
+    # Robot radius 0: the C-space obstacle is the footprint, the square [1, 2] x [0, 1].
+    scene = Scene((box("b", 1.0, 0.0, 2.0, 1.0, 0.0, 2.0),), ROBOT)
+    angles = np.array([
+        0.0,                      # along the bottom edge: touches it at (1, 0)
+        math.atan2(1.0, 1.0),     # through the corner (1, 1) only, grazing it
+        math.atan2(1.0, 2.0),     # into the left edge at (1, 0.5), out through the corner (2, 1)
+        math.atan2(1.0, 2.0) + 2 * math.pi,  # the same, a turn on (a turn on from 0 is not: sin 2pi < 0)
+        math.atan2(1.0, 2.0) - 4 * math.pi,  # and two turns back
+        -1e-6,                    # just below the box: misses
+        math.atan2(1.0, 1.0) + 1e-6,  # just above the corner: misses
+        math.pi,                  # away from it
+    ])
+    reach = true_reach(scene, angles, robot_radius=0.0, max_range=3.0)
+    np.testing.assert_allclose(reach, [1.0, math.sqrt(2.0)] + [math.hypot(1.0, 0.5)] * 3 + [3.0] * 3,
+                               rtol=0, atol=1e-9)
+
+
+def test_true_reach_is_zero_with_the_origin_on_an_obstacles_boundary() -> None:
+    # The wall's grown face runs through the robot's centre: it already touches the wall.
+    on, off = wall_ahead(ROBOT.radius), wall_ahead(ROBOT.radius + 1e-6)
+    angles = np.linspace(-math.pi, math.pi, 16, endpoint=False)
+    assert (true_reach(on, angles, max_range=1.0) == 0).all() and reachable_region(on, max_range=1.0).is_empty
+    assert true_reach(off, np.array([0.0, math.pi]), max_range=1.0) == pytest.approx([1e-6, 1.0], abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["clutter", "aisle"])
+def test_the_truths_ray_filter_and_blocks_change_nothing(monkeypatch, name: str) -> None:
+    # The edges are filtered by the wedge of each block of rays; every edge against every
+    # ray, a few rays at a time, gives the very same reaches.
+    from occtool.scoring import _rays
+
+    scene = build_scene(name, yaw=0.7)
+    angles = np.concatenate([np.linspace(-math.pi, math.pi, 1440, endpoint=False),
+                             np.random.default_rng(0).uniform(-10, 10, 200)])
+    reach = true_reach(scene, angles, max_range=3.0)
+    assert (reach < 3.0).any()
+    monkeypatch.setattr(_rays, "_edges_in_wedge", lambda c, s, x1, *rest: np.ones(len(x1), dtype=bool))
+    monkeypatch.setattr(_rays, "PAIRS_PER_BLOCK", 2000)
+    np.testing.assert_array_equal(true_reach(scene, angles, max_range=3.0), reach)
+
+
+def test_the_truth_casts_its_own_rays() -> None:
+    # The judge shares no code with the maps it judges: a bug in the navigation maps' ray
+    # caster must not turn up in the truth too.
+    import ast
+    import inspect
+    import subprocess
+    import sys
+
+    from occtool.scoring import _polygon, _rays
+
+    for module in (_polygon, _rays):
+        tree = ast.parse(inspect.getsource(module))
+        imported = [node.module or "" for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)]
+        imported += [alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names]
+        assert imported and not [name for name in imported if name.startswith("occtool.navigation")]
+        assert not [name for name, value in vars(module).items()
+                    if getattr(value, "__module__", "").startswith("occtool.navigation")]
+    loaded = subprocess.run([sys.executable, "-c", "import sys, occtool.scoring as s; s.true_reach; "
+                             "print(sorted(m for m in sys.modules if m.startswith('occtool.navigation')))"],
+                            capture_output=True, text=True, check=True).stdout
+    assert loaded.strip() == "[]"
+
+
 def test_points_are_judged_by_their_direction() -> None:
     scene = wall_ahead(1.0)
     obstacle = np.array([[0.75, 0.0], [0.5, 0.5], [0.0, 1.5], [-1.5, 0.0]])  # the last two face open space

@@ -1,8 +1,8 @@
 """Casting rays from the origin against polygon edges: the first hit of each ray.
 
-The one ray caster of occtool: the navigation map casts rays to its polygon's boundary
-(obstacle points, the straight-line cut) and :mod:`occtool.scoring` casts them against
-the truth's obstacles.
+The navigation maps' ray caster: the navigation map casts rays to its polygon's boundary
+(obstacle points, the straight-line cut). :mod:`occtool.scoring` casts the truth's rays
+with its own (``occtool.scoring._rays``): the judge of a map shares no code with it.
 """
 
 from __future__ import annotations

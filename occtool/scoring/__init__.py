@@ -12,6 +12,8 @@ The parts, one concept a module (private; everything public is imported from her
                :func:`split_holdout`, :func:`holdout_points` (``compare-grid``'s features)
 ``_metrics``   :func:`roc_auc`, :func:`grouped_auc` (the same figure from per-cell counts),
                :func:`polygon_iou`
+``_rays``      the truth's own ray caster (numpy only), deliberately not the navigation
+               maps' one: a bug there must not hide in the map and its judge alike
 ``_polygon``   a navigation polygon against a scene's truth: :func:`evaluate_navigation`
                (IoU, violation), :func:`reachable_region`, ... (``occtool evaluate``)
 ``_tune``      :func:`tune_grids`, :func:`tune_textbook`, :func:`tune_counting`: the textbook
@@ -23,7 +25,7 @@ The parts, one concept a module (private; everything public is imported from her
 
 Layers (each imports only those before it): :mod:`occtool.grid` (the baselines; imports
 no scorer) -> ``_heldout``, ``_metrics`` (numpy, scipy and shapely only, so any scorer can
-use them) -> ``_polygon``, ``_tune``, ``_nav2`` -> ``_log`` -> :mod:`occtool.compare`
+use them), ``_rays`` -> ``_polygon``, ``_tune``, ``_nav2`` -> ``_log`` -> :mod:`occtool.compare`
 (which scores the parametric model against the baselines with these). The grid tuners
 sit here rather than in :mod:`occtool.grid` because they choose a grid by its held-out
 score: the grids stay free of scoring, and there is one generator of held-out points.

@@ -28,9 +28,9 @@ from occtool.errors import InputError
 from occtool.features import Features, Pose
 from occtool.guard import guard_candidates
 from occtool.limits import MAX_RAYS
-from occtool.navigation._raycast import first_hits
 from occtool.robot import Robot
 from occtool.scoring._metrics import OVERLAY_GRID
+from occtool.scoring._rays import ray_reach
 from occtool.simulate import Obstacle, Scene
 
 FloatArray = NDArray[np.float64]
@@ -72,31 +72,32 @@ def _check_nonnegative(what: str, value: float) -> None:
 
 
 def _boundary_segments(geometry: BaseGeometry) -> tuple[FloatArray, FloatArray]:
-    """Start points and edge vectors of every boundary segment of a (multi)polygon."""
+    """Start and end points of every boundary segment of a (multi)polygon."""
     starts: list[FloatArray] = []
-    vectors: list[FloatArray] = []
+    ends: list[FloatArray] = []
     for ring in shapely.get_parts(shapely.boundary(geometry)) if not geometry.is_empty else []:
         coords = np.asarray(shapely.get_coordinates(ring))
         if len(coords) < 2:
             continue
         starts.append(coords[:-1])
-        vectors.append(np.diff(coords, axis=0))
+        ends.append(coords[1:])
     if not starts:
         return np.empty((0, 2)), np.empty((0, 2))
-    return np.concatenate(starts), np.concatenate(vectors)
+    return np.concatenate(starts), np.concatenate(ends)
 
 
 def _reach(obstacles: BaseGeometry, angles: FloatArray, max_range: float) -> FloatArray:
-    """Distance along each pan angle to the first C-space obstacle, capped at ``max_range``."""
-    starts, vectors = _boundary_segments(obstacles)
-    # Keep only segments that come within the disk: the rest cannot cut a ray.
+    """Distance along each pan angle to the first C-space obstacle, capped at ``max_range``.
+
+    Cast by scoring's own ray caster (:func:`occtool.scoring._rays.ray_reach`), never the
+    navigation maps': the judge shares no code with what it judges.
+    """
+    starts, ends = _boundary_segments(obstacles)
+    # Only segments that come within the disk can cut a ray short of max_range.
     if starts.shape[0]:
-        near = shapely.intersects(
-            shapely.linestrings(np.stack([starts, starts + vectors], axis=1)),
-            _ORIGIN.buffer(max_range * 1.001, quad_segs=64),
-        )
-        starts, vectors = starts[near], vectors[near]
-    return np.minimum(first_hits(starts, vectors, angles)[0], max_range)
+        near = shapely.distance(shapely.linestrings(np.stack([starts, ends], axis=1)), _ORIGIN) <= max_range
+        starts, ends = starts[near], ends[near]
+    return ray_reach(starts, ends, angles, max_range)
 
 
 def true_reach(scene: Scene, angles: ArrayLike, *, robot_radius: float | None = None,
