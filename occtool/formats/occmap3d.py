@@ -54,6 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.formats.occmap import MAGIC, MAX_HEADER, framed, write_file
+from occtool.limits import MAX_DISTANCE, MAX_WORLD_COORDINATE
 
 FloatArray = NDArray[np.float64]
 
@@ -334,8 +335,13 @@ def decode(data: bytes, name: str = "occmap") -> Map3DArrays:
             and (version == 5 or table.size >= 1) and np.all((table >= 0.0) & (table <= 1.0))):
         raise fail("bad free space or patch extent")
     if lo.shape != (3,) or len(shape) != 3 or min(shape) < 1 or not all(
-            math.isfinite(v) and v > 0 for v in (resolution, falloff, edge_falloff)):
+            0 < v <= MAX_DISTANCE for v in (resolution, falloff, edge_falloff)):
         raise fail("bad box, resolution or falloff")
+    # Lengths a map can hold: finite is not enough (a resolution of 1e153 m passes that, and
+    # its queries' reach overflows to infinity).
+    if not (np.abs(lo * resolution) <= MAX_WORLD_COORDINATE).all() or not (
+            np.abs((lo + np.asarray(shape)) * resolution) <= MAX_WORLD_COORDINATE).all():
+        raise fail(f"a box beyond {MAX_WORLD_COORDINATE:g} m")
     if not 0.0 <= free_level <= 1.0:
         raise fail("free level outside [0, 1]")
     if to_map is not None:
