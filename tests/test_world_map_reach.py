@@ -8,9 +8,11 @@ import math
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from occtool.fuse import FREE, UNKNOWN, WorldMap, load_map
-from occtool.fuse._refit import _with_far_walls
+from occtool.fuse._refit import _simplified, _with_far_walls
 from occtool.fuse._sightings import RunReturns
 from occtool.fuse._walls import fit_segments
 from occtool.observation import BIN_CENTRE
@@ -93,3 +95,22 @@ def test_walls_seen_only_from_afar_are_added_and_nearer_walls_kept():
     segments = fit_segments(near, owner, viewpoints=run.poses[owner, :2], **fit)
     assert len(segments) > 0
     assert _with_far_walls(segments, run, near, 16.0, 30.0, True, fit) is segments
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**16), gap=st.sampled_from([0.01, 0.05, 0.2, 5.0]))
+def test_a_region_simplified_a_group_of_polygons_at_a_time_is_simplified_whole(seed, gap):
+    """The observed region's polygons are simplified in groups of those within a few
+    tolerances of each other: the same geometry, byte for byte, as one simplification."""
+    rng = np.random.default_rng(seed)
+    polygons = []
+    for k in range(6):  # wobbly rings with holes, some a gap apart, some far
+        centre = np.array([k * (4.0 + gap) if k % 3 else k * 40.0, 0.0])
+        angles = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+        radius = 2.0 + 0.02 * rng.standard_normal(80)
+        shell = centre + np.column_stack([radius * np.cos(angles), radius * np.sin(angles)])
+        hole = centre + 0.5 * np.column_stack([np.cos(angles), np.sin(angles)]) * (1 + 0.02 * rng.random(80))[:, None]
+        polygons.append(shapely.Polygon(shell, [hole[::-1]]))
+    region = shapely.union_all(polygons)
+    whole = shapely.simplify(region, 0.03, preserve_topology=True)
+    assert shapely.to_wkb(_simplified(region, 0.03)) == shapely.to_wkb(whole)

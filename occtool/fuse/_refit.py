@@ -63,6 +63,36 @@ def _observed_region(distances: FloatArray, poses: FloatArray, reach: float) -> 
     return shapely.union_all(polygons)
 
 
+def _simplified(region: Any, tolerance: float) -> Any:
+    """``shapely.simplify(region, tolerance, preserve_topology=True)``, a group of the
+    region's polygons at a time: those within a few tolerances of each other.
+
+    GEOS's topology-preserving simplifier checks every shortcut against every other ring
+    of the geometry, so its time grows as the square of the rings: campus x4's regions (four
+    polygons, 10,000 holes) took 6.9 s against the campus's 0.36 s. A shortcut stays within
+    ``tolerance`` of the line it replaces, so it can neither cross nor jump over a polygon
+    farther than twice that: each group is simplified as it is within the whole, and the
+    polygons come back in their order (the same WKB on the campus x1 and x4)."""
+    import shapely
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    parts = shapely.get_parts(region)
+    if parts.size <= 1:
+        return shapely.simplify(region, tolerance, preserve_topology=True)
+    near, other = shapely.STRtree(parts).query(parts, predicate="dwithin", distance=4.0 * tolerance)
+    count, group = connected_components(coo_matrix((np.ones(near.size), (near, other)), shape=(parts.size,) * 2),
+                                        directed=False)
+    if count == 1:
+        return shapely.simplify(region, tolerance, preserve_topology=True)
+    out = np.empty(parts.size, dtype=object)
+    for k in range(count):
+        members = np.flatnonzero(group == k)
+        out[members] = shapely.get_parts(shapely.simplify(shapely.multipolygons(parts[members]), tolerance,
+                                                          preserve_topology=True))
+    return shapely.multipolygons(out)
+
+
 def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach: float, far_reach: float,
                     one_sided: bool, fit: dict[str, Any]) -> Segments:
     """``segments`` (fitted to the returns within ``reach``, ``near``) and the walls of the
@@ -113,8 +143,6 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     ``free_level``...). The defaults were chosen on inner splits of the training scans of
     four CARMEN logs (docs/map.md).
     """
-    import shapely
-
     for name, value in (("reach", reach), ("region_reach", region_reach), ("observed_reach", observed_reach)):
         if not value > 0:
             raise InputError(f"{name} must be a positive number of metres, got {value}")
@@ -131,7 +159,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     trust = segments.hits / np.maximum(segments.hits + through, 1)
     regions = [_observed_region(own.ranges, own.poses, r) for r in (observed_reach, min(region_reach, observed_reach))]
     if simplify > 0:
-        regions = [g if g.is_empty else shapely.simplify(g, simplify, preserve_topology=True) for g in regions]
+        regions = [g if g.is_empty else _simplified(g, simplify) for g in regions]
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
     maps = [WorldMap(segments.start, segments.end, segments.thickness, trust, g, band=(z0 + low, z0 + high),
