@@ -110,8 +110,14 @@ class SpilledCells:
         if high <= low:
             return np.zeros((0, self.shape[1]), dtype=np.uint8)
         cols = self.shape[1]
-        data = os.pread(self._file.fileno(), (high - low) * cols, (self.shape[0] - high) * cols)
-        return np.frombuffer(data, dtype=np.uint8).reshape(high - low, cols)[::-1].copy()
+        out = bytearray((high - low) * cols)
+        done, start = 0, (self.shape[0] - high) * cols
+        while done < len(out):  # one read returns at most about 2 GB
+            got = os.preadv(self._file.fileno(), [memoryview(out)[done:]], start + done)
+            if got <= 0:
+                raise OSError(f"the raster's temporary file ended {len(out) - done} bytes early")
+            done += got
+        return np.frombuffer(out, dtype=np.uint8).reshape(high - low, cols)[::-1].copy()
 
     def __setitem__(self, rows: slice, values: ArrayLike) -> None:
         low, high, stride = rows.indices(self.shape[0]) if isinstance(rows, slice) else (0, 0, 0)
