@@ -129,21 +129,14 @@ class _Refitter:
 
     # ---------------------------------------------------------------- constraints
     def project(self, piece: FloatArray) -> FloatArray:
-        """Move a piece onto the constraint set (box, and the disc for trig angle terms)."""
-        piece = np.clip(piece, self.lower, self.upper)
-        if self.k_angle == 2:
-            norm = pan_weight(piece[0], piece[1])
-            if norm > self.p.a_max:
-                piece[:2] *= self.p.a_max / norm
-                # hypot after scaling can exceed a_max by an ulp; shave it off exactly.
-                while pan_weight(piece[0], piece[1]) > self.p.a_max:
-                    piece[:2] = np.nextafter(piece[:2], 0.0)
-        return piece
+        """Move a piece onto the constraint set (box, and the disc for trig angle terms):
+        :meth:`project_rows` of one row."""
+        return self.project_rows(np.asarray(piece)[None, :])[0]
 
     def project_rows(self, W: FloatArray) -> FloatArray:
-        """:meth:`project` of every row of ``W`` (a new array), bit for bit: the same clip,
-        hypot and scaling element by element, in one call for a fit's few dozen pieces (one
-        at a time they cost more in numpy's per-call overhead than in arithmetic)."""
+        """Move every row of ``W`` onto the constraint set (a new array): clipped to the box,
+        then with trig angle terms scaled onto the disc, in one call for a fit's few dozen
+        pieces (one at a time they cost more in numpy's per-call overhead than in arithmetic)."""
         W = np.clip(W, self.lower, self.upper)
         if self.k_angle == 2:
             a_max = self.p.a_max
@@ -152,7 +145,8 @@ class _Refitter:
             over = np.flatnonzero(norm > a_max)
             if over.size:
                 W[over, :2] *= (a_max / norm[over])[:, None]
-                for i in over.tolist():  # the rare rows an ulp over: shaved one at a time, as project does
+                # hypot after scaling can exceed a_max by an ulp: the rare rows over are shaved exactly.
+                for i in over.tolist():
                     while pan_weight(W[i, 0], W[i, 1]) > a_max:
                         W[i, :2] = np.nextafter(W[i, :2], 0.0)
         return W
