@@ -91,6 +91,30 @@ def test_a_wall_seen_from_one_side_faces_it():
     assert fit_segments(wall, owner, cell=2.0).facing.tolist() == [0]  # no viewpoints: both sides
 
 
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 400))
+def test_segments_fitted_a_stripe_at_a_time_are_those_of_one_pass(seed, most):
+    from occtool.fuse import _walls
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 600))
+    # Walls and clutter over a few metres, seen from a few positions.
+    t = rng.uniform(0, 6, n)
+    points = np.where(rng.random((n, 1)) < 0.7, np.column_stack([t, 0.2 * t + rng.normal(0, 0.01, n)]),
+                      rng.uniform(-1, 6, (n, 2)))
+    positions = rng.uniform(-3, 8, (5, 2))
+    owner = rng.integers(0, 5, n)
+    whole = fit_segments(points, owner, viewpoints=positions[owner], cell=0.64)
+    saved = _walls.STRIPE_RETURNS
+    try:
+        _walls.STRIPE_RETURNS = most
+        striped = fit_segments(points, owner, owner_positions=positions, cell=0.64)
+    finally:
+        _walls.STRIPE_RETURNS = saved
+    for name in ("start", "end", "thickness", "hits", "facing"):
+        np.testing.assert_array_equal(getattr(striped, name), getattr(whole, name), err_msg=name)
+
+
 def _square_map(**kwargs):
     """A 2 m x 2 m observed square with one trusted wall along its right side."""
     region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 2.0, 2.0)])

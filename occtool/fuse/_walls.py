@@ -77,7 +77,13 @@ def _line_moments(points: FloatArray, cell: NDArray[np.intp], n_cells: int) -> t
     return count, mx, my, np.cos(theta), np.sin(theta), np.sqrt(minor)
 
 
+#: Returns in one stripe of cells at most (unless one column of cells holds more):
+#: :func:`fit_segments` works a stripe at a time, so a large run's temporaries are a stripe's.
+STRIPE_RETURNS = 1 << 18
+
+
 def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: FloatArray | None = None,
+                 owner_positions: FloatArray | None = None,
                  cell: float = CELL, min_cell: float = MIN_CELL, max_thickness: float = MAX_THICKNESS,
                  min_returns: int = MIN_RETURNS, facing_share: float = FACING_SHARE) -> Segments:
     """Segments through world returns ``(N, 2)`` of positions ``owner`` ``(N,)``.
@@ -86,9 +92,16 @@ def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: Flo
     ``min_returns`` and lie within ``max_thickness`` (standard deviation) of their principal
     axis becomes one segment; the returns of the other cells go on to the next, finer side.
     At the finest side every cell left is a segment, however few or scattered its returns.
-    ``viewpoints`` ``(N, 2)``: where each return was seen from (its position); a segment
-    faces the side that at least ``facing_share`` of its returns were seen from (without
-    viewpoints every segment faces both).
+    ``viewpoints`` ``(N, 2)``: where each return was seen from (its position), or
+    ``owner_positions`` ``(P, 2)``: where each position is (the viewpoints are
+    ``owner_positions[owner]``, never made whole); a segment faces the side that at least
+    ``facing_share`` of its returns were seen from (without viewpoints every segment faces
+    both).
+
+    The cells of side ``cell`` are taken a stripe of columns at a time
+    (:data:`STRIPE_RETURNS`): a cell and the finer cells in it lie in one stripe, so each is
+    fitted to the same returns in the same order as all at once, and the segments come in
+    the same order, by side, then column, then row of their cell.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     owner = np.asarray(owner, dtype=np.int64).reshape(-1)
@@ -96,50 +109,95 @@ def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: Flo
         viewpoints = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 2)
         if viewpoints.shape[0] != points.shape[0]:
             raise ValueError(f"{points.shape[0]} returns need as many viewpoints, got {viewpoints.shape[0]}")
-    starts, ends, thick, hits, facing = [], [], [], [], []
-    if points.shape[0]:
-        origin = points.min(axis=0)
-        pending = np.arange(points.shape[0])
-        side = float(cell)
-        while pending.size:
-            last = side / 2.0 < min_cell - 1e-12
-            p = points[pending]
-            ij = np.floor((p - origin) / side).astype(np.int64)
-            key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-            keys, which = np.unique(key, return_inverse=True)
-            which = which.reshape(-1)
-            count, mx, my, ux, uy, spread = _line_moments(p, which, keys.size)
-            accept = last | ((count >= min_returns) & (spread <= max_thickness))
-            taken = accept[which]
-            if taken.any():
-                rows = np.flatnonzero(accept)
-                renumber = np.full(keys.size, -1, dtype=np.int64)
-                renumber[rows] = np.arange(rows.size)
-                c = renumber[which[taken]]
-                q, w = p[taken], which[taken]
-                along = (q[:, 0] - mx[w]) * ux[w] + (q[:, 1] - my[w]) * uy[w]
-                low = np.full(rows.size, np.inf)
-                high = np.full(rows.size, -np.inf)
-                np.minimum.at(low, c, along)
-                np.maximum.at(high, c, along)
-                centre = np.column_stack([mx[rows], my[rows]])
-                axis = np.column_stack([ux[rows], uy[rows]])
-                starts.append(centre + low[:, None] * axis)
-                ends.append(centre + high[:, None] * axis)
-                thick.append(spread[rows])
-                pairs = np.unique(c * (int(owner.max()) + 1) + owner[pending[taken]])
-                hits.append(np.bincount(pairs // (int(owner.max()) + 1), minlength=rows.size))
-                sides = _facing(q, viewpoints[pending[taken]] if viewpoints is not None else None,
-                                ux[w], uy[w], c, rows.size, facing_share)
-                sides[high - low <= 1e-9] = 0  # a dot has no line to face from
-                facing.append(sides)
-            pending = pending[~taken]
-            side /= 2.0
-    if not starts:
+    if not points.shape[0]:
         empty = np.zeros((0, 2))
         return Segments(empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8))
-    return Segments(np.concatenate(starts), np.concatenate(ends), np.concatenate(thick),
-                    np.concatenate(hits).astype(np.int64), np.concatenate(facing).astype(np.int8))
+    origin = points.min(axis=0)
+    owners = int(owner.max()) + 1
+    column = np.floor((points[:, 0] - origin[0]) / cell).astype(np.int64)
+    stripes = _stripes(np.bincount(column), STRIPE_RETURNS)
+    parts = []
+    for low, high in stripes:
+        taken = slice(None) if len(stripes) == 1 else np.flatnonzero((column >= low) & (column < high))
+        sights = (viewpoints[taken] if viewpoints is not None else
+                  owner_positions[owner[taken]] if owner_positions is not None else None)
+        parts.append(_fit_cells(points[taken], owner[taken], sights, origin, owners, cell=float(cell),
+                                min_cell=min_cell, max_thickness=max_thickness, min_returns=min_returns,
+                                facing_share=facing_share))
+    del column
+    fields = [np.concatenate([part[k] for part in parts]) for k in range(8)]
+    if len(parts) > 1:  # by side, column and row of the cell, as one pass over every return gives them
+        order = np.lexsort((fields[7], fields[6], fields[5]))
+        fields = [f[order] for f in fields]
+    return Segments(fields[0], fields[1], fields[2], fields[3].astype(np.int64), fields[4].astype(np.int8))
+
+
+def _stripes(counts: NDArray[np.int64], most: int) -> list[tuple[int, int]]:
+    """Runs of columns ``[low, high)`` holding at most ``most`` returns together (a column
+    holding more on its own)."""
+    ends = np.cumsum(counts)
+    stripes, low, base = [], 0, 0
+    while low < counts.size:
+        high = max(int(np.searchsorted(ends, base + most, side="right")), low + 1)
+        stripes.append((low, high))
+        base, low = int(ends[high - 1]), high
+    return stripes
+
+
+def _fit_cells(points: FloatArray, owner: NDArray[np.int64], viewpoints: FloatArray | None, origin: FloatArray,
+               owners: int, *, cell: float, min_cell: float, max_thickness: float, min_returns: int,
+               facing_share: float) -> list[NDArray[np.generic]]:
+    """:func:`fit_segments` of the returns of whole cells of side ``cell`` from ``origin``:
+    start, end, thickness, hits, facing, and the side (pass), column and row of each
+    segment's cell."""
+    starts, ends, thick, hits, facing, passes, columns, rows_of = [], [], [], [], [], [], [], []
+    pending = np.arange(points.shape[0])
+    side, depth = cell, 0
+    while pending.size:
+        last = side / 2.0 < min_cell - 1e-12
+        p = points[pending]
+        ij = np.floor((p - origin) / side).astype(np.int64)
+        height = int(ij[:, 1].max()) + 1
+        key = ij[:, 0] * height + ij[:, 1]
+        del ij
+        keys, which = np.unique(key, return_inverse=True)
+        which = which.reshape(-1)
+        count, mx, my, ux, uy, spread = _line_moments(p, which, keys.size)
+        accept = last | ((count >= min_returns) & (spread <= max_thickness))
+        taken = accept[which]
+        if taken.any():
+            rows = np.flatnonzero(accept)
+            renumber = np.full(keys.size, -1, dtype=np.int64)
+            renumber[rows] = np.arange(rows.size)
+            c = renumber[which[taken]]
+            q, w = p[taken], which[taken]
+            along = (q[:, 0] - mx[w]) * ux[w] + (q[:, 1] - my[w]) * uy[w]
+            low = np.full(rows.size, np.inf)
+            high = np.full(rows.size, -np.inf)
+            np.minimum.at(low, c, along)
+            np.maximum.at(high, c, along)
+            centre = np.column_stack([mx[rows], my[rows]])
+            axis = np.column_stack([ux[rows], uy[rows]])
+            starts.append(centre + low[:, None] * axis)
+            ends.append(centre + high[:, None] * axis)
+            thick.append(spread[rows])
+            pairs = np.unique(c * owners + owner[pending[taken]])
+            hits.append(np.bincount(pairs // owners, minlength=rows.size))
+            sides = _facing(q, viewpoints[pending[taken]] if viewpoints is not None else None,
+                            ux[w], uy[w], c, rows.size, facing_share)
+            sides[high - low <= 1e-9] = 0  # a dot has no line to face from
+            facing.append(sides)
+            passes.append(np.full(rows.size, depth, dtype=np.int64))
+            columns.append(keys[rows] // height)
+            rows_of.append(keys[rows] % height)
+        pending = pending[~taken]
+        side /= 2.0
+        depth += 1
+    if not starts:
+        empty = np.zeros((0, 2))
+        return [empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8),
+                np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)]
+    return [np.concatenate(x) for x in (starts, ends, thick, hits, facing, passes, columns, rows_of)]
 
 
 def _facing(returns: FloatArray, viewpoints: FloatArray | None, ux: FloatArray, uy: FloatArray,
