@@ -148,7 +148,9 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         ``consume``), the models go once their navigation maps are placed, before the world
         map is built (:attr:`MapResult.models` is then empty), every position's sightings
         once the world map is built (the report's :attr:`~FuseReport.sightings` is
-        ``None``), the placed navigation maps keep no per-height slices, and a large 2D
+        ``None``), the placed navigation maps keep no per-height slices and their
+        polygons wait in an unnamed temporary file in the output folder
+        (:class:`occtool.fuse._outlines.SpilledNavigation`), and a large 2D
         raster's cells wait in an unnamed temporary file in the output folder (or its
         nearest existing parent) while the files are written (:class:`occtool.raster.SpilledCells`;
         :attr:`MapResult.run`'s raster reads them from there). The files are
@@ -201,7 +203,8 @@ def map_log(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | 
         if lean:
             # The navigation maps first, so that the models go before the world map is built.
             placed, navigation_seconds = place_navigation(models, positions, navigation=navigation,
-                                                          executor=executor, release_models=True)
+                                                          executor=executor, release_models=True,
+                                                          spill=_existing_folder(output))
         world3d, world2d, sensors = None, None, None
         started = time.perf_counter()
         if three_d:

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
-import shapely
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
@@ -24,8 +23,10 @@ from occtool.executor import in_order
 from occtool.features import Pose
 from occtool.fuse._frontiers import frontier_points, frontiers_in_strips
 from occtool.fuse._map import FusedMap
+from occtool.fuse._outlines import SpilledNavigation, SpilledOutlines, placed_outlines
 from occtool.fuse._refit import build_world_map
 from occtool.fuse._sightings import RunReturns
+from occtool.fuse._union import union_in_groups
 from occtool.fuse._world import WorldMap
 from occtool.limits import release_free_memory
 from occtool.raster import FREE, UNKNOWN, Raster
@@ -227,7 +228,10 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
     seconds = {**{key: seconds[key] for key in ("world_map",) if key in seconds},
                "raster": time.perf_counter() - started, "navigation": seconds["navigation"]}
     started = time.perf_counter()
-    region = shapely.union_all([p.nav.polygon for p in placed if not p.nav.polygon.is_empty])
+    # A group of overlapping polygons at a time: campus x10's in one union took 600 MB more.
+    outlines, bounds = placed_outlines([p.nav for p in placed])
+    region = union_in_groups(outlines, bounds=bounds)
+    del outlines
     obstacles = np.concatenate([np.asarray(p.nav.obstacle_points, dtype=np.float64).reshape(-1, 2)
                                 for p in placed]) if placed else np.zeros((0, 2))
     release_free_memory()  # the world map's and the raster's temporaries, back to the system
@@ -238,10 +242,14 @@ def map_of_run(fused: FusedMap, models: list[Any], positions: list[tuple[int, Po
 
 def place_navigation(models: list[Any], positions: list[tuple[int, Pose, float | None]], *,
                      navigation: dict[str, Any] | None = None, robot_overrides: Mapping[str, float] | None = None,
-                     executor: Any = None, release_models: bool = False) -> tuple[list[PlacedMap], float]:
+                     executor: Any = None, release_models: bool = False,
+                     spill: str | os.PathLike[str] | None = None) -> tuple[list[PlacedMap], float]:
     """Each model's navigation map placed at its position, as :func:`map_of_run` places them
-    (its keywords), and the seconds it took."""
+    (its keywords), and the seconds it took. ``spill``: a folder where the maps' polygons
+    wait in an unnamed temporary file (:class:`occtool.fuse._outlines.SpilledNavigation`,
+    read back as they are drawn and unioned) instead of memory; ``None``: in memory."""
     started = time.perf_counter()
+    outlines = SpilledOutlines(spill) if spill is not None else None
     options = []
     for model in models:
         option = dict(navigation or {})
@@ -258,7 +266,7 @@ def place_navigation(models: list[Any], positions: list[tuple[int, Pose, float |
     placed = []
     for chunk, at in zip(chunks, range(0, len(models), NAVIGATION_CHUNK)):
         for (index, pose, stamp), nav in zip(positions[at:at + NAVIGATION_CHUNK], chunk):
-            placed.append(PlacedMap(index, pose, stamp, nav))
+            placed.append(PlacedMap(index, pose, stamp, nav if outlines is None else SpilledNavigation(nav, outlines)))
         del chunk
     if release_models:
         models.clear()
