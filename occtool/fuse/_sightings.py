@@ -57,21 +57,26 @@ class RunReturns:
         than ``beyond``), and the position of each (a block of positions at a time: the
         temporaries are a block's)."""
         bins = self.ranges.shape[1]
-        points, owners = [], []
-        for low in range(0, len(self), _POSITIONS_AT_ONCE):
-            high = low + _POSITIONS_AT_ONCE
-            ranges = self.ranges[low:high]
-            k, b = np.nonzero(self.returned[low:high] & (ranges <= within) & (ranges > beyond))
+        blocks = range(0, len(self), _POSITIONS_AT_ONCE)
+
+        def kept(low: int) -> NDArray[np.bool_]:
+            ranges = self.ranges[low:low + _POSITIONS_AT_ONCE]
+            return self.returned[low:low + _POSITIONS_AT_ONCE] & (ranges <= within) & (ranges > beyond)
+
+        # Counted first, then written in place: never the blocks' arrays beside their concatenation.
+        counts = [int(np.count_nonzero(kept(low))) for low in blocks]
+        points, owners = np.empty((sum(counts), 2)), np.empty(sum(counts), dtype=np.int64)
+        at = 0
+        for low, count in zip(blocks, counts):
+            k, b = np.nonzero(kept(low))
             k += low
             alpha = -math.pi + (b + self.offsets[k, b] / OFFSET_STEPS) * (2.0 * math.pi / bins) + self.poses[k, 3]
             r = self.ranges[k, b]
-            points.append(np.column_stack([self.poses[k, 0] + r * np.cos(alpha), self.poses[k, 1] + r * np.sin(alpha)]))
-            owners.append(k.astype(np.int64))
-        if len(points) == 1:
-            return points[0], owners[0]
-        if not points:
-            return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
-        return np.concatenate(points), np.concatenate(owners)
+            points[at:at + count, 0] = self.poses[k, 0] + r * np.cos(alpha)
+            points[at:at + count, 1] = self.poses[k, 1] + r * np.sin(alpha)
+            owners[at:at + count] = k
+            at += count
+        return points, owners
 
 
 def returns_of_fused(fused: Any) -> RunReturns:

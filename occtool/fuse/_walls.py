@@ -114,22 +114,22 @@ def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: Flo
         return Segments(empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8))
     origin = points.min(axis=0)
     owners = int(owner.max()) + 1
-    column = np.floor((points[:, 0] - origin[0]) / cell).astype(np.int64)
-    stripes = _stripes(np.bincount(column), STRIPE_RETURNS)
-    parts = []
+    column = np.floor((points[:, 0] - origin[0]) / cell)
+    stripes = _stripes(np.bincount(column.astype(np.int64)), STRIPE_RETURNS)
+    by_side: dict[int, list[tuple[NDArray[np.generic], ...]]] = {}
     for low, high in stripes:
         taken = slice(None) if len(stripes) == 1 else np.flatnonzero((column >= low) & (column < high))
         sights = (viewpoints[taken] if viewpoints is not None else
                   owner_positions[owner[taken]] if owner_positions is not None else None)
-        parts.append(_fit_cells(points[taken], owner[taken], sights, origin, owners, cell=float(cell),
-                                min_cell=min_cell, max_thickness=max_thickness, min_returns=min_returns,
-                                facing_share=facing_share))
+        for depth, fields in _fit_cells(points[taken], owner[taken], sights, origin, owners, cell=float(cell),
+                                        min_cell=min_cell, max_thickness=max_thickness, min_returns=min_returns,
+                                        facing_share=facing_share):
+            by_side.setdefault(depth, []).append(fields)
     del column
-    fields = [np.concatenate([part[k] for part in parts]) for k in range(8)]
-    if len(parts) > 1:  # by side, column and row of the cell, as one pass over every return gives them
-        order = np.lexsort((fields[7], fields[6], fields[5]))
-        fields = [f[order] for f in fields]
-    return Segments(fields[0], fields[1], fields[2], fields[3].astype(np.int64), fields[4].astype(np.int8))
+    # By side, then by stripe: a stripe's cells come column by column, row by row, and the
+    # stripes are runs of columns in order, as one pass over every return gives them.
+    parts = [fields for depth in sorted(by_side) for fields in by_side[depth]]
+    return Segments(*(np.concatenate([part[k] for part in parts]) for k in range(5)))
 
 
 def _stripes(counts: NDArray[np.int64], most: int) -> list[tuple[int, int]]:
@@ -146,11 +146,11 @@ def _stripes(counts: NDArray[np.int64], most: int) -> list[tuple[int, int]]:
 
 def _fit_cells(points: FloatArray, owner: NDArray[np.int64], viewpoints: FloatArray | None, origin: FloatArray,
                owners: int, *, cell: float, min_cell: float, max_thickness: float, min_returns: int,
-               facing_share: float) -> list[NDArray[np.generic]]:
+               facing_share: float) -> list[tuple[int, tuple[NDArray[np.generic], ...]]]:
     """:func:`fit_segments` of the returns of whole cells of side ``cell`` from ``origin``:
-    start, end, thickness, hits, facing, and the side (pass), column and row of each
-    segment's cell."""
-    starts, ends, thick, hits, facing, passes, columns, rows_of = [], [], [], [], [], [], [], []
+    for each side (0 the first, ``cell``) that made segments, their start, end, thickness,
+    hits and facing, by column then row of their cell."""
+    out = []
     pending = np.arange(points.shape[0])
     side, depth = cell, 0
     while pending.size:
@@ -178,26 +178,17 @@ def _fit_cells(points: FloatArray, owner: NDArray[np.int64], viewpoints: FloatAr
             np.maximum.at(high, c, along)
             centre = np.column_stack([mx[rows], my[rows]])
             axis = np.column_stack([ux[rows], uy[rows]])
-            starts.append(centre + low[:, None] * axis)
-            ends.append(centre + high[:, None] * axis)
-            thick.append(spread[rows])
             pairs = np.unique(c * owners + owner[pending[taken]])
-            hits.append(np.bincount(pairs // owners, minlength=rows.size))
             sides = _facing(q, viewpoints[pending[taken]] if viewpoints is not None else None,
                             ux[w], uy[w], c, rows.size, facing_share)
             sides[high - low <= 1e-9] = 0  # a dot has no line to face from
-            facing.append(sides)
-            passes.append(np.full(rows.size, depth, dtype=np.int64))
-            columns.append(keys[rows] // height)
-            rows_of.append(keys[rows] % height)
+            out.append((depth, (centre + low[:, None] * axis, centre + high[:, None] * axis, spread[rows],
+                                np.bincount(pairs // owners, minlength=rows.size).astype(np.int64),
+                                sides.astype(np.int8))))
         pending = pending[~taken]
         side /= 2.0
         depth += 1
-    if not starts:
-        empty = np.zeros((0, 2))
-        return [empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8),
-                np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)]
-    return [np.concatenate(x) for x in (starts, ends, thick, hits, facing, passes, columns, rows_of)]
+    return out
 
 
 def _facing(returns: FloatArray, viewpoints: FloatArray | None, ux: FloatArray, uy: FloatArray,
