@@ -150,7 +150,7 @@ def _fit_cells(points: FloatArray, owner: NDArray[np.int64], viewpoints: FloatAr
     """:func:`fit_segments` of the returns of whole cells of side ``cell`` from ``origin``:
     for each side (0 the first, ``cell``) that made segments, their start, end, thickness,
     hits and facing, by column then row of their cell."""
-    out = []
+    out: list[tuple[int, tuple[NDArray[np.generic], ...]]] = []
     pending = np.arange(points.shape[0])
     side, depth = cell, 0
     while pending.size:
