@@ -100,12 +100,19 @@ def _depth(text: str) -> int:
     return int(np.cumsum(step).max(initial=0))
 
 
-def loads(text: str, *, max_depth: int | None = None, bounded_numbers: bool = False) -> Any:
-    """``json.loads`` with integers of at most :data:`MAX_INTEGER_DIGITS` digits and a
-    nesting the parser can follow; both failures are :class:`json.JSONDecodeError`.
+#: Deepest nesting of arrays and objects :func:`loads` parses (occtool's files nest a few
+#: levels; a GeoJSON polygon five). Deeper is refused before parsing, whatever the depth
+#: of the interpreter's stack at the call (the parser's own limit moved with it: the library
+#: and the command line told a summary nested 950 deep apart).
+MAX_JSON_DEPTH = 256
 
-    ``max_depth``: arrays and objects nested deeper are refused before parsing (a file
-    format that knows its depth says so); ``bounded_numbers``: number literals longer
+
+def loads(text: str, *, max_depth: int | None = None, bounded_numbers: bool = False) -> Any:
+    """``json.loads`` with integers of at most :data:`MAX_INTEGER_DIGITS` digits and at most
+    :data:`MAX_JSON_DEPTH` levels of nesting; both failures are :class:`json.JSONDecodeError`.
+
+    ``max_depth``: arrays and objects nested deeper are refused before parsing with their
+    depth (a file format that knows its depth says so); ``bounded_numbers``: number literals longer
     than :data:`MAX_NUMBER_LENGTH` characters and ``NaN`` / ``Infinity`` are refused too.
 
     >>> loads('[[[1]]]', max_depth=2)  # doctest: +ELLIPSIS
@@ -113,10 +120,12 @@ def loads(text: str, *, max_depth: int | None = None, bounded_numbers: bool = Fa
     ...
     json.decoder.JSONDecodeError: nested 3 deep, more than 2: line 1 column 1 (char 0)
     """
-    if max_depth is not None:
+    if max_depth is not None or text.count("[") + text.count("{") > MAX_JSON_DEPTH:
         depth = _depth(text)
-        if depth > max_depth:
+        if max_depth is not None and depth > max_depth:
             raise json.JSONDecodeError(f"nested {depth} deep, more than {max_depth}", text, 0)
+        if depth > MAX_JSON_DEPTH:
+            raise json.JSONDecodeError("nested too deeply", text, 0)
     hooks: dict[str, Any] = {}
     if bounded_numbers:
         hooks = {"parse_float": _parse_float, "parse_constant": _refuse_constant}

@@ -23,6 +23,7 @@ from click.testing import CliRunner
 from hypothesis import example, given
 from hypothesis import strategies as st
 
+from occtool._json import MAX_JSON_DEPTH
 from occtool.cli.main import cli
 from occtool.errors import InputError
 from occtool.formats.nav2 import PNG_DECODE_BYTES, read_nav2, write_nav2
@@ -288,13 +289,16 @@ def test_a_truncated_png_is_refused(tmp_path_factory, data):
 
 @given(st.integers(3, 200_000))
 @example(100_000)
+@example(MAX_JSON_DEPTH - 1)
+@example(MAX_JSON_DEPTH)
+@example(950)
 def test_a_deeply_nested_summary_is_refused(tmp_path_factory, depth):
     folder = make_folder(tmp_path_factory.mktemp("json"))
     (folder / "summary.json").write_text('{"path": ' + "[" * depth + "]" * depth + "}")
-    # Past the parser's depth (about a thousand, by the interpreter's stack) a JSON error;
+    # Past MAX_JSON_DEPTH (the object and its arrays) a JSON error, whatever the stack;
     # short of it, a path that is no list of pairs.
-    assert_refused(folder, "summary.json", r"not valid JSON \(line 1: nested too deeply\)" if depth > 5000 else
-                   r"(not valid JSON \(line 1: nested too deeply\)|path must be \[x, y\] pairs .*)")
+    assert_refused(folder, "summary.json", r"not valid JSON \(line 1: nested too deeply\)" if depth + 1 > MAX_JSON_DEPTH
+                   else r"path must be \[x, y\] pairs .*")
 
 
 @given(st.integers(21, 5000), st.sampled_from(["summary.json", "frontiers.geojson"]))
