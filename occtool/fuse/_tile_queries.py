@@ -174,7 +174,7 @@ def cell_walls(world: Any, xy: FloatArray, within: float, doubted_trust: float) 
     counted = world.trust >= doubted_trust
     wanted = min(NEIGHBOURS, len(world))
     asked = min(NEIGHBOURS + 1, len(world))
-    tied: list[FloatArray] = []
+    tied: list[NDArray[np.intp]] = []
     for low in range(0, count, _BLOCK):
         rows = slice(low, low + _BLOCK)
         block = xy[rows]
