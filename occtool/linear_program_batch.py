@@ -109,7 +109,7 @@ def solve_stacked(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: ND
             or upper.shape != (B, d) or rows.shape != (B,) or B == 0 or d == 0 or (rows <= 0).any():
         raise ValueError("solve_stacked: inconsistent shapes")
     limit = 200 + 50 * d if max_iterations is None else max_iterations
-    results = _Batch(cost, A_ub, b_ub, rows, lower, upper, limit).solve()
+    results = _solved_batches(cost, A_ub, b_ub, rows, lower, upper, limit)
     ends = np.cumsum(rows)
     for i, result in enumerate(results):
         if result is None:
@@ -117,6 +117,45 @@ def solve_stacked(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: ND
             results[i] = solve_lp(cost[i], A_ub[start:end], b_ub[start:end], lower[i], upper[i],
                                   max_iterations=max_iterations)
     return results  # type: ignore[return-value]
+
+
+#: A batch of at least :data:`SPLIT_PROGRAMMES` programmes is split in two at twice its
+#: median count of rows when at least this share of them have more: each part padded to
+#: its own most rows.
+WIDE_SHARE = 0.1
+#: ... (a smaller batch's cost is mostly its steps': a second batch's cost more than the
+#: padding saved; the corridor's keyframes' programmes fitted one at a time took 1.5 times
+#: as long split).
+SPLIT_PROGRAMMES = 512
+
+
+def _solved_batches(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: NDArray[np.float64],
+                    rows: NDArray[np.intp], lower: NDArray[np.float64], upper: NDArray[np.float64],
+                    limit: int) -> list[LinearProgramResult | None]:
+    """:meth:`_Batch.solve` of the stacked programmes, in one batch or two.
+
+    A batch's steps work on every programme padded to the most rows of any: the MIT
+    corridor's keyframes have programmes of about 70 rows and a third of about 220, and
+    the narrow ones padded to the wide ones' width took twice the time. With at least
+    :data:`WIDE_SHARE` of the programmes above twice the median rows, those and the others
+    are two batches (each programme's answer is its own whichever batch it is in; the
+    campus's few wide programmes are not worth a second batch's steps), when there are at
+    least :data:`SPLIT_PROGRAMMES` of them (several fits' programmes solved together,
+    :func:`solved_together`)."""
+    wide = rows > 2 * np.median(rows)
+    count = int(np.count_nonzero(wide))
+    if rows.size < SPLIT_PROGRAMMES or count < WIDE_SHARE * rows.size or count == rows.size:
+        return _Batch(cost, A_ub, b_ub, rows, lower, upper, limit).solve()
+    results: list[LinearProgramResult | None] = [None] * rows.size
+    starts = np.cumsum(rows) - rows
+    for part in (np.flatnonzero(~wide), np.flatnonzero(wide)):
+        counts = rows[part]
+        # Each chosen programme's rows: from its start, one after another.
+        entry = np.repeat(starts[part] - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+        solved_part = _Batch(cost[part], A_ub[entry], b_ub[entry], counts, lower[part], upper[part], limit).solve()
+        for i, result in zip(part.tolist(), solved_part):
+            results[i] = result
+    return results
 
 
 def solved(steps: Generator[Stacked, list[LinearProgramResult], T]) -> T:

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from occtool.linear_program import LinearProgramResult, solve_lp
-from occtool.linear_program_batch import solve_lps, solve_stacked, solved, solved_together
+from occtool.linear_program_batch import (
+    SPLIT_PROGRAMMES,
+    WIDE_SHARE,
+    solve_lps,
+    solve_stacked,
+    solved,
+    solved_together,
+)
 from tests.test_linear_program import load_captured
 
 
@@ -70,6 +77,19 @@ def test_stacked_equals_alone_and_list():
                                           programmes):
         assert_same(stacked, solve_lp(*programme))
         assert_same(listed, stacked)
+
+
+def test_a_batch_split_by_its_rows_answers_as_alone():
+    """A large batch whose wide programmes are many is solved as two batches, each padded to
+    its own most rows: every answer is still solve_lp's, bit for bit."""
+    rng = np.random.default_rng(5)
+    programmes = [fit_like(rng, 2000) if rng.random() < 0.25 else fit_like(rng, 40)
+                  for _ in range(SPLIT_PROGRAMMES + 8)]
+    stacked = _stacked(programmes)
+    rows = stacked[3]
+    assert np.count_nonzero(rows > 2 * np.median(rows)) >= WIDE_SHARE * rows.size
+    for batched, programme in zip(solve_stacked(*stacked), programmes, strict=True):
+        assert_same(batched, solve_lp(*programme))
 
 
 def test_unusual_programmes_in_a_batch_are_solve_lps():
