@@ -83,7 +83,7 @@ def test_a_batch_split_by_its_rows_answers_as_alone():
     """A large batch whose wide programmes are many is solved as two batches, each padded to
     its own most rows: every answer is still solve_lp's, bit for bit."""
     rng = np.random.default_rng(5)
-    programmes = [fit_like(rng, 2000) if rng.random() < 0.25 else fit_like(rng, 40)
+    programmes = [fit_like(rng, 600) if rng.random() < 0.25 else fit_like(rng, 40)
                   for _ in range(SPLIT_PROGRAMMES + 8)]
     stacked = _stacked(programmes)
     rows = stacked[3]
