@@ -30,7 +30,9 @@ infeasibility proof that leans on an artificial bound.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Generator, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -51,10 +53,18 @@ from occtool.linear_program import (
     solve_lp,
 )
 
-__all__ = ["Programme", "solve_lps", "solve_stacked"]
+__all__ = ["Programme", "Stacked", "solve_lps", "solve_stacked", "solved", "solved_together"]
 
 #: One programme as :func:`solve_lp` takes it: ``cost, A_ub, b_ub, lower, upper``.
 Programme = tuple[ArrayLike, ArrayLike, ArrayLike, ArrayLike, ArrayLike]
+
+#: Programmes given stacked, as :func:`solve_stacked` takes them: ``cost, A_ub, b_ub, rows, lower, upper``.
+Stacked = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.intp],
+                NDArray[np.float64], NDArray[np.float64]]
+#: A computation that asks for stacked programmes to be solved: it yields them and is sent
+#: their results (:func:`solved`, :func:`solved_together`), and returns its answer.
+Steps = Generator[Stacked, list[LinearProgramResult], Any]
+T = TypeVar("T")
 
 #: Statuses besides scipy's: still pivoting, waiting for a refactorisation, to be solved alone.
 _RUNNING, _WAITING, _ALONE = -1, -3, -2
@@ -99,7 +109,7 @@ def solve_stacked(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: ND
             or upper.shape != (B, d) or rows.shape != (B,) or B == 0 or d == 0 or (rows <= 0).any():
         raise ValueError("solve_stacked: inconsistent shapes")
     limit = 200 + 50 * d if max_iterations is None else max_iterations
-    results = _Batch(cost, A_ub, b_ub, rows, lower, upper, limit).solve()
+    results = _solved_batches(cost, A_ub, b_ub, rows, lower, upper, limit)
     ends = np.cumsum(rows)
     for i, result in enumerate(results):
         if result is None:
@@ -107,6 +117,122 @@ def solve_stacked(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: ND
             results[i] = solve_lp(cost[i], A_ub[start:end], b_ub[start:end], lower[i], upper[i],
                                   max_iterations=max_iterations)
     return results  # type: ignore[return-value]
+
+
+#: A batch of at least :data:`SPLIT_PROGRAMMES` programmes is split in two at twice its
+#: median count of rows when at least this share of them have more: each part padded to
+#: its own most rows.
+WIDE_SHARE = 0.1
+#: ... (a smaller batch's cost is mostly its steps': a second batch's cost more than the
+#: padding saved; the corridor's keyframes' programmes fitted one at a time took 1.5 times
+#: as long split).
+SPLIT_PROGRAMMES = 512
+
+
+def _solved_batches(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: NDArray[np.float64],
+                    rows: NDArray[np.intp], lower: NDArray[np.float64], upper: NDArray[np.float64],
+                    limit: int) -> list[LinearProgramResult | None]:
+    """:meth:`_Batch.solve` of the stacked programmes, in one batch or two.
+
+    A batch's steps work on every programme padded to the most rows of any: the MIT
+    corridor's keyframes have programmes of about 70 rows and a third of about 220, and
+    the narrow ones padded to the wide ones' width took twice the time. With at least
+    :data:`WIDE_SHARE` of the programmes above twice the median rows, those and the others
+    are two batches (each programme's answer is its own whichever batch it is in; the
+    campus's few wide programmes are not worth a second batch's steps), when there are at
+    least :data:`SPLIT_PROGRAMMES` of them (several fits' programmes solved together,
+    :func:`solved_together`)."""
+    wide = rows > 2 * np.median(rows)
+    count = int(np.count_nonzero(wide))
+    if rows.size < SPLIT_PROGRAMMES or count < WIDE_SHARE * rows.size or count == rows.size:
+        return _Batch(cost, A_ub, b_ub, rows, lower, upper, limit).solve()
+    results: list[LinearProgramResult | None] = [None] * rows.size
+    starts = np.cumsum(rows) - rows
+    for part in (np.flatnonzero(~wide), np.flatnonzero(wide)):
+        counts = rows[part]
+        # Each chosen programme's rows: from its start, one after another.
+        entry = np.repeat(starts[part] - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+        solved_part = _Batch(cost[part], A_ub[entry], b_ub[entry], counts, lower[part], upper[part], limit).solve()
+        for i, result in zip(part.tolist(), solved_part):
+            results[i] = result
+    return results
+
+
+def solved(steps: Generator[Stacked, list[LinearProgramResult], T]) -> T:
+    """What ``steps`` returns, each batch of programmes it yields answered by :func:`solve_stacked`."""
+    try:
+        request = next(steps)
+        while True:
+            request = steps.send(solve_stacked(*request))
+    except StopIteration as stop:
+        return stop.value
+
+
+def solved_together(computations: Sequence[Steps]) -> list[tuple[Any, BaseException | None, float]]:
+    """Each computation's ``(answer, None, seconds)``, or ``(None, the exception it raised,
+    seconds)``: what
+    :func:`solved` of each would return or raise, the computations run in turns, and the
+    programmes they ask for at the same turn (of the same number of unknowns) solved in one
+    :func:`solve_stacked` call.
+
+    A batch costs about its count of steps, nearly independent of its width (this module's
+    docstring): the ~64 programmes of one campus keyframe's fit took 2.8 ms, those of 16
+    keyframes 1.3 ms a keyframe. Each programme's answer is the one it gets alone, bit for bit
+    (``solve_stacked``'s steps are each programme's own; its docstring says where BLAS may
+    differ). Stacked arrays a batch cannot take (no programme, inconsistent shapes) are
+    solved alone, so that the computation sees the error it would see alone. ``seconds``:
+    the wall time of the computation's own steps and its share of the batches' (by its
+    programmes), not the others' steps."""
+    outcomes: list[tuple[Any, BaseException | None, float]] = [(None, None, 0.0)] * len(computations)
+    seconds = [0.0] * len(computations)
+    asked: dict[int, Stacked] = {}
+
+    def advance(i: int, send: Any = None, error: BaseException | None = None) -> None:
+        steps = computations[i]
+        started = time.perf_counter()
+        try:
+            asked[i] = steps.send(send) if error is None else steps.throw(error)
+        except StopIteration as stop:
+            outcomes[i] = (stop.value, None, seconds[i] + time.perf_counter() - started)
+        except Exception as exc:  # noqa: BLE001  (the computation's own error, handed back)
+            outcomes[i] = (None, exc, seconds[i] + time.perf_counter() - started)
+        else:
+            seconds[i] += time.perf_counter() - started
+
+    for i in range(len(computations)):
+        advance(i)
+    while asked:
+        turn, asked = asked, {}
+        by_size: dict[int, list[int]] = {}
+        for i, request in turn.items():
+            cost, A_ub, b_ub, rows, lower, upper = request
+            B, d = cost.shape if cost.ndim == 2 else (0, 0)
+            usual = (B > 0 and d > 0 and A_ub.shape == (int(rows.sum()), d) and b_ub.shape == (A_ub.shape[0],)
+                     and lower.shape == upper.shape == (B, d) and rows.shape == (B,) and bool((rows > 0).all()))
+            if usual:
+                by_size.setdefault(d, []).append(i)
+                continue
+            started = time.perf_counter()
+            try:
+                results = solve_stacked(*request)
+            except Exception as exc:  # noqa: BLE001  (raised where the computation asked)
+                seconds[i] += time.perf_counter() - started
+                advance(i, error=exc)
+            else:
+                seconds[i] += time.perf_counter() - started
+                advance(i, results)
+        for members in by_size.values():
+            started = time.perf_counter()
+            stacked = [np.concatenate([turn[i][k] for i in members]) for k in range(6)]
+            results = solve_stacked(*stacked)
+            share = (time.perf_counter() - started) / len(results)
+            start = 0
+            for i in members:
+                count = turn[i][0].shape[0]
+                seconds[i] += share * count
+                advance(i, results[start:start + count])
+                start += count
+    return outcomes
 
 
 def _arrays(programme: Programme) -> tuple[NDArray[np.float64], ...] | None:

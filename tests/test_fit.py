@@ -18,6 +18,7 @@ from occtool.fit import (
     contradicted_features,
     default_pieces,
     first_obstacle_distance,
+    fit_together,
     frontier_samples,
     segment_near_runs,
     sorted_within_bins,
@@ -108,6 +109,22 @@ def test_fit_is_deterministic():
     b = OccupancyRegressor(pieces=8, seed=3).fit(features)
     assert np.array_equal(a.tree_.coefficients, b.tree_.coefficients)
     assert a.tree_ == b.tree_
+
+
+def test_fits_together_are_the_fits_alone():
+    """fit_together runs a few fits in turns, their programmes in one batch: each model is
+    the one its own fit makes (its tree's numbers bit for bit), a failed fit its error."""
+    chunk = [ring_room(900, seed=s, pallet=s % 2 == 0, radius=1.5 + 0.5 * s) for s in range(3)]
+    chunk.insert(1, Features(np.zeros((0, 3)), np.zeros(0)))
+    params = {"pieces": 12, "seed": 2}
+    together = fit_together(params, chunk)
+    assert isinstance(together[1], InputError)
+    for model, features in zip(together[::2] + together[3:], chunk[::2] + chunk[3:]):
+        alone = OccupancyRegressor(**params).fit(features)
+        assert isinstance(model, OccupancyRegressor) and model.fit_seconds_ >= 0
+        assert model.tree_.coefficients.tobytes() == alone.tree_.coefficients.tobytes()
+        assert model.tree_ == alone.tree_
+        assert model.loss_history_ == alone.loss_history_
 
 
 def test_free_inside_the_wall_occupied_beyond(fitted):

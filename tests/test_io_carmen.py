@@ -268,3 +268,29 @@ def test_a_bad_no_return_code_is_an_error(fixtures_dir):
     for bad in (0, -1, float("nan"), True, "far"):
         with pytest.raises(InputError, match="no-return code must be"):
             read_log(fixtures_dir / "logs" / "tiny.carmen.log", no_return_code=bad)
+
+
+@pytest.mark.parametrize("kept", [1 << 22, 500])
+def test_the_lines_kept_from_the_first_reading_give_the_scans_of_a_second(tmp_path, fixtures_dir, monkeypatch, kept):
+    """read_carmen keeps the lines its no-return codes' reading parsed (up to KEPT_READINGS
+    readings, else none) and makes its scans of them: the scans, notes and skipped lines
+    of a reader that parses the file again."""
+    import occtool.io.carmen as carmen
+
+    monkeypatch.setattr(carmen, "KEPT_READINGS", kept)
+    lines = (fixtures_dir / "logs" / "tiny.carmen.log").read_text().splitlines(keepends=True)
+    path = tmp_path / "log.log"
+    path.write_text("".join(lines + ["FLASER 2 oops\n", "WHATEVER 1 2\n"]
+                            + [_flaser([2.0] * 170 + [81.91] * 10, x=0.01 * i) for i in range(3)]))
+    keeping = carmen.CarmenScans(path, keep=True, skip_invalid=True, no_return_range=3.0)
+    again = carmen.CarmenScans(path, skip_invalid=True, no_return_range=3.0)
+    readings, parse = [], keeping._lines
+    keeping._lines = lambda: (readings.append(1), parse())[1]  # type: ignore[method-assign]
+    both = list(keeping), list(again)
+    assert len(readings) == (1 if kept > 1000 else 2)  # the file read once when its lines were kept
+    assert (keeping._kept is None) and len(both[0]) == len(both[1]) > 3
+    for a, b in zip(*both, strict=True):
+        assert a.points.tobytes() == b.points.tobytes() and a.evidence.tobytes() == b.evidence.tobytes()
+        assert (a.pose, a.stamp, a.source) == (b.pose, b.stamp, b.source)
+    assert keeping.notes == again.notes and keeping.skipped_lines == again.skipped_lines == 1
+    assert keeping.unknown == again.unknown == {"WHATEVER"}

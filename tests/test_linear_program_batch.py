@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from occtool.linear_program import LinearProgramResult, solve_lp
-from occtool.linear_program_batch import solve_lps, solve_stacked
+from occtool.linear_program_batch import (
+    SPLIT_PROGRAMMES,
+    WIDE_SHARE,
+    solve_lps,
+    solve_stacked,
+    solved,
+    solved_together,
+)
 from tests.test_linear_program import load_captured
 
 
@@ -72,6 +79,19 @@ def test_stacked_equals_alone_and_list():
         assert_same(listed, stacked)
 
 
+def test_a_batch_split_by_its_rows_answers_as_alone():
+    """A large batch whose wide programmes are many is solved as two batches, each padded to
+    its own most rows: every answer is still solve_lp's, bit for bit."""
+    rng = np.random.default_rng(5)
+    programmes = [fit_like(rng, 600) if rng.random() < 0.25 else fit_like(rng, 40)
+                  for _ in range(SPLIT_PROGRAMMES + 8)]
+    stacked = _stacked(programmes)
+    rows = stacked[3]
+    assert np.count_nonzero(rows > 2 * np.median(rows)) >= WIDE_SHARE * rows.size
+    for batched, programme in zip(solve_stacked(*stacked), programmes, strict=True):
+        assert_same(batched, solve_lp(*programme))
+
+
 def test_unusual_programmes_in_a_batch_are_solve_lps():
     """Whatever leaves the common path (unbounded, artificial bounds at the optimum, a zero
     row, crossed bounds, no rows, other sizes, scalar bounds, Bland's rule, the iteration
@@ -106,3 +126,44 @@ def test_invalid_programmes_raise_as_solve_lp():
     with pytest.raises(ValueError):
         solve_stacked(np.ones((2, 2)), np.ones((3, 2)), np.ones(3), np.array([1, 1]), np.zeros((2, 2)),
                       np.ones((2, 2)))
+
+
+def _stacked(programmes: list) -> tuple:
+    return (np.array([p[0] for p in programmes]), np.concatenate([p[1] for p in programmes]),
+            np.concatenate([p[2] for p in programmes]), np.array([p[1].shape[0] for p in programmes]),
+            np.array([p[3] for p in programmes]), np.array([p[4] for p in programmes]))
+
+
+def _asking(batches: list):
+    """A computation that asks for each of ``batches`` in turn and returns every answer."""
+    answers = []
+    for batch in batches:
+        answers.append((yield batch))
+    return answers
+
+
+def test_solved_together_answers_each_as_alone():
+    """The batches several computations ask for at the same turn are solved together (of
+    the same number of unknowns; other sizes and shapes a batch cannot take apart), and
+    each answer is the one the computation gets alone, bit for bit; an error is raised
+    inside the computation that asked, as alone."""
+    rng = np.random.default_rng(11)
+    plans = [[_stacked([fit_like(rng, int(rng.integers(30, 300))) for _ in range(int(rng.integers(1, 9)))])
+              for _ in range(int(rng.integers(1, 4)))] for _ in range(6)]
+    three = (np.array([[0.0, 0.0, -1.0]]), np.array([[1.0, 1.0, 1.0], [-1.0, 0.0, 0.0]]), np.array([1.0, 0.0]),
+             np.array([2]), np.full((1, 3), -np.inf), np.full((1, 3), np.inf))
+    plans.append([three, plans[0][0]])  # d = 3 beside d = 4
+    bad = (np.ones((2, 2)), np.ones((3, 2)), np.ones(3), np.array([1, 1]), np.zeros((2, 2)), np.ones((2, 2)))
+    plans.append([plans[1][0], bad, plans[2][0]])  # raises ValueError at its second turn
+    outcomes = solved_together([_asking(plan) for plan in plans])
+    for plan, (answers, error, seconds) in zip(plans[:-1], outcomes):
+        assert error is None and seconds >= 0
+        alone = solved(_asking(plan))
+        assert len(answers) == len(alone) == len(plan)
+        for together, single in zip(answers, alone):
+            for a, b in zip(together, single, strict=True):
+                assert_same(a, b)
+    answers, error, _ = outcomes[-1]
+    assert answers is None and isinstance(error, ValueError)
+    with pytest.raises(ValueError):
+        solved(_asking(plans[-1]))

@@ -16,7 +16,8 @@ from occtool.errors import InputError
 from occtool.fuse import load_map
 from occtool.fuse._memory import check_map_memory, estimate_map_memory
 from occtool.fuse._rasterise import raster_shape, rasterise
-from occtool.fuse._world import DOUBTED_TRUST
+from occtool.fuse._tile_queries import cell_walls
+from occtool.fuse._world import DOUBTED_TRUST, NEIGHBOURS, WorldMap
 from occtool.io import read_log
 from occtool.limits import memory_bytes
 from occtool.raster import FREE, SpilledCells
@@ -47,6 +48,33 @@ def test_the_raster_is_the_same_whatever_its_tiles_and_strips():
     may_be_free = observed & world.free_space(centres).reshape(ny, nx)
     assert not (tiled.cells == FREE)[~may_be_free].any()
     assert np.asarray(tiled.explored, dtype=bool)[may_be_free].all()
+
+
+@pytest.mark.parametrize("count", [5, 600])
+def test_the_walls_from_one_query_a_cell_are_those_of_two(count):
+    """The crowded cells' walls from one neighbour query a cell (cell_walls) are the numbers
+    of _wall_values and _wall_distances, bit for bit: short segments on a 5 cm grid (several
+    on one middle), points between them, ties at the last neighbour among them."""
+    import shapely
+
+    rng = np.random.default_rng(count)
+    middles = rng.integers(0, 30, (count, 2)) * 0.05
+    angle = rng.integers(0, 8, count) * (np.pi / 8)
+    half = rng.integers(1, 4, count) * 0.025
+    offset = np.column_stack([np.cos(angle), np.sin(angle)]) * half[:, None]
+    world = WorldMap(middles - offset, middles + offset, rng.integers(0, 3, count) * 0.01,
+                     rng.integers(0, 5, count) / 4, shapely.box(-1, -1, 3, 3), band=(-0.25, 0.2),
+                     facing=rng.integers(-1, 2, count))
+    xy = np.stack(np.meshgrid(np.arange(-10, 70) * 0.025, np.arange(-10, 70) * 0.025), axis=-1).reshape(-1, 2)
+    within = max(world.wall_half_width, world.wall_rim, world.doubted_wall_rim)
+    got = cell_walls(world, xy, within, DOUBTED_TRUST)
+    expected = (*world._wall_values(xy), *world._wall_distances(xy, within, DOUBTED_TRUST))
+    for a, b in zip(got, expected, strict=True):
+        assert a.tobytes() == b.tobytes()
+    assert np.isfinite(got[0]).any() and np.isfinite(got[3]).any() and not np.isfinite(got[2]).all()
+    if count > NEIGHBOURS:
+        distance = world._segment_tree().query(xy, k=NEIGHBOURS + 1)[0]
+        assert (distance[:, -2] == distance[:, -1]).any(), "some points should tie at the last neighbour"
 
 
 @pytest.fixture(scope="module")

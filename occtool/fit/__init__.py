@@ -64,6 +64,7 @@ from occtool.fit._regressor import (
     OccupancyRegressor,
     default_pieces,
     features_digest,
+    fit_together,
     slope_bounds,
 )
 from occtool.fit._sight import contradicted_features
@@ -89,6 +90,7 @@ __all__ = [
     "default_pieces",
     "features_digest",
     "first_obstacle_distance",
+    "fit_together",
     "first_obstacles_in_band",
     "focus_samples",
     "frontier_samples",

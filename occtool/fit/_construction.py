@@ -30,7 +30,7 @@ from occtool.fit._profile import (
     segment_near_runs,
 )
 from occtool.fit._refit import FitSettings, FloatArray, ProgressCallback, _Refitter
-from occtool.linear_program_batch import solve_lps, solve_stacked
+from occtool.linear_program_batch import Steps, solve_lps, solved
 from occtool.robot import Robot
 from occtool.sensor import SAMPLE_KINDS, Samples
 from occtool.tree import MinMaxTree
@@ -222,6 +222,13 @@ class _Fitter(_Refitter):
         return [(a + shift, b + shift) for a, b in segments]
 
     def run(self) -> tuple[MinMaxTree, list[float]]:
+        """The fitted tree and the loss after each sweep."""
+        return solved(self.run_steps())
+
+    def run_steps(self) -> Steps:
+        """:meth:`run` as steps: it yields the centres' programmes stacked and is sent their
+        results (:func:`occtool.linear_program_batch.solved_together` solves those of several
+        fits at once), and returns what :meth:`run` does."""
         p = self.p
         L = self.n_pieces
         # Four pieces a group by default: two centres (low and high part of the body band)
@@ -249,7 +256,7 @@ class _Fitter(_Refitter):
                 centres_per_group[int(order[i])] += 1
 
         programmes = self.centre_programmes(profile, segments, centres_per_group)
-        centres = self.place_centres(programmes)
+        centres = yield from self.place_centres_steps(programmes)
         # Each segment's centres (in programme order: segment by segment), then its two sides.
         segment_of = np.asarray(programmes.segment_of, dtype=np.intp)
         first_centre = np.searchsorted(segment_of, np.arange(len(segments)))
@@ -427,7 +434,12 @@ class _Fitter(_Refitter):
         body floor was needed by about 30 % of the Freiburg campus's centres, and a batch's
         cost is mostly its count of steps, not its width).
         """
-        results = solve_stacked(*programmes.floored())
+        return solved(self.place_centres_steps(programmes))
+
+    def place_centres_steps(self, programmes: _CentreProgrammes) -> Steps:
+        """:meth:`place_centres` as steps (:meth:`run_steps`): the floored programmes are
+        yielded and their results sent back."""
+        results = yield programmes.floored()
         optima: list[FloatArray | None] = []
         for flat, body in zip(results[::2], results[1::2]):
             optima.append(flat.x if flat.status == 0 else body.x if body.status == 0 else None)

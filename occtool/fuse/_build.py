@@ -45,15 +45,16 @@ def _fit_keyframes(params: dict[str, Any], chunk: list[Any]) -> list[Any]:
     for each, the fitted model and its :class:`~occtool.observation.Observation`, or
     :class:`~occtool.executor.Failed`."""
     from occtool.errors import OcctoolError
-    from occtool.fit import OccupancyRegressor
+    from occtool.fit import fit_together
 
     out: list[Any] = []
-    for features in chunk:
-        try:
-            model = OccupancyRegressor(**params).fit(features)
-        except OcctoolError as exc:
-            out.append(Failed(str(exc)))
+    # The fits run in turns, their centres' programmes solved together (the same models).
+    for model, features in zip(fit_together(params, chunk), chunk):
+        if isinstance(model, OcctoolError):
+            out.append(Failed(str(model)))
             continue
+        if isinstance(model, Exception):
+            raise model
         # Every return, far ones too: they mark walls; the map's return_reach keeps them from
         # lending occupancy or clearing cells past the guard's reach.
         out.append((model, observe(model, features)))

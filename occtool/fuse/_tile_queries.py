@@ -140,9 +140,70 @@ def tile_walls(world: Any, x: FloatArray, y: FloatArray, centres: FloatArray, ha
     else:
         xy = np.column_stack([np.broadcast_to(x[crowded, None, :], inner).ravel(),
                               np.broadcast_to(y[crowded, :, None], inner).ravel()])
-        answers = (*world._wall_values(xy), *world._wall_distances(xy, within, doubted_trust))
+        answers = cell_walls(world, xy, within, doubted_trust)
     for whole, answer in zip((every, of_trusted, near_doubted, near_trusted), answers):
         whole[crowded] = answer.reshape(inner)
+    return every, of_trusted, near_doubted, near_trusted
+
+
+def cell_walls(world: Any, xy: FloatArray, within: float, doubted_trust: float) -> Walls:
+    """``(*world._wall_values(xy), *world._wall_distances(xy, within, doubted_trust))``, the
+    same numbers, from one neighbour query a point, not two.
+
+    Each of those asks the tree for the :data:`NEIGHBOURS` nearest middles within its own
+    reach (the ridges' and the bands'), and takes the MAX or MIN over them. Here the tree is
+    asked once for one more neighbour within the larger reach: the nearest within a smaller
+    reach are the first of them that lie within it (the tree's own test, a squared distance
+    below the squared reach), and a MAX or MIN over a set does not depend on its order. Where
+    the last neighbour wanted and the one after it lie equally far within the reach, which of
+    them the tree keeps is its own choice: those points ask both queries as before."""
+    from occtool.fuse._world import _BLOCK
+
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    count = xy.shape[0]
+    every, of_trusted = np.full(count, -np.inf), np.full(count, -np.inf)
+    near_doubted, near_trusted = np.full(count, np.inf), np.full(count, np.inf)
+    if not len(world) or not count:
+        return every, of_trusted, near_doubted, near_trusted
+    tree = world._segment_tree()
+    middle = world._frames[0]
+    ridge_reach = world._reach(max(world.width, world.front_width, world.back_width))
+    band_reach = world._reach(within + 1e-9)
+    reach = max(ridge_reach, band_reach)
+    trusted = world.trust >= world.wall_share
+    counted = world.trust >= doubted_trust
+    wanted = min(NEIGHBOURS, len(world))
+    asked = min(NEIGHBOURS + 1, len(world))
+    tied: list[NDArray[np.intp]] = []
+    for low in range(0, count, _BLOCK):
+        rows = slice(low, low + _BLOCK)
+        block = xy[rows]
+        distance, index = tree.query(block, k=asked, distance_upper_bound=reach)
+        distance = np.asarray(distance).reshape(block.shape[0], asked)
+        index = np.asarray(index).reshape(block.shape[0], asked)
+        if asked > wanted:
+            tie = (distance[:, wanted - 1] == distance[:, wanted]) & np.isfinite(distance[:, wanted])
+            if tie.any():
+                tied.append(low + np.flatnonzero(tie))
+            distance, index = distance[:, :wanted], index[:, :wanted]
+        found = np.isfinite(distance)
+        s = np.where(found, index, 0)
+        dx, dy = block[:, :1] - middle[s, 0], block[:, 1:] - middle[s, 1]
+        squared = dx * dx + dy * dy
+        across, along = world._offsets(block[:, :1], block[:, 1:], s)
+        value = np.where(found & (squared < ridge_reach * ridge_reach), world._ridges(s, across, along), -np.inf)
+        every[rows] = value.max(axis=1)
+        of_trusted[rows] = np.where(trusted[s], value, -np.inf).max(axis=1)
+        gap = np.where(found & (squared < band_reach * band_reach), world._gaps(s, across, along), np.inf)
+        near_doubted[rows] = np.where(counted[s], gap, np.inf).min(axis=1)
+        near_trusted[rows] = np.where(trusted[s], gap, np.inf).min(axis=1)
+    near_doubted[near_doubted > within] = np.inf
+    near_trusted[near_trusted > within] = np.inf
+    if tied:
+        ties = np.concatenate(tied)
+        answers = (*world._wall_values(xy[ties]), *world._wall_distances(xy[ties], within, doubted_trust))
+        for whole, answer in zip((every, of_trusted, near_doubted, near_trusted), answers):
+            whole[ties] = answer
     return every, of_trusted, near_doubted, near_trusted
 
 
@@ -225,4 +286,4 @@ def tile_position_distances(world: Any, x: FloatArray, y: FloatArray, centres: F
     return nearest
 
 
-__all__ = ["POSITION_CANDIDATES", "SMALLEST_SIDE", "influence", "tile_position_distances", "tile_walls"]
+__all__ = ["POSITION_CANDIDATES", "SMALLEST_SIDE", "cell_walls", "influence", "tile_position_distances", "tile_walls"]

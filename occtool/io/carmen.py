@@ -51,6 +51,9 @@ from occtool.io.read_options import ReadOptions, as_read_options, options_as_key
 SENTINEL_MIN_COUNT = 10
 #: ... and within this share of the laser's largest reading.
 CODE_BAND = 0.02
+#: Readings of the lines :class:`CarmenScans` keeps from its first reading, at most (``keep``;
+#: a campus log's 725k readings and their angles take 12 MB).
+KEPT_READINGS = 1 << 22
 LASER_RECORDS = ("FLASER", "RLASER", "ROBOTLASER1")
 OTHER_RECORDS = ("ODOM", "PARAM", "NEFF", "SYNC", "TRUEPOS", "RAWLASER1", "RAWLASER2", "RAWLASER3", "RAWLASER4",
                  "ROBOTLASER2", "GPSNMEA", "GPSGGA", "GPSRMC", "SONAR", "BUMPER", "SCANMARK", "POSITIONLASER")
@@ -147,7 +150,7 @@ def read_carmen(
         For a laser line that does not parse (naming it) or a log without scans.
     """
     settings = as_read_options(options, **keywords)
-    scans = CarmenScans(path, settings)
+    scans = CarmenScans(path, settings, keep=True)
     positions = list(group_scans(scans, source=scans.name, tolerance=settings.position_tolerance,
                                  group_by=settings.group_by, notes=scans.notes))
     return RangeLog(positions=positions, source=scans.name, notes=scans.notes)
@@ -215,12 +218,16 @@ class CarmenScans:
     the first iteration reads every laser line once before yielding anything (keeping only
     each laser's largest readings and their counts), so a line that does not parse is an
     :class:`InputError` before the first scan, wherever it lies. ``notes`` is complete
-    after a full iteration. Parameters are those of :func:`read_carmen`.
+    after a full iteration. Parameters are those of :func:`read_carmen`; ``keep``: the
+    lines that first reading parsed are kept (up to :data:`KEPT_READINGS` readings) for the
+    first iteration, not parsed again (:func:`read_carmen`, which holds the whole log anyway).
     """
 
-    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None,
+    def __init__(self, path: str | os.PathLike[str], options: ReadOptions | None = None, *, keep: bool = False,
                  **keywords: Any) -> None:
         self.settings = as_read_options(options, **keywords)
+        self.keep = keep
+        self._kept: list[Any] | None = None  # the limits' reading's parsed lines (keep)
         self.path = path
         self.name = str(path)
         self.evidence = self.settings.constant_evidence
@@ -269,11 +276,20 @@ class CarmenScans:
             return {kind: (self.settings.no_return_code, []) for kind in LASER_RECORDS}
         if self._limits is None:
             top = {kind: _TopReadings() for kind in LASER_RECORDS}
-            for kind, ranges, *_ in self._lines():
+            kept: list[Any] | None = [] if self.keep else None
+            kept_readings = 0
+            for line in self._lines():
+                kind, ranges = line[0], line[1]
                 finite = ranges[np.isfinite(ranges)]
                 if finite.size:
                     top[kind].add(finite)
+                if kept is not None:
+                    kept_readings += ranges.size
+                    kept = kept if kept_readings <= KEPT_READINGS else None
+                    if kept is not None:
+                        kept.append(line)
             self._limits = {kind: readings.limit() for kind, readings in top.items()}
+            self._kept = kept
         return self._limits
 
     def __iter__(self) -> Iterator[Scan]:
@@ -284,7 +300,9 @@ class CarmenScans:
         no_return = dict.fromkeys(LASER_RECORDS, 0)
         invalid = 0
         reach_low, reach_high = np.inf, -np.inf  # of every free ray
-        for kind, ranges, angles, pose, stamp, line_max, line_number in self._lines():
+        # The lines the limits' reading kept (parsed once: a third of a campus log's reading), once.
+        lines, self._kept = (self._lines() if self._kept is None else iter(self._kept)), None
+        for kind, ranges, angles, pose, stamp, line_max, line_number in lines:
             readings += ranges.size
             limit = limits[kind][0]
             with np.errstate(invalid="ignore"):
