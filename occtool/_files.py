@@ -7,6 +7,7 @@ name, so a gzip file saved as ``scan.csv`` is read as the text it holds. A compr
 file may expand without limit (a few megabytes of zeros become gigabytes); readers
 stop at :data:`occtool.limits.MAX_DECOMPRESSED_BYTES` with an :class:`~occtool.errors.InputError`
 instead of filling the memory. Text is UTF-8; a byte-order mark is skipped.
+:func:`read_at` reads a run's own temporary files (its spilled raster and outlines).
 """
 
 from __future__ import annotations
@@ -24,6 +25,19 @@ from typing import IO
 
 from occtool import limits
 from occtool.errors import InputError
+
+
+def read_at(descriptor: int, into: bytearray, offset: int, what: str) -> bytearray:
+    """Fill ``into`` from the file ``descriptor`` at ``offset`` with ``os.preadv`` (never
+    mapped: what was read is not held in the process), as many reads as it takes (one
+    returns at most about 2 GB); an :class:`OSError` naming ``what`` when the file ends first."""
+    done = 0
+    while done < len(into):
+        got = os.preadv(descriptor, [memoryview(into)[done:]], offset + done)
+        if got <= 0:
+            raise OSError(f"{what} ended {len(into) - done} bytes early")
+        done += got
+    return into
 
 
 @contextlib.contextmanager

@@ -97,6 +97,15 @@ def solve_lps(programmes: Sequence[Programme], *, max_iterations: int | None = N
     return results  # type: ignore[return-value]
 
 
+def _consistent(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: NDArray[np.float64],
+                rows: NDArray[np.intp], lower: NDArray[np.float64], upper: NDArray[np.float64]) -> bool:
+    """Whether stacked programmes have the shapes :func:`solve_stacked` takes: ``B >= 1``
+    programmes of ``d >= 1`` unknowns, each with at least one row."""
+    B, d = cost.shape if cost.ndim == 2 else (0, 0)
+    return (B > 0 and d > 0 and A_ub.shape == (int(rows.sum()), d) and b_ub.shape == (A_ub.shape[0],)
+            and lower.shape == upper.shape == (B, d) and rows.shape == (B,) and bool((rows > 0).all()))
+
+
 def solve_stacked(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: NDArray[np.float64],
                   rows: NDArray[np.intp], lower: NDArray[np.float64], upper: NDArray[np.float64], *,
                   max_iterations: int | None = None) -> list[LinearProgramResult]:
@@ -104,10 +113,9 @@ def solve_stacked(cost: NDArray[np.float64], A_ub: NDArray[np.float64], b_ub: ND
     minimises ``cost[i] @ x`` subject to its ``rows[i]`` (at least one) rows of ``A_ub`` and
     ``b_ub`` (the programmes' rows one after another) and ``lower[i] <= x <= upper[i]``.
     The fit forms its programmes this way, without a small array per programme."""
-    B, d = cost.shape
-    if A_ub.shape != (int(rows.sum()), d) or b_ub.shape != (A_ub.shape[0],) or lower.shape != (B, d) \
-            or upper.shape != (B, d) or rows.shape != (B,) or B == 0 or d == 0 or (rows <= 0).any():
+    if not _consistent(cost, A_ub, b_ub, rows, lower, upper):
         raise ValueError("solve_stacked: inconsistent shapes")
+    d = cost.shape[1]
     limit = 200 + 50 * d if max_iterations is None else max_iterations
     results = _solved_batches(cost, A_ub, b_ub, rows, lower, upper, limit)
     ends = np.cumsum(rows)
@@ -205,12 +213,8 @@ def solved_together(computations: Sequence[Steps]) -> list[tuple[Any, BaseExcept
         turn, asked = asked, {}
         by_size: dict[int, list[int]] = {}
         for i, request in turn.items():
-            cost, A_ub, b_ub, rows, lower, upper = request
-            B, d = cost.shape if cost.ndim == 2 else (0, 0)
-            usual = (B > 0 and d > 0 and A_ub.shape == (int(rows.sum()), d) and b_ub.shape == (A_ub.shape[0],)
-                     and lower.shape == upper.shape == (B, d) and rows.shape == (B,) and bool((rows > 0).all()))
-            if usual:
-                by_size.setdefault(d, []).append(i)
+            if _consistent(*request):
+                by_size.setdefault(request[0].shape[1], []).append(i)
                 continue
             started = time.perf_counter()
             try:

@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from occtool._files import read_at
+
 #: Nav2 pixel values (trinary mode).
 FREE, OCCUPIED, UNKNOWN = 254, 0, 205
 #: Occupancy at and above which a map's raster cell is occupied (map_server's own
@@ -110,13 +112,8 @@ class SpilledCells:
         if high <= low:
             return np.zeros((0, self.shape[1]), dtype=np.uint8)
         cols = self.shape[1]
-        out = bytearray((high - low) * cols)
-        done, start = 0, (self.shape[0] - high) * cols
-        while done < len(out):  # one read returns at most about 2 GB
-            got = os.preadv(self._file.fileno(), [memoryview(out)[done:]], start + done)
-            if got <= 0:
-                raise OSError(f"the raster's temporary file ended {len(out) - done} bytes early")
-            done += got
+        out = read_at(self._file.fileno(), bytearray((high - low) * cols), (self.shape[0] - high) * cols,
+                      "the raster's temporary file")
         return np.frombuffer(out, dtype=np.uint8).reshape(high - low, cols)[::-1].copy()
 
     def __setitem__(self, rows: slice, values: ArrayLike) -> None:

@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool._files import read_at
+
 
 class SpilledOutlines:
     """Polygons kept as WKB (exact float64 coordinates) in an unnamed temporary file in
@@ -26,7 +28,7 @@ class SpilledOutlines:
     ``outlines[index_array]`` an object array of them; :attr:`bounds` is ``(N, 4)``
     (``shapely.bounds``: NaN for an empty polygon). The file has no name
     (``tempfile.TemporaryFile``), so it goes with the object or the process, however the
-    process ends; it is read with ``os.pread``, never mapped.
+    process ends; it is read with ``os.preadv``, never mapped.
     """
 
     def __init__(self, folder: str | os.PathLike[str] | None = None) -> None:
@@ -57,13 +59,7 @@ class SpilledOutlines:
 
     def _read(self, index: int) -> bytes:
         low, high = self._offsets[index], self._offsets[index + 1]
-        data = b""
-        while len(data) < high - low:
-            got = os.pread(self._file.fileno(), high - low - len(data), low + len(data))
-            if not got:
-                raise OSError(f"the outlines' temporary file ended {high - low - len(data)} bytes early")
-            data += got
-        return data
+        return bytes(read_at(self._file.fileno(), bytearray(high - low), low, "the outlines' temporary file"))
 
     def __getitem__(self, index: Any) -> Any:
         import shapely

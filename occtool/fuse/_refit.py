@@ -42,6 +42,11 @@ REGION_REACH = 8.0
 OBSERVED_REACH = 16.0
 
 
+#: Polygons farther apart than this many simplification tolerances are simplified apart
+#: (:func:`_simplified`): a shortcut stays within one tolerance of the line it replaces.
+SIMPLIFY_APART = 4.0
+
+
 def _observed_region(distances: FloatArray, poses: FloatArray, reach: float, simplify: float) -> Any:
     """Union of what each position (``poses`` ``(P, 4)`` x, y, z, yaw) saw: rays up to
     ``distances`` (``(P, bins)``, at most ``reach``) at the bins' centres, simplified by
@@ -55,7 +60,7 @@ def _observed_region(distances: FloatArray, poses: FloatArray, reach: float, sim
 
     views = _Views(distances, poses, reach)
     # Groups whose boxes are farther apart than _simplified's reach are simplified alike apart.
-    return union_in_groups(views, bounds=views.bounds, margin=4.0 * simplify,
+    return union_in_groups(views, bounds=views.bounds, margin=SIMPLIFY_APART * simplify,
                            then=(lambda union: _simplified(union, simplify)) if simplify > 0 else None)
 
 
@@ -107,15 +112,14 @@ def _simplified(region: Any, tolerance: float) -> Any:
     farther than twice that: each group is simplified as it is within the whole, and the
     polygons come back in their order (the same WKB on the campus x1 and x4)."""
     import shapely
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+
+    from occtool.fuse._union import connected_labels
 
     parts = shapely.get_parts(region)
     if parts.size <= 1:
         return shapely.simplify(region, tolerance, preserve_topology=True)
-    near, other = shapely.STRtree(parts).query(parts, predicate="dwithin", distance=4.0 * tolerance)
-    count, group = connected_components(coo_matrix((np.ones(near.size), (near, other)), shape=(parts.size,) * 2),
-                                        directed=False)
+    near, other = shapely.STRtree(parts).query(parts, predicate="dwithin", distance=SIMPLIFY_APART * tolerance)
+    count, group = connected_labels(near, other, parts.size)
     if count == 1:
         return shapely.simplify(region, tolerance, preserve_topology=True)
     out = np.empty(parts.size, dtype=object)

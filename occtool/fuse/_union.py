@@ -17,14 +17,24 @@ import numpy as np
 from numpy.typing import NDArray
 
 
+def connected_labels(near: NDArray[np.intp], other: NDArray[np.intp], count: int) -> tuple[int, NDArray[np.intp]]:
+    """The groups of ``count`` items linked, directly or through others, by the pairs
+    ``near[k]``-``other[k]`` (an STRtree query's answer): how many, and each item's group."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    groups, label = connected_components(
+        coo_matrix((np.ones(near.size, dtype=bool), (near.astype(np.int32), other.astype(np.int32))),
+                   shape=(count, count)), directed=False)
+    return int(groups), label
+
+
 def overlapping_groups(bounds: NDArray[np.float64], margin: float = 0.0) -> list[NDArray[np.intp]]:
     """Indices of geometries in groups, from their bounding boxes ``(N, 4)`` (``shapely.bounds``:
     NaN for an empty geometry): two whose boxes, grown by ``margin``, overlap are in one
     group, and so, transitively, are their groups. The groups come in the order of their
     first member, each member in the order given; empty geometries are in no group."""
     import shapely
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
 
     bounds = np.asarray(bounds, dtype=np.float64).reshape(-1, 4)
     present = np.flatnonzero(~np.isnan(bounds).any(axis=1))
@@ -33,9 +43,7 @@ def overlapping_groups(bounds: NDArray[np.float64], margin: float = 0.0) -> list
     bounds = bounds[present]
     boxes = shapely.box(bounds[:, 0] - margin, bounds[:, 1] - margin, bounds[:, 2] + margin, bounds[:, 3] + margin)
     near, other = shapely.STRtree(boxes).query(boxes)
-    count, label = connected_components(
-        coo_matrix((np.ones(near.size, dtype=np.int8), (near.astype(np.int32), other.astype(np.int32))),
-                   shape=(present.size,) * 2), directed=False)
+    count, label = connected_labels(near, other, present.size)
     del near, other
     # Groups by their first member: the order the geometries came in.
     first = np.full(count, present.size, dtype=np.intp)
@@ -81,4 +89,4 @@ def union_in_groups(geometries: Any, *, bounds: NDArray[np.float64] | None = Non
     return shapely.multipolygons(np.concatenate(parts)) if parts else shapely.MultiPolygon()
 
 
-__all__ = ["overlapping_groups", "union_in_groups"]
+__all__ = ["connected_labels", "overlapping_groups", "union_in_groups"]
