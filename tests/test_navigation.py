@@ -8,19 +8,24 @@ import warnings
 import numpy as np
 import pytest
 import shapely
-from hypothesis import example, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Point, Polygon
+from shapely.geometry.polygon import orient
 
 from occtool.errors import InputError
 from occtool.navigation import (
+    MIN_CIRCLE_VERTICES,
+    TIP_REACH,
     NavigationWarning,
     add_slices,
+    boundary_points,
     default_heights,
     farthest_from_slices,
     navigation_map,
     pan_angles,
     ray_boundary_distances,
+    spike_tips,
     visible_from_origin,
 )
 from occtool.robot import Robot
@@ -278,6 +283,64 @@ def test_a_narrow_sector_gets_a_point_even_when_narrower_than_the_spacing():
     assert abs(angles_of(nav.exploration_points)[0]) < 0.02
 
 
+# The obstacle rays of a polygon with no exploration sector at max range 1.5 and spacing
+# 0.25: 38 of them, at the middles of 38 equal angles from 0.
+RAYS = math.ceil(2 * math.pi * 1.5 / 0.25)
+RAY_STEP = 2 * math.pi / RAYS
+
+
+def spiked_disc(disc: float, tip: float, angle: float, width: float = 0.01) -> Polygon:
+    """A disc of radius ``disc`` round the origin and a wedge ``width`` wide at the origin
+    narrowing to a point ``tip`` away at ``angle``, counter-clockwise."""
+    wedge = Polygon([(0.0, -width / 2), (tip, 0.0), (0.0, width / 2)])
+    wedge = shapely.affinity.rotate(wedge, angle, origin=(0, 0), use_radians=True)
+    return orient(Point(0, 0).buffer(disc, quad_segs=64).union(wedge), sign=1.0)
+
+
+@pytest.mark.parametrize("between", [0, 7, 19, 30])
+def test_the_tip_of_a_spike_between_the_rays_is_an_obstacle_point(between):
+    # The rest of the boundary lies inside the robot's disc and every ray misses the wedge
+    # (exactly between two of them, 0.017 rad wide where it leaves the disc): without its
+    # tip the map would say nothing of the obstacle 0.6 m away.
+    angle = between * RAY_STEP
+    obstacles, exploration = boundary_points(spiked_disc(0.2, 0.6, angle), 1.5, 0.25, min_distance=0.25)
+    np.testing.assert_allclose(obstacles, [[0.6 * math.cos(angle), 0.6 * math.sin(angle)]], atol=1e-12)
+    assert len(exploration) == 0
+
+
+@pytest.mark.parametrize("between", [1, 19, 37])
+def test_a_tip_joins_the_ray_points_in_the_order_of_their_angles(between):
+    angle = between * RAY_STEP
+    polygon = spiked_disc(0.5, 1.2, angle)
+    obstacles, _ = boundary_points(polygon, 1.5, 0.25, min_distance=0.25)
+    # The 38 rays meet the disc; the tip, far from all of them, comes after the rays before it.
+    assert len(obstacles) == RAYS + 1
+    np.testing.assert_allclose(obstacles[between], [1.2 * math.cos(angle), 1.2 * math.sin(angle)], atol=1e-12)
+    rays = np.delete(obstacles, between, axis=0)
+    np.testing.assert_allclose(np.hypot(*rays.T), 0.5, rtol=1e-3)
+    np.testing.assert_allclose(np.mod(angles_of(rays), 2 * math.pi), (np.arange(RAYS) + 0.5) * RAY_STEP, atol=1e-12)
+
+
+def test_a_wall_the_rays_sample_gets_no_point_at_its_rounding_tips():
+    # A round wall whose vertices rounding left a hair apart: half of them are farther than
+    # both neighbours, and all lie within half a spacing of the rays' points.
+    rng = np.random.default_rng(0)
+    theta = 2 * math.pi * np.arange(720) / 720
+    radius = 0.75 * (1 + 1e-12 * rng.standard_normal(720))
+    polygon = Polygon(np.column_stack([radius * np.cos(theta), radius * np.sin(theta)]))
+    assert len(spike_tips(polygon, 1.5, min_distance=0.25)) > 100
+    obstacles, _ = boundary_points(polygon, 1.5, 0.25, min_distance=0.25)
+    assert len(obstacles) == RAYS
+
+
+@pytest.mark.parametrize(("tip", "expected"), [(0.6, 1), (0.24, 0), (1.7, 0)])
+def test_spike_tips_lie_between_the_robot_and_the_circle(tip, expected):
+    # Inside the robot's disc a tip tells a planner nothing; on the circle (the wedge cut by
+    # it) the free space goes on out of range: an exploration point's, not an obstacle's.
+    polygon = spiked_disc(0.2, tip, 0.0).intersection(Point(0, 0).buffer(1.5, quad_segs=MIN_CIRCLE_VERTICES // 4))
+    assert len(spike_tips(orient(polygon, sign=1.0), 1.5, min_distance=0.25)) == expected
+
+
 def test_free_space_near_the_bound_is_not_lost_to_the_shrink():
     # A wall just beyond max range + radius leaves the whole disk; one just inside does not.
     free = navigation_map(round_room(1.5 + 0.25 + 1e-3), robot=ROBOT, max_range=1.5)
@@ -499,6 +562,41 @@ def test_the_polygon_lies_in_the_max_range_disk_around_the_free_robot(scene, max
     np.testing.assert_allclose(np.hypot(*nav.exploration_points.T), max_range)
 
 
+@st.composite
+def star_polygons(draw):
+    """A polygon through random distances at random increasing angles round the origin (no
+    gap of pi or more, so it holds the origin), clipped to the 1.5 m disk as maps are."""
+    count = draw(st.integers(3, 40))
+    radii = np.asarray(draw(st.lists(st.floats(0.05, 2.0), min_size=count, max_size=count)))
+    gaps = np.asarray(draw(st.lists(st.floats(0.05, 1.0), min_size=count, max_size=count)))
+    angles = 2 * np.pi * np.cumsum(gaps) / gaps.sum()
+    assume(gaps.max() / gaps.sum() < 0.45)
+    star = Polygon(np.column_stack([radii * np.cos(angles), radii * np.sin(angles)]))
+    clipped = star.intersection(Point(0, 0).buffer(1.5, quad_segs=MIN_CIRCLE_VERTICES // 4))
+    return orient(clipped if clipped.geom_type == "Polygon" else Polygon(), sign=1.0)
+
+
+@given(polygon=star_polygons(), spacing=st.floats(0.05, 0.5), min_distance=st.floats(0.0, 0.4))
+def test_every_spike_tip_beyond_the_robot_has_an_obstacle_point_near_it(polygon, spacing, min_distance):
+    assume(not polygon.is_empty)
+    obstacles, exploration = boundary_points(polygon, 1.5, spacing, min_distance=min_distance)
+    # The tips, found vertex by vertex: farther than the nearest distinct vertex either side.
+    ring = np.asarray(polygon.exterior.coords)[:-1]
+    ring = ring[np.any(ring != np.roll(ring, 1, axis=0), axis=1)]
+    distance = np.hypot(*ring.T)
+    for i, vertex in enumerate(ring):
+        tip = distance[i] > max(distance[i - 1], distance[(i + 1) % len(ring)])
+        if tip and min_distance <= distance[i] < 1.5 * (1 - 1e-4):
+            assert np.hypot(*(obstacles - vertex).T).min() < TIP_REACH * spacing
+    if len(obstacles):
+        assert shapely.distance(polygon.exterior, shapely.points(obstacles)).max() < 1e-9
+        assert np.hypot(*obstacles.T).min() >= min_distance
+    # In the order of their angles: once round the circle, counter-clockwise.
+    if len(obstacles) > 1:
+        theta = angles_of(obstacles)
+        assert np.mod(np.roll(theta, -1) - theta, 2 * np.pi).sum() <= 2 * np.pi + 1e-9
+
+
 @given(scene=scenes, radius=st.floats(0.0, 0.3))
 def test_a_robot_with_room_around_it_is_free(scene, radius):
     heights = default_heights(ROBOT)
@@ -529,6 +627,10 @@ def test_a_larger_robot_never_gets_more_room(scene, small, extra):
 # Found by a fresh run: a boundary 0.247-0.256 m from the robot, a few millimetres outside its
 # disc, where the points spaced a radius apart all fall inside it and are dropped.
 @example(scene=star_room(np.asarray([0.515625, 0.3125, 0.3125]), 0.0), steps=0)
+# Found by a fresh run: a navigation polygon that is a 1.4 cm sliver reaching 0.63 m from the
+# robot, the rest of its boundary inside the robot's disc: every evenly spaced ray missed the
+# sliver, so the map had no obstacle point at all (now its tip carries one).
+@example(scene=star_room(np.asarray([1.0, 0.3125, 1.0, 0.3125, 0.3125, 1.0, 0.3125]), 0.0), steps=0)
 def test_rotating_the_model_rotates_the_polygon(scene, steps):
     n_angles = 90
     yaw = 2 * np.pi * steps / n_angles
@@ -542,11 +644,11 @@ def test_rotating_the_model_rotates_the_polygon(scene, steps):
         turned = navigation_map(rotated, robot=ROBOT, n_angles=n_angles)
     expected = shapely.affinity.rotate(base.polygon, yaw, origin=(0, 0), use_radians=True)
     assert expected.symmetric_difference(turned.polygon).area <= 1e-6 * max(base.polygon.area, 1e-3)
-    # Every map has points, unless its boundary lies within the robot's own disc (up to 1 cm:
-    # points are spaced along the boundary and those inside the disc are dropped), where
-    # obstacle points would lie inside the robot.
+    # Every map has points, unless its boundary lies within the robot's own disc, where
+    # obstacle points would lie inside the robot: its farthest vertex beyond the disc is a
+    # spike's tip if no ray's point lies near it.
     inside_disc = base.polygon.is_empty or (
-        shapely.Point(0, 0).hausdorff_distance(base.polygon) < ROBOT.radius + 0.01)
+        shapely.Point(0, 0).hausdorff_distance(base.polygon) < ROBOT.radius)
     assert len(turned.exploration_points) + len(turned.obstacle_points) > 0 or inside_disc
 
 
@@ -775,3 +877,20 @@ def test_a_robot_in_collision_stays_in_collision_whatever_the_snap():
 def test_a_snap_out_of_range_is_refused(snap):
     with pytest.raises(InputError, match="return_snap"):
         navigation_map(round_room(3.0), robot=ROBOT, return_snap=snap)
+
+
+def test_the_index_and_every_pair_mark_the_same_spike_tips(monkeypatch):
+    import occtool.navigation._points
+
+    regions = [random_region(seed) for seed in range(40)]
+    regions = [orient(region.intersection(Point(0, 0).buffer(1.5, quad_segs=MIN_CIRCLE_VERTICES // 4)), sign=1.0)
+               for region in regions if not region.is_empty]
+    regions = [region for region in regions if region.geom_type == "Polygon"]
+    pairs = [boundary_points(region, 1.5, 0.1, min_distance=0.25)[0] for region in regions]
+    # Some tips were marked by a ray's point and some were not, or the test shows nothing.
+    tips = [spike_tips(region, 1.5, min_distance=0.25) for region in regions]
+    added = sum(int((tip[:, None] == points[None]).all(axis=2).any(axis=1).sum()) for tip, points in zip(tips, pairs))
+    monkeypatch.setattr(occtool.navigation._points, "BRUTE_FORCE_PAIRS", 0)
+    for region, expected in zip(regions, pairs):
+        np.testing.assert_array_equal(boundary_points(region, 1.5, 0.1, min_distance=0.25)[0], expected)
+    assert 0 < added < sum(len(tip) for tip in tips)

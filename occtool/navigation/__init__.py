@@ -53,7 +53,7 @@ from occtool.navigation._heights import (
     farthest_from_slices,
     height_lipschitz,
 )
-from occtool.navigation._points import MIN_SECTOR_LENGTH, boundary_points, circle_sectors
+from occtool.navigation._points import MIN_SECTOR_LENGTH, TIP_REACH, boundary_points, circle_sectors, spike_tips
 from occtool.navigation._raycast import ray_boundary_distances
 from occtool.navigation._result import NavigationMap, NavigationWarning, Slice
 from occtool.navigation._visibility import visible_from_origin
@@ -70,6 +70,7 @@ __all__ = [
     "MIN_CIRCLE_VERTICES",
     "MIN_SECTOR_LENGTH",
     "SHRINK_QUAD_SEGMENTS",
+    "TIP_REACH",
     "FreeBounds",
     "InverseRange",
     "NavigationMap",
@@ -85,5 +86,6 @@ __all__ = [
     "navigation_map",
     "pan_angles",
     "ray_boundary_distances",
+    "spike_tips",
     "visible_from_origin",
 ]
