@@ -207,6 +207,8 @@ def boundary_points(
     if len(tips) == 0:
         return obstacles.reshape(-1, 2), exploration
     # In the rays' order: counter-clockwise from where the first obstacle sector starts.
+    # (No blocked sector wide enough for a ray: the tips alone, from angle 0.)
+    start = blocked[0][0] if blocked else 0.0
     angles = np.concatenate([obstacle_angles, np.arctan2(tips[:, 1], tips[:, 0])])
-    merged = np.argsort((angles - blocked[0][0]) % (2.0 * np.pi), kind="stable")
+    merged = np.argsort((angles - start) % (2.0 * np.pi), kind="stable")
     return np.concatenate([obstacles, tips])[merged], exploration
