@@ -16,6 +16,7 @@ from shapely.geometry.polygon import orient
 from occtool.errors import InputError
 from occtool.navigation import (
     MIN_CIRCLE_VERTICES,
+    SHRINK_QUAD_SEGMENTS,
     TIP_REACH,
     NavigationWarning,
     add_slices,
@@ -627,6 +628,8 @@ def test_a_larger_robot_never_gets_more_room(scene, small, extra):
 # Found by a fresh run: a boundary 0.247-0.256 m from the robot, a few millimetres outside its
 # disc, where the points spaced a radius apart all fall inside it and are dropped.
 @example(scene=star_room(np.asarray([0.515625, 0.3125, 0.3125]), 0.0), steps=0)
+# Found by a long run: a room the robot just fits (a 1.2 mm^2 polygon), see the sag below.
+@example(scene=star_room(np.asarray([1.0, 0.5, 0.5, 1.0, 0.5]), 0.3), steps=11)
 # Found by a fresh run: a navigation polygon that is a 1.4 cm sliver reaching 0.63 m from the
 # robot, the rest of its boundary inside the robot's disc: every evenly spaced ray missed the
 # sliver, so the map had no obstacle point at all (now its tip carries one).
@@ -643,7 +646,12 @@ def test_rotating_the_model_rotates_the_polygon(scene, steps):
         base = navigation_map(scene, robot=ROBOT, n_angles=n_angles)
         turned = navigation_map(rotated, robot=ROBOT, n_angles=n_angles)
     expected = shapely.affinity.rotate(base.polygon, yaw, origin=(0, 0), use_radians=True)
-    assert expected.symmetric_difference(turned.polygon).area <= 1e-6 * max(base.polygon.area, 1e-3)
+    # GEOS draws the shrink's arcs with chords fixed to the axes, not turned with the room: a
+    # polygon of a few millimetres (the robot just fits) may then differ by more than the
+    # area tolerance, but never by more than the chords' sag.
+    sag = ROBOT.radius * (1.0 - np.cos(np.pi / (4 * SHRINK_QUAD_SEGMENTS)))
+    assert (expected.symmetric_difference(turned.polygon).area <= 1e-6 * max(base.polygon.area, 1e-3)
+            or expected.hausdorff_distance(turned.polygon) <= sag)
     # Every map has points, unless its boundary lies within the robot's own disc, where
     # obstacle points would lie inside the robot: its farthest vertex beyond the disc is a
     # spike's tip if no ray's point lies near it.
