@@ -382,3 +382,19 @@ def test_a_lean_run_keeps_its_large_raster_in_a_file_and_writes_the_same_map(roo
     for name in ("map.pgm", "world.occmap", "navigation.geojson", "frontiers.geojson"):
         assert (tmp_path / "held" / name).read_bytes() == (tmp_path / "spilled" / name).read_bytes()
     assert sorted(path.name for path in tmp_path.iterdir()) == ["held", "spilled"]
+
+
+def test_a_region_cut_along_its_own_edge_keeps_only_its_polygons():
+    """A region whose boundary runs along the cut's edge leaves lines there (a collection);
+    the cut keeps its polygons, which answer as the region does inside the rectangle."""
+    import shapely
+
+    from occtool.fuse._rasterise import _cut
+
+    region = shapely.MultiPolygon([shapely.box(0, 0, 2, 2), shapely.box(3, 1, 5, 2)])
+    rectangle = (-1.0, -1.0, 6.0, 1.0)
+    assert shapely.intersection(region, shapely.box(*rectangle)).geom_type == "GeometryCollection"
+    piece = _cut(region, rectangle)
+    assert piece.geom_type == "MultiPolygon" and shapely.equals(piece, shapely.box(0, 0, 2, 1))
+    x, y = np.meshgrid(np.linspace(-0.9, 5.9, 35), np.linspace(-0.9, 0.9, 10))
+    assert np.array_equal(shapely.contains_xy(piece, x, y), shapely.contains_xy(region, x, y))

@@ -292,6 +292,13 @@ def _cut(region: Any, rectangle: tuple[float, float, float, float]) -> Any:
     if region.is_empty:
         return region
     part = shapely.intersection(region, shapely.box(*rectangle))
+    if shapely.get_type_id(part) == 7:
+        # A collection: the polygons, and lines or points where the region's boundary runs
+        # along the rectangle's, which no box or point asked lies near. Cut again, GEOS took
+        # 60 ms a block for what takes 0.4 ms as polygons (campus x10's free region, 3.2 s).
+        pieces = shapely.get_parts(part)
+        pieces = shapely.get_parts(pieces[np.isin(shapely.get_type_id(pieces), (3, 6))])
+        part = shapely.multipolygons(pieces)
     shapely.prepare(part)
     return part
 
