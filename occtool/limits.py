@@ -100,3 +100,27 @@ def release_free_memory() -> None:
         ctypes.CDLL(None).malloc_trim(0)
     except (AttributeError, OSError):  # a C library without malloc_trim (musl)
         pass
+
+
+class collector_paused:
+    """A block in which Python's cyclic garbage collector does not run (``gc.disable``), for
+    work that makes many container objects and frees them by their reference counts alone:
+    a list a vertex of a polygon turned into GeoJSON. Each of the collector's full passes
+    walks every tracked object of the process, and such work sets off more of them the more
+    it makes: writing campus x10's navigation.geojson ran 23 of them over the run's ~500,000
+    objects (8 s of CPU), the campus's 4 over ~90,000 (0.26 s). The collector is left as it
+    was found (a block inside a paused one does not start it again)."""
+
+    def __enter__(self) -> collector_paused:
+        import gc
+
+        self._was = gc.isenabled()
+        gc.disable()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import gc
+
+        if self._was:
+            gc.enable()
+

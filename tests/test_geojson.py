@@ -237,3 +237,40 @@ def test_a_negative_simplify_tolerance_is_one_line():
     run = small_run_map()
     with pytest.raises(InputError, match="simplify tolerance must be a number of metres >= 0, got -1"):
         run_map_layers(run.navigation, run.obstacles, run.frontiers, simplify=-1.0)
+
+
+def test_a_collection_is_dumped_without_the_cyclic_collector_and_leaves_it_as_it_was():
+    """Each feature of a dumped collection is made and encoded with the cyclic collector
+    paused (its lists go with their reference counts); the collector is left as found, a
+    paused block inside another does not start it, and the text is json.dump's."""
+    import gc
+    import io
+    import json
+
+    from occtool.formats.geojson import dump_collection
+    from occtool.limits import collector_paused
+
+    seen = []
+
+    def features():
+        for k in range(3):
+            seen.append(gc.isenabled())
+            yield {"type": "Feature", "properties": {"k": k}, "geometry": {"type": "Point", "coordinates": [k, 0.5]}}
+
+    assert gc.isenabled()
+    written, expected = io.StringIO(), io.StringIO()
+    dump_collection({"type": "FeatureCollection", "features": features()}, written)
+    json.dump({"type": "FeatureCollection", "features": list(features())}, expected, separators=(",", ":"))
+    assert written.getvalue() == expected.getvalue() and seen[:3] == [False] * 3 and gc.isenabled()
+    with collector_paused():
+        with collector_paused():
+            assert not gc.isenabled()
+        assert not gc.isenabled()
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with collector_paused():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

@@ -50,6 +50,26 @@ def test_the_raster_is_the_same_whatever_its_tiles_and_strips():
     assert np.asarray(tiled.explored, dtype=bool)[may_be_free].all()
 
 
+@pytest.mark.parametrize(("columns", "rows"), [(16, 1), (48, 100), (64, 10_000), (128, 16)])
+def test_the_raster_is_the_same_whatever_its_regions_blocks(monkeypatch, columns, rows):
+    """Bands of rows grouped to share the regions cut once (BLOCK_ROWS), and the regions
+    cut again into blocks of columns (BLOCK_COLUMNS) that their tiles are sorted against
+    and their cells tested against: the raster of one tile holding the whole map."""
+    from occtool.fuse import _rasterise
+
+    world = load_map(FIXTURES / "maps" / "intel.occmap")
+    origin, nx, ny = raster_shape(world, 0.1)
+    within = max(world.wall_half_width, world.wall_rim, world.doubted_wall_rim)
+    whole = rasterise(world, 0.1, nx, ny, origin, within, DOUBTED_TRUST, tile=max(nx, ny), strip_cells=nx * ny)
+    monkeypatch.setattr(_rasterise, "BLOCK_COLUMNS", columns)
+    monkeypatch.setattr(_rasterise, "BLOCK_ROWS", rows)
+    blocks = _rasterise._band_blocks(world, _rasterise._centres(origin[0], 0.1, nx), 0.1, origin[1], 0, ny, 16)
+    assert blocks[0].count == -(-nx // max(16, columns // 16 * 16)) > 1
+    tiled = rasterise(world, 0.1, nx, ny, origin, within, DOUBTED_TRUST, strip_cells=nx * 16)
+    assert np.array_equal(tiled.cells, whole.cells) and np.array_equal(tiled.probability, whole.probability)
+    assert np.array_equal(tiled.explored, whole.explored)
+
+
 @pytest.mark.parametrize("count", [5, 600])
 def test_the_walls_from_one_query_a_cell_are_those_of_two(count):
     """The crowded cells' walls from one neighbour query a cell (cell_walls) are the numbers
@@ -242,6 +262,26 @@ def test_the_mcap_grid_of_a_large_raster_is_drawn_in_blocks():
     assert values[0, 0] == 100 and values[1, 2] == 0 and values[2, 3] == 100 and values[0, 1] == -1
 
 
+@settings(max_examples=60, deadline=None)
+@given(rows=st.integers(1, 30), cols=st.integers(1, 30), seed=st.integers(0, 2**16), cap=st.integers(1, 300))
+def test_the_mcap_grid_blocks_are_the_block_rule_cell_by_cell(rows, cols, seed, cap):
+    """The grid's k x k blocks (a maximum of ranks by columns, then rows) are what each block's
+    cells say: 100 when one is occupied, else 0 when one is free, else -1, for any shape
+    (blocks cut at the raster's edges) and strip of rows."""
+    from occtool.formats.foxglove import grid_values
+    from occtool.raster import OCCUPIED, UNKNOWN, Raster
+
+    rng = np.random.default_rng(seed)
+    cells = rng.choice(np.array([FREE, OCCUPIED, UNKNOWN, 17], dtype=np.uint8), size=(rows, cols),
+                       p=[0.2, 0.05, 0.7, 0.05])
+    values, k = grid_values(Raster(cells, 0.1, (0.0, 0.0), None, np.zeros(cells.shape, dtype=bool)), max_cells=cap)
+    assert values.shape == (-(-rows // k), -(-cols // k)) and values.dtype == np.int8
+    for i in range(values.shape[0]):
+        for j in range(values.shape[1]):
+            block = cells[i * k:(i + 1) * k, j * k:(j + 1) * k]
+            assert values[i, j] == (100 if (block == OCCUPIED).any() else 0 if (block == FREE).any() else -1)
+
+
 def test_a_raster_larger_than_the_old_cell_cap_is_estimated_not_refused(room_log):
     """The cap is the memory estimate: past the MCAP grid's cap a trinary raster costs two
     bytes a cell more (its cells and explored flags), not a refusal for its cell count."""
@@ -342,3 +382,19 @@ def test_a_lean_run_keeps_its_large_raster_in_a_file_and_writes_the_same_map(roo
     for name in ("map.pgm", "world.occmap", "navigation.geojson", "frontiers.geojson"):
         assert (tmp_path / "held" / name).read_bytes() == (tmp_path / "spilled" / name).read_bytes()
     assert sorted(path.name for path in tmp_path.iterdir()) == ["held", "spilled"]
+
+
+def test_a_region_cut_along_its_own_edge_keeps_only_its_polygons():
+    """A region whose boundary runs along the cut's edge leaves lines there (a collection);
+    the cut keeps its polygons, which answer as the region does inside the rectangle."""
+    import shapely
+
+    from occtool.fuse._rasterise import _cut
+
+    region = shapely.MultiPolygon([shapely.box(0, 0, 2, 2), shapely.box(3, 1, 5, 2)])
+    rectangle = (-1.0, -1.0, 6.0, 1.0)
+    assert shapely.intersection(region, shapely.box(*rectangle)).geom_type == "GeometryCollection"
+    piece = _cut(region, rectangle)
+    assert piece.geom_type == "MultiPolygon" and shapely.equals(piece, shapely.box(0, 0, 2, 1))
+    x, y = np.meshgrid(np.linspace(-0.9, 5.9, 35), np.linspace(-0.9, 0.9, 10))
+    assert np.array_equal(shapely.contains_xy(piece, x, y), shapely.contains_xy(region, x, y))

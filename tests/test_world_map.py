@@ -622,3 +622,47 @@ def test_a_real_runs_map_has_frontiers_on_the_boundary_of_what_it_observed(name)
     for d_row, d_col in ((1, 0), (-1, 0), (0, 1), (0, -1)):
         beside |= unexplored[np.clip(row + d_row, 0, raster.shape[0] - 1), np.clip(col + d_col, 0, raster.shape[1] - 1)]
     assert beside.all()
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 2**16), shrink=st.floats(0.0, 3.0), grow=st.floats(0.0, 40.0))
+def test_a_region_rounded_alone_is_the_region_of_the_map_rounded(seed, shrink, grow):
+    """quantise_region(region, *extent(...)) is the region WorldMap(...).quantised() keeps,
+    to the bit: the free region of build_world_map, rounded without a second map's segments.
+    The walls and positions may reach past the region (the grid's origin is theirs)."""
+    from occtool.formats.occmap import quantise_region
+    from occtool.fuse._world import extent
+
+    world = load_map(FIXTURES / "maps" / "intel.occmap")
+    rng = np.random.default_rng(seed)
+    region = shapely.buffer(world.region, -shrink)
+    positions = rng.uniform(-20.0, 20.0, (7, 2)) * (1.0 + grow / 20.0)
+    start = world.start + rng.normal(0.0, 1e-3, world.start.shape)
+    mapped = WorldMap(start, world.end, world.thickness, world.trust, region, band=world.band,
+                      positions=positions, facing=world.facing).quantised()
+    alone = quantise_region(region, *extent(start, world.end, positions, region))
+    assert shapely.to_wkb(alone) == shapely.to_wkb(mapped.region)
+
+
+@settings(max_examples=40, deadline=None)
+@given(positions=st.integers(1, 40), bins=st.sampled_from([8, 24, 720]), coarse=st.sampled_from([4, 8, 120]),
+       seed=st.integers(0, 2**16))
+def test_stored_ranges_read_as_the_float64_ranges_they_are_made_of(positions, bins, coarse, seed):
+    """StoredRanges (uint16 returns and reaches) read rows, slices, index arrays, elements and
+    masks as position_ranges' float64 array, bit for bit."""
+    from occtool.fuse._sightings import StoredRanges, _ranges
+    from occtool.observation import NO_OBSTACLE
+
+    rng = np.random.default_rng(seed)
+    returns = rng.integers(0, 60000, (positions, bins)).astype(np.uint16)
+    returns[rng.random((positions, bins)) < 0.4] = NO_OBSTACLE
+    reaches = rng.integers(0, 5000, (positions, 2, coarse)).astype(np.uint16)
+    whole, stored = _ranges(returns, reaches), StoredRanges(returns, reaches)
+    assert stored.shape == whole.shape and len(stored) == positions
+    assert np.asarray(stored).tobytes() == whole.tobytes()
+    k = int(rng.integers(-positions, positions))
+    low, high = sorted(rng.integers(0, positions + 1, 2).tolist())
+    rows = rng.integers(0, positions, 9)
+    cols = rng.integers(0, bins, 9)
+    for key in (k, slice(low, high), rows, (rows, cols), (k, cols), whole > 3.0, (slice(low, high), 0)):
+        assert np.asarray(stored[key]).tobytes() == whole[key].tobytes(), key

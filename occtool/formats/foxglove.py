@@ -55,12 +55,36 @@ def grid_values(raster: Any, max_cells: int = MAX_GRID_CELLS) -> tuple[Any, int]
             strip[cells == FREE] = 0
             strip[cells == OCCUPIED] = 100
             continue
-        pad = ((0, -cells.shape[0] % k), (0, -cols % k))
-        blocks = np.pad(cells, pad, constant_values=0xFF).reshape(-1, k, out_cols, k)
-        strip = values[low // k:low // k + blocks.shape[0]]
-        strip[(blocks == FREE).any(axis=(1, 3))] = 0
-        strip[(blocks == OCCUPIED).any(axis=(1, 3))] = 100
+        blocks = _block_ranks(cells, k, out_cols)
+        values[low // k:low // k + blocks.shape[0]] = _RANK_VALUES[blocks]
     return values, k
+
+
+#: Each rank of a block's cells (0 neither free nor occupied, 1 free, 2 occupied: the highest
+#: counts) as its grid value.
+_RANK_VALUES = np.array([-1, 0, 100], dtype=np.int8)
+
+
+def _block_ranks(cells: Any, k: int, out_cols: int) -> Any:
+    """The highest rank (:data:`_RANK_VALUES`) of each k x k block of ``cells`` (blocks cut at
+    the edges: what lies past them ranks 0), by a maximum over each of the k columns of a
+    block and then each of its k rows: an eighth of the time of comparing whole blocks
+    (the campus x2's 63 M cells, 0.8 s)."""
+    rows, cols = cells.shape
+    ranks = np.zeros((-(-rows // k) * k, out_cols * k), dtype=np.uint8)
+    # By comparisons, not a table lookup: np.take's indices become an 8-byte array a cell.
+    inner = ranks[:rows, :cols]
+    inner[...] = cells == FREE
+    inner[cells == OCCUPIED] = 2
+    del inner
+    across = ranks[:, 0::k].copy()
+    for j in range(1, k):
+        np.maximum(across, ranks[:, j::k], out=across)
+    del ranks
+    blocks = across[0::k].copy()
+    for j in range(1, k):
+        np.maximum(blocks, across[j::k], out=blocks)
+    return blocks
 
 
 def _imports() -> Any:

@@ -33,6 +33,7 @@ from occtool._files import atomic_write
 from occtool._json import read_text
 from occtool.errors import InputError
 from occtool.features import Pose
+from occtool.limits import collector_paused
 from occtool.navigation import NavigationMap, Slice
 
 if TYPE_CHECKING:
@@ -401,6 +402,9 @@ def run_map_layers(navigation: BaseGeometry | None, obstacles: ArrayLike, fronti
             for layer, kind in RUN_MAP_LAYERS.items()}
 
 
+#: The end of a collection's features (:func:`dump_collection`).
+_END = object()
+
 #: Points turned into Python lists at a time by a lazy layer (:func:`run_map_layers`).
 _POINTS_AT_ONCE = 1 << 16
 
@@ -417,8 +421,18 @@ def dump_collection(collection: Mapping[str, Any], handle: Any) -> None:
             handle.write(json.dumps(value, separators=(",", ":")))
             continue
         handle.write("[")
-        for k, feature in enumerate(value):
-            handle.write(("," if k else "") + json.dumps(feature, separators=(",", ":")))
+        features, separator = iter(value), ""
+        while True:
+            # A feature made and encoded without the cyclic collector: its lists (one a
+            # vertex) go with their reference counts (occtool.limits.collector_paused).
+            with collector_paused():
+                feature = next(features, _END)
+                if feature is _END:
+                    break
+                text = json.dumps(feature, separators=(",", ":"))
+                del feature
+            handle.write(separator + text)
+            separator = ","
         handle.write("]")
     handle.write("}")
 

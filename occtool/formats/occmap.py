@@ -120,14 +120,11 @@ def unreadable(name: str, why: str) -> InputError:
 def quantise(world: Any, unit: float | None = None) -> MapArrays:
     """``world``'s numbers rounded to what the file stores and its segments listed tile by
     tile, as the file lists them (same settings)."""
-    import shapely
 
     unit = UNIT if unit is None else float(unit)
     lower, upper = world.bounds
     origin, unit = _grid(lower, upper, unit)
-
-    def snap(xy: np.ndarray) -> np.ndarray:
-        return origin + np.clip(np.round((xy - origin) / unit), 0, 65535) * unit
+    snap = _snapping(origin, unit)
 
     half_unit = _half_unit(0.5 * np.hypot(*(world.end - world.start).T))
     middles, steps, half = _segment_codes(world, origin, unit, half_unit)
@@ -139,15 +136,38 @@ def quantise(world: Any, unit: float | None = None) -> MapArrays:
     facing = np.where(np.hypot(*(end - start).T) > 1e-12, np.sign(turned), 0).astype(np.int8) * world.facing[order]
     thickness = np.clip(np.round(world.thickness[order] * 1000.0), 0, 255) / 1000.0
     trust = np.clip(np.round(world.trust[order] * 255.0), 0, 255) / 255.0
-    region = world.region
-    if not region.is_empty:
-        # On the file's grid and valid there (origin is a whole number of units), then
-        # through the loader's own arithmetic, so that a map read back is this one.
-        region = _areal(shapely.transform(_areal(shapely.set_precision(region, unit)), snap))
+    region = _region_on_grid(world.region, origin, unit)
     params = world.params()
     band = params.pop("band")
     return MapArrays(start, end, thickness, trust, region, (band[0], band[1]), snap(world.positions), facing, params,
                      unit, origin, half_unit)
+
+
+def _snapping(origin: np.ndarray, unit: float) -> Any:
+    """Points rounded to the file's grid (``origin``, ``unit``), by the loader's arithmetic."""
+
+    def snap(xy: np.ndarray) -> np.ndarray:
+        return origin + np.clip(np.round((xy - origin) / unit), 0, 65535) * unit
+
+    return snap
+
+
+def _region_on_grid(region: Any, origin: np.ndarray, unit: float) -> Any:
+    """A region on the file's grid and valid there (origin is a whole number of units), then
+    through the loader's own arithmetic, so that a map read back is this one."""
+    import shapely
+
+    if region.is_empty:
+        return region
+    return _areal(shapely.transform(_areal(shapely.set_precision(region, unit)), _snapping(origin, unit)))
+
+
+def quantise_region(region: Any, lower: np.ndarray, upper: np.ndarray, unit: float | None = None) -> Any:
+    """The region :func:`quantise` gives a map whose :attr:`~occtool.fuse.WorldMap.bounds`
+    are ``lower``, ``upper`` and whose region is ``region``: a region on such a map's grid
+    without the map's segments made and rounded beside it."""
+    origin, grid_unit = _grid(lower, upper, UNIT if unit is None else float(unit))
+    return _region_on_grid(region, origin, grid_unit)
 
 
 def _areal(geometry: Any) -> Any:

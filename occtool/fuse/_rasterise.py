@@ -10,8 +10,8 @@ cells of a large map cost no query at all:
 * a tile whose box lies inside the observed region is observed in every cell, one outside
   it in none; only the cells of tiles on the region's boundary are tested one by one (and
   the same for the part of it the raster may call free, :attr:`WorldMap.free_region`),
-  against the regions cut to the band of rows (:func:`_cut`: a box's test costs time with
-  every ring of the region it is tested against);
+  each against the regions cut to its rows and its block of columns (:class:`_RegionBlocks`:
+  a box's test costs time with every ring of the region it is tested against);
 * a tile lists the few segments that can matter to its cells and the positions that can be
   the nearest to them, and its cells are measured against those alone; a tile no segment
   reaches skips the walls, and only the cells of a thick of segments ask the k-d tree one
@@ -110,23 +110,37 @@ def raster_bands(world: Any, resolution: float, nx: int, ny: int, origin: tuple[
 
     rows = max(tile, (BAND_STRIPS * strip_cells // max(nx * tile, 1)) * tile)
     bands = [(low, min(low + rows, ny)) for low in range(0, ny, rows)]
-    arguments = ((world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells, occupancy)
-                 for low, high in bands)
-    for (low, high), strip in zip(bands, in_order(executor, "drawing the raster", tile_rows, arguments)):
+    # Bands in groups at least BLOCK_ROWS tall, whose regions are cut once for all of them.
+    group = max(1, -(-BLOCK_ROWS // rows))
+    xs = _centres(origin[0], resolution, nx)
+
+    def arguments() -> Any:
+        for first in range(0, len(bands), group):
+            members = bands[first:first + group]
+            blocks = _band_blocks(world, xs, resolution, origin[1], members[0][0], members[-1][1], tile)
+            for low, high in members:
+                yield (world, resolution, nx, origin, low, high, within, doubted_trust, tile, strip_cells, occupancy,
+                       blocks)
+            del blocks
+
+    for (low, high), strip in zip(bands, in_order(executor, "drawing the raster", tile_rows, arguments())):
         yield low, high, strip
 
 
 def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float], low: int, high: int,
               within: float, doubted_trust: float, tile: int = TILE, strip_cells: int = STRIP_CELLS,
-              occupancy: bool = True) -> tuple[NDArray[np.uint8], NDArray[np.float32] | None, NDArray[np.bool_]]:
+              occupancy: bool = True, blocks: tuple[_RegionBlocks, _RegionBlocks | None] | None = None,
+              ) -> tuple[NDArray[np.uint8], NDArray[np.float32] | None, NDArray[np.bool_]]:
     """Rows ``low`` to ``high`` (``low`` a whole number of tiles) of :func:`rasterise`'s cells,
     occupancy (``None`` without ``occupancy``) and explored flags, a row of tiles at a time,
-    at most ``strip_cells`` cells at once (runs in this process or on a worker)."""
+    at most ``strip_cells`` cells at once (runs in this process or on a worker). ``blocks``:
+    the observed and free regions cut to rows holding these (:func:`_band_blocks`, shared by
+    a group of bands); ``None``: cut here to these rows."""
 
     cells = np.full((high - low, nx), UNKNOWN, dtype=np.uint8)
     probability = np.empty((high - low, nx), dtype=np.float32) if occupancy else None
     explored = np.zeros((high - low, nx), dtype=bool)
-    xs = origin[0] + (np.arange(nx) + 0.5) * resolution
+    xs = _centres(origin[0], resolution, nx)
     first = np.arange(0, nx, tile)
     last = np.minimum(first + tile, nx) - 1
     matters = None
@@ -139,16 +153,11 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
     # Tiles in rows of `tile` cells, at most `strip_cells` cells at a time.
     chunk = max(1, strip_cells // (tile * tile))
     pad = 0.25 * resolution
-    # The regions cut to the band, with a margin no tile box or cell centre comes near.
-    margin = 2.0 * resolution
-    rectangle = (xs[0] - margin, origin[1] + low * resolution - margin, xs[-1] + margin,
-                 origin[1] + high * resolution + margin)
-    region = _cut(world.region, rectangle)
-    free_region = _cut(getattr(world, "free_region", None), rectangle)
-    # The boundary cells' point tests ask the regions cut again into blocks of columns.
-    bottom, top = rectangle[1], rectangle[3]
-    observed_blocks = _ColumnBlocks(region, xs, resolution, bottom, top)
-    free_blocks = None if free_region is None else _ColumnBlocks(free_region, xs, resolution, bottom, top)
+    observed_blocks, free_blocks = (_band_blocks(world, xs, resolution, origin[1], low, high, tile)
+                                    if blocks is None else blocks)
+    for pieces in (observed_blocks, free_blocks):
+        if pieces is not None:
+            pieces.prepare()  # sent to a worker, its pieces come unprepared
     for t0 in range(low, high, tile):
         t1 = min(t0 + tile, high)
         ys = origin[1] + (np.arange(t0, t1) + 0.5) * resolution
@@ -157,11 +166,11 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
             # The tiles' boxes round their cell centres, widened by a quarter cell so that
             # a one-cell tile is still a box; the tests below hold for the wider box too.
             boxes = (xs[lo] - pad, ys[0] - pad, xs[hi] + pad, ys[-1] + pad)
-            if region.is_empty:
+            if observed_blocks.empty:
                 inside = outside = None
             else:
-                inside, outside = _sort_tiles(region, *boxes)
-            free = _free_tiles(free_region, boxes)
+                inside, outside = observed_blocks.sort_tiles(lo, *boxes)
+            free = _free_tiles(free_blocks, (lo, *boxes))
             # Each box's middle and half-diagonal: what the tiles' queries reach round (occtool.fuse._tile_queries).
             half = 0.5 * np.hypot(xs[hi] - xs[lo], ys[-1] - ys[0]) + pad * math.sqrt(2.0)
             middles = np.column_stack([0.5 * (xs[lo] + xs[hi]), np.full(lo.size, 0.5 * (ys[0] + ys[-1]))])
@@ -173,35 +182,74 @@ def tile_rows(world: Any, resolution: float, nx: int, origin: tuple[float, float
     return cells, probability, explored
 
 
-#: Columns of a block of a band's regions (:class:`_ColumnBlocks`): about 50 m at 5 cm.
+#: Columns of a block of a band's regions (:class:`_RegionBlocks`): about 50 m at 5 cm.
 BLOCK_COLUMNS = 1024
+#: Rows of the regions' pieces, at least: bands (fewer rows the wider the raster) are taken
+#: in groups this tall, whose regions are cut once for all of them (:func:`_band_blocks`).
+BLOCK_ROWS = 256
 
 
-class _ColumnBlocks:
-    """A band's region (cut to the band, :func:`_cut`) cut again into blocks of
-    :data:`BLOCK_COLUMNS` columns, each when first asked, for the point tests of the cells
-    along its boundary. GEOS's prepared point-in-polygon test walks the region's edges that
-    cross the point's row, as many as the band is wide: over the whole band, the campus
-    mapped four times over took twelve times the campus's time in these tests. A point is
-    tested against its block's piece, which answers as the band's region does for points
-    within a margin of two cells round the block (:func:`_cut`), more than rounding when a
-    point's block is found from its x."""
+def _centres(x0: float, resolution: float, nx: int) -> FloatArray:
+    """The x of the raster's cell centres, from its left edge ``x0``."""
+    return np.asarray(x0 + (np.arange(nx) + 0.5) * resolution, dtype=np.float64)
 
-    def __init__(self, region: Any, xs: NDArray[np.floating[Any]], resolution: float, bottom: float,
-                 top: float) -> None:
-        self.region, self.xs, self.resolution, self.bottom, self.top = region, xs, resolution, bottom, top
-        self.count = -(-xs.size // BLOCK_COLUMNS)
-        self.pieces: dict[int, Any] = {}
 
-    def _piece(self, block: int) -> Any:
-        if self.count == 1:
-            return self.region
-        if block not in self.pieces:
-            first, last = block * BLOCK_COLUMNS, min((block + 1) * BLOCK_COLUMNS, self.xs.size) - 1
-            margin = 2.0 * self.resolution
-            self.pieces[block] = _cut(self.region, (self.xs[first] - margin, self.bottom, self.xs[last] + margin,
-                                                    self.top))
-        return self.pieces[block]
+def _band_blocks(world: Any, xs: FloatArray, resolution: float, y0: float, low: int, high: int,
+                 tile: int) -> tuple[_RegionBlocks, _RegionBlocks | None]:
+    """The world's observed region and free region (``None``: a map without one) cut to rows
+    ``low`` to ``high`` of the raster (cell centres ``xs``, bottom edge ``y0``) and to blocks of
+    columns (:class:`_RegionBlocks`), with a margin of two cells that no tile box or cell
+    centre of those rows comes near."""
+    margin = 2.0 * resolution
+    rectangle = (float(xs[0] - margin), y0 + low * resolution - margin, float(xs[-1] + margin),
+                 y0 + high * resolution + margin)
+    columns = max(tile, BLOCK_COLUMNS // tile * tile)
+    free = getattr(world, "free_region", None)
+    return (_RegionBlocks(world.region, xs, resolution, rectangle, columns),
+            None if free is None else _RegionBlocks(free, xs, resolution, rectangle, columns))
+
+
+class _RegionBlocks:
+    """A region cut to a band of rows (:func:`_cut`), then into blocks of ``columns`` columns
+    (whole tiles), each piece prepared: the tiles of a block are sorted against its piece and
+    the cells along the region's boundary tested against it.
+
+    Both tests cost time with the geometry they ask: GEOS's prepared test of a box looks at
+    every ring, its point-in-polygon test walks the edges that cross the point's row, and
+    cutting a region to a rectangle nodes all of it within a tenth of its width of the
+    rectangle. Over whole bands of rows, the wider the raster, the thinner its bands and the
+    more of them, each cut from the whole region and tested across its whole width: campus
+    x10's raster spent 30 s more than ten campuses' in these. Cut once for a group of bands at
+    least :data:`BLOCK_ROWS` tall, and asked a block at a time, what each costs is a block's.
+    A piece answers as the whole region does for boxes and points within the margin of two
+    cells round its block (:func:`_cut`), more than rounding when a point's block is found
+    from its x."""
+
+    def __init__(self, region: Any, xs: FloatArray, resolution: float, rectangle: tuple[float, float, float, float],
+                 columns: int = BLOCK_COLUMNS) -> None:
+        self.xs, self.resolution, self.columns = xs, resolution, columns
+        self.count = -(-xs.size // columns)
+        band = _cut(region, rectangle)
+        #: The region has nothing in these rows.
+        self.empty = bool(band.is_empty)
+        if self.count == 1 or self.empty:
+            self.pieces = [band] * self.count
+            return
+        margin = 2.0 * resolution
+        self.pieces = []
+        for block in range(self.count):
+            first, last = block * columns, min((block + 1) * columns, xs.size) - 1
+            self.pieces.append(_cut(band, (float(xs[first] - margin), rectangle[1], float(xs[last] + margin),
+                                           rectangle[3])))
+
+    def prepare(self) -> None:
+        import shapely
+
+        for piece in self.pieces:
+            shapely.prepare(piece)
+
+    def _blocks(self, column: NDArray[np.integer[Any]]) -> NDArray[np.int64]:
+        return np.clip(np.asarray(column, dtype=np.int64) // self.columns, 0, self.count - 1)
 
     def contains(self, x: FloatArray, y: FloatArray) -> NDArray[np.bool_]:
         """Whether points (``x``, ``y``: cell centres of the band) lie in the region, as
@@ -209,14 +257,25 @@ class _ColumnBlocks:
         import shapely
 
         if self.count == 1:
-            return np.asarray(shapely.contains_xy(self.region, x, y), dtype=bool)
-        block = np.clip(np.floor((x - self.xs[0]) / self.resolution).astype(np.int64) // BLOCK_COLUMNS,
-                        0, self.count - 1)
+            return np.asarray(shapely.contains_xy(self.pieces[0], x, y), dtype=bool)
+        block = self._blocks(np.floor((x - self.xs[0]) / self.resolution).astype(np.int64))
         out = np.zeros(x.size, dtype=bool)
         for b in np.unique(block).tolist():
             chosen = block == b
-            out[chosen] = shapely.contains_xy(self._piece(b), x[chosen], y[chosen])
+            out[chosen] = shapely.contains_xy(self.pieces[b], x[chosen], y[chosen])
         return out
+
+    def sort_tiles(self, first: NDArray[np.intp], left: FloatArray, bottom: float, right: FloatArray,
+                   top: float) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """:func:`_sort_tiles` of a row of tiles (``first``: each one's first column, in order;
+        the boxes as there), each block's tiles against its piece."""
+        block = self._blocks(first)
+        ends = np.flatnonzero(np.diff(block)) + 1
+        inside, outside = np.zeros(first.size, dtype=bool), np.zeros(first.size, dtype=bool)
+        for low, high in zip(np.r_[0, ends].tolist(), np.r_[ends, first.size].tolist()):
+            inside[low:high], outside[low:high] = _sort_tiles(self.pieces[int(block[low])], left[low:high], bottom,
+                                                              right[low:high], top)
+        return inside, outside
 
 
 def _cut(region: Any, rectangle: tuple[float, float, float, float]) -> Any:
@@ -233,18 +292,27 @@ def _cut(region: Any, rectangle: tuple[float, float, float, float]) -> Any:
     if region.is_empty:
         return region
     part = shapely.intersection(region, shapely.box(*rectangle))
+    if shapely.get_type_id(part) == 7:
+        # A collection: the polygons, and lines or points where the region's boundary runs
+        # along the rectangle's, which no box or point asked lies near. Cut again, GEOS took
+        # 60 ms a block for what takes 0.4 ms as polygons (campus x10's free region, 3.2 s).
+        pieces = shapely.get_parts(part)
+        pieces = shapely.get_parts(pieces[np.isin(shapely.get_type_id(pieces), (3, 6))])
+        part = shapely.multipolygons(pieces)
     shapely.prepare(part)
     return part
 
 
-def _free_tiles(free_region: Any, boxes: tuple[Any, ...]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
-    """The tiles (``boxes``: :func:`_sort_tiles`' left and right sides, bottom and top) wholly
-    inside and wholly outside the part of the observed region the raster may call free
-    (:attr:`WorldMap.free_region`, cut to the band; ``None``: a map without one, whose cells
-    each ask :meth:`WorldMap.free_space`), as the region's own tiles are sorted."""
-    if free_region is None:
+def _free_tiles(free_blocks: _RegionBlocks | None,
+                boxes: tuple[Any, ...]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The tiles (``boxes``: their first columns, then :func:`_sort_tiles`' left and right
+    sides, bottom and top) wholly inside and wholly outside the part of the observed region
+    the raster may call free (:attr:`WorldMap.free_region`, cut to the band and its blocks;
+    ``None``: a map without one, whose cells each ask :meth:`WorldMap.free_space`), as the
+    region's own tiles are sorted."""
+    if free_blocks is None:
         return None
-    return _sort_tiles(free_region, *boxes)
+    return free_blocks.sort_tiles(*boxes)
 
 
 def _sort_tiles(geometry: Any, left: NDArray[np.floating[Any]], bottom: float, right: NDArray[np.floating[Any]],
@@ -279,14 +347,14 @@ def _strip(world: Any, cells: NDArray[np.uint8], probability: NDArray[np.float32
            last: NDArray[np.intp], inside: NDArray[np.bool_] | None, outside: NDArray[np.bool_] | None,
            boxes: tuple[FloatArray, FloatArray], within: float, doubted_trust: float,
            free: tuple[NDArray[np.bool_], NDArray[np.bool_]] | None, matters: FloatArray | None,
-           observed_blocks: _ColumnBlocks, free_blocks: _ColumnBlocks | None) -> None:
+           observed_blocks: _RegionBlocks, free_blocks: _RegionBlocks | None) -> None:
     """One row of tiles (``ys`` its cells' rows), written into the raster's views (no
     occupancy where ``probability`` is ``None``); ``boxes``:
     the tiles' middles and half-diagonals; ``free``: the tiles inside and outside the world's
     :attr:`~WorldMap.free_region` (``None``: each cell asks :meth:`~WorldMap.free_space`);
     ``matters``: the segments' :func:`~occtool.fuse._tile_queries.influence` (``None``: computed
     here); ``observed_blocks`` and ``free_blocks``: the world's observed region and free
-    region cut to the strip's band and its blocks of columns (:class:`_ColumnBlocks`; ``None``:
+    region cut to the strip's band and its blocks of columns (:class:`_RegionBlocks`; ``None``:
     no free region)."""
     h, nx = ys.size, xs.size
     # The strip's cells row by row, each row padded to whole tiles (the last tile's missing

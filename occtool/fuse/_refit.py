@@ -11,9 +11,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from occtool.errors import InputError
+from occtool.formats.occmap import quantise_region
 from occtool.fuse._sightings import RunReturns, returns_of_fused
 from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
-from occtool.fuse._world import WorldMap
+from occtool.fuse._world import WorldMap, extent
 from occtool.limits import release_free_memory
 
 FloatArray = NDArray[np.float64]
@@ -47,7 +48,7 @@ OBSERVED_REACH = 16.0
 SIMPLIFY_APART = 4.0
 
 
-def _observed_region(distances: FloatArray, poses: FloatArray, reach: float, simplify: float) -> Any:
+def _observed_region(distances: Any, poses: FloatArray, reach: float, simplify: float) -> Any:
     """Union of what each position (``poses`` ``(P, 4)`` x, y, z, yaw) saw: rays up to
     ``distances`` (``(P, bins)``, at most ``reach``) at the bins' centres, simplified by
     ``simplify`` metres (:func:`_simplified`; 0: not simplified).
@@ -72,7 +73,7 @@ class _Views:
     #: Positions whose rings are drawn at once (a large run's temporaries).
     BLOCK = 1024
 
-    def __init__(self, distances: FloatArray, poses: FloatArray, reach: float) -> None:
+    def __init__(self, distances: Any, poses: FloatArray, reach: float) -> None:
         self.distances, self.poses, self.reach = distances, poses, reach
         bins = distances.shape[1]
         self.angles = -math.pi + (np.arange(bins) + 0.5) * (2.0 * math.pi / bins)
@@ -130,6 +131,10 @@ def _simplified(region: Any, tolerance: float) -> Any:
     return shapely.multipolygons(out)
 
 
+#: Far returns measured at once by :func:`_with_far_walls`.
+_FAR_AT_ONCE = 1 << 18
+
+
 def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach: float, far_reach: float,
                     one_sided: bool, fit: dict[str, Any]) -> Segments:
     """``segments`` (fitted to the returns within ``reach``, ``near``) and the walls of the
@@ -141,9 +146,18 @@ def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach
     # The returns beyond reach, measured as before from the world points (the range itself
     # can round to the other side of reach; a micrometre below it takes those in).
     points, owner = run.return_points(far_reach, beyond=reach - 1e-6)
-    far = np.hypot(*(points - run.poses[owner, :2]).T) > reach
+    far = np.zeros(points.shape[0], dtype=bool)
+    blocks = range(0, points.shape[0], _FAR_AT_ONCE)  # a block's temporaries, not the run's
+    for low in blocks:
+        high = low + _FAR_AT_ONCE
+        far[low:high] = np.hypot(*(points[low:high] - run.poses[owner[low:high], :2]).T) > reach
     if far.any() and near.shape[0]:
-        far[far] = np.isinf(cKDTree(near).query(points[far], distance_upper_bound=FAR_WALL_GAP)[0])
+        # The near returns are not copied into the tree (campus x10: 2.7 M of them, 41 MB).
+        tree = cKDTree(np.ascontiguousarray(near), copy_data=False)
+        for low in blocks:
+            chosen = low + np.flatnonzero(far[low:low + _FAR_AT_ONCE])
+            far[chosen] = np.isinf(tree.query(points[chosen], distance_upper_bound=FAR_WALL_GAP)[0])
+        del tree
     if not far.any():
         return segments
     points, owner = points[far], owner[far]
@@ -192,25 +206,31 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     fit: dict[str, Any] = {"cell": cell, "max_thickness": max_thickness, "min_returns": min_returns}
     points, owner = run.return_points(reach)
     segments: Segments = fit_segments(points, owner, owner_positions=run.poses[:, :2] if one_sided else None, **fit)
+    del owner  # the far walls ask only where the near returns lie (campus x10: 22 MB)
     if far_reach > reach:
         segments = _with_far_walls(segments, run, points, reach, far_reach, one_sided, fit)
-    del points, owner  # a large run's returns: not held through the unions below
+    del points  # a large run's returns: not held through the unions below
     release_free_memory()
     through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
     trust = segments.hits / np.maximum(segments.hits + through, 1)
     own = run if sightings is None else returns_of_fused(fused)
     regions = [_observed_region(own.ranges, own.poses, r, simplify)
                for r in (observed_reach, min(region_reach, observed_reach))]
+    import shapely
+
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
-    maps = [WorldMap(segments.start, segments.end, segments.thickness, trust, g, band=(z0 + low, z0 + high),
+    world = WorldMap(segments.start, segments.end, segments.thickness, trust, regions[0], band=(z0 + low, z0 + high),
                      positions=own.poses[:, :2], facing=segments.facing, **{"free_reach": region_reach, **params})
-            # Rounded to the file's precision now, so that the map written is the map used.
-            .quantised() for g in regions]
-    world = maps[0]
+    # Rounded to the file's precision now, so that the map written is the map used.
+    world = world.quantised()
     # The Nav2 raster's free space: the region the beams swept within region_reach, as
-    # before the region reached farther (its returns on free cells, docs/figures.md).
-    world.free_region = maps[1].region
+    # before the region reached farther (its returns on free cells, docs/figures.md), on the
+    # grid a map of it and the same walls would have (not made: campus x10's 600,000
+    # segments rounded a second time took 90 MB).
+    free_region = quantise_region(regions[1], *extent(segments.start, segments.end, own.poses[:, :2], regions[1]))
+    shapely.prepare(free_region)
+    world.free_region = free_region
     release_free_memory()  # the unions' GEOS garbage, before the raster
     return world
 

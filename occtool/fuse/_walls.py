@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -206,11 +207,12 @@ def _facing(returns: FloatArray, viewpoints: FloatArray | None, ux: FloatArray, 
     return out
 
 
-def seen_through(middle: FloatArray, poses: FloatArray, distances: FloatArray, *, margin: float,
+def seen_through(middle: FloatArray, poses: FloatArray, distances: Any, *, margin: float,
                  reach: float) -> NDArray[np.int64]:
     """How many positions saw through each of the world points ``middle`` ``(S, 2)``.
 
-    ``poses`` ``(P, 4)`` are x, y, z, yaw; ``distances`` ``(P, bins)`` each position's range
+    ``poses`` ``(P, 4)`` are x, y, z, yaw; ``distances`` ``(P, bins)`` (an array, or
+    :class:`occtool.fuse._sightings.StoredRanges`, read a block of rows at a time) each position's range
     per pan bin (its nearest return, or how far it saw where it had none; 0 where it saw
     nothing). A point is seen through by a position when it lies in the position's pan bin
     more than ``margin`` in front of that bin's range, and no farther than ``reach``.
@@ -222,9 +224,13 @@ def seen_through(middle: FloatArray, poses: FloatArray, distances: FloatArray, *
         return counts
     index = cKDTree(middle)
     bins = distances.shape[1]
+    block = np.zeros((0, bins))
     for k in range(poses.shape[0]):  # a loop over positions, each vectorised over its points
+        if k % _POSITIONS_AT_ONCE == 0:  # the distances read a block of positions at a time
+            block = np.asarray(distances[k:k + _POSITIONS_AT_ONCE], dtype=np.float64)
+        row = block[k % _POSITIONS_AT_ONCE]
         x, y, _, yaw = poses[k]
-        far = float(min(reach, distances[k].max()))
+        far = float(min(reach, row.max()))
         if far <= margin:
             continue
         near = np.asarray(index.query_ball_point((x, y), far), dtype=np.intp)
@@ -234,6 +240,10 @@ def seen_through(middle: FloatArray, poses: FloatArray, distances: FloatArray, *
         c, s = math.cos(yaw), math.sin(yaw)
         alpha = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
         b = np.clip(np.floor((alpha + math.pi) / (2.0 * math.pi) * bins).astype(np.intp), 0, bins - 1)
-        through = np.hypot(dx, dy) < np.minimum(distances[k, b], reach) - margin
+        through = np.hypot(dx, dy) < np.minimum(row[b], reach) - margin
         counts[near[through]] += 1
     return counts
+
+
+#: Positions whose distances :func:`seen_through` reads at once.
+_POSITIONS_AT_ONCE = 1024

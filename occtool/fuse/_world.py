@@ -107,6 +107,23 @@ _BLOCK = 1 << 15
 OCCUPANCY_CELLS = 50_000_000
 
 
+def extent(start: FloatArray, end: FloatArray, positions: FloatArray, region: Any) -> tuple[FloatArray, FloatArray]:
+    """World ``(x, y)`` lower and upper corners of segments (``start``, ``end`` ``(S, 2)``),
+    positions ``(P, 2)`` and a region: :attr:`WorldMap.bounds` of a map of them."""
+    import shapely
+
+    boxes = [np.concatenate([start, end])] if start.shape[0] else []
+    if positions.shape[0]:
+        boxes.append(positions)
+    if not region.is_empty:
+        x0, y0, x1, y1 = shapely.bounds(region)
+        boxes.append(np.array([[x0, y0], [x1, y1]]))
+    if not boxes:
+        return np.zeros(2), np.zeros(2)
+    both = np.concatenate(boxes)
+    return both.min(axis=0), both.max(axis=0)
+
+
 class WorldMap:
     """A run's occupancy in the world frame: wall ridges over an observed region.
 
@@ -230,18 +247,7 @@ class WorldMap:
     @property
     def bounds(self) -> tuple[FloatArray, FloatArray]:
         """World ``(x, y)`` lower and upper corners of the walls and the observed region."""
-        import shapely
-
-        boxes = [np.concatenate([self.start, self.end])] if len(self) else []
-        if self.positions.shape[0]:
-            boxes.append(self.positions)
-        if not self.region.is_empty:
-            x0, y0, x1, y1 = shapely.bounds(self.region)
-            boxes.append(np.array([[x0, y0], [x1, y1]]))
-        if not boxes:
-            return np.zeros(2), np.zeros(2)
-        both = np.concatenate(boxes)
-        return both.min(axis=0), both.max(axis=0)
+        return extent(self.start, self.end, self.positions, self.region)
 
     @property
     def nbytes(self) -> int:
