@@ -135,16 +135,25 @@ def _ranges(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatAr
     """Nearest returns ``(P, bins)`` (millimetres) where a bin has one, else the reach
     (``(P, 2, coarse bins)`` centimetres, row 0) of the coarser bin its centre lies in, metres
     (a block of positions at a time: the temporaries are a block's)."""
-    bins = returns.shape[1]
-    centre = (np.arange(bins) + 0.5) / bins
-    coarse = np.minimum((centre * reaches.shape[2]).astype(np.intp), reaches.shape[2] - 1)
+    coarse = _coarse_bins(returns.shape[1], reaches.shape[2])
     out = np.empty(returns.shape, dtype=np.float64)
     for low in range(0, returns.shape[0], _POSITIONS_AT_ONCE):
         high = low + _POSITIONS_AT_ONCE
-        reach = reaches[low:high, 0].astype(np.float64) * REACH_UNIT
-        part = returns[low:high]
-        out[low:high] = np.where(part != NO_OBSTACLE, part.astype(np.float64) / 1000.0, reach[:, coarse])
+        out[low:high] = _in_metres(returns[low:high], reaches[low:high, 0][:, coarse])
     return out
+
+
+def _coarse_bins(bins: int, coarse: int) -> NDArray[np.intp]:
+    """The coarse reach bin (of ``coarse``) each of ``bins`` return bins' centres lies in."""
+    centre = (np.arange(bins) + 0.5) / bins
+    return np.minimum((centre * coarse).astype(np.intp), coarse - 1)
+
+
+def _in_metres(returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> FloatArray:
+    """Nearest returns (millimetres) where there is one, else the reaches beside them
+    (centimetres, the same shape), in metres."""
+    return np.where(returns != NO_OBSTACLE, returns.astype(np.float64) / 1000.0,
+                    reaches.astype(np.float64) * REACH_UNIT)
 
 
 class StoredRanges:
@@ -157,9 +166,7 @@ class StoredRanges:
 
     def __init__(self, returns: NDArray[np.uint16], reaches: NDArray[np.uint16]) -> None:
         self.returns, self.reaches = returns, reaches
-        bins = returns.shape[1]
-        centre = (np.arange(bins) + 0.5) / bins
-        self._coarse = np.minimum((centre * reaches.shape[2]).astype(np.intp), reaches.shape[2] - 1)
+        self._coarse = _coarse_bins(returns.shape[1], reaches.shape[2])
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -176,9 +183,7 @@ class StoredRanges:
         if isinstance(key, tuple) and len(key) == 2 and not any(isinstance(k, slice) for k in key):
             rows, bins = (np.asarray(k) for k in key)
             if rows.dtype.kind in "iu" and bins.dtype.kind in "iu":
-                part = self.returns[rows, bins]
-                reach = self.reaches[rows, 0, self._coarse[bins]].astype(np.float64) * REACH_UNIT
-                return np.where(part != NO_OBSTACLE, part.astype(np.float64) / 1000.0, reach)
+                return _in_metres(self.returns[rows, bins], self.reaches[rows, 0, self._coarse[bins]])
         elif isinstance(key, (int, np.integer, slice)) or (
                 isinstance(key, np.ndarray) and key.ndim == 1 and key.dtype.kind in "iu"):
             if isinstance(key, (int, np.integer)):

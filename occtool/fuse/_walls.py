@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from occtool.fuse._sightings import _POSITIONS_AT_ONCE
+
 FloatArray = NDArray[np.float64]
 
 #: The first (largest) cell side, metres.
@@ -243,7 +245,3 @@ def seen_through(middle: FloatArray, poses: FloatArray, distances: Any, *, margi
         through = np.hypot(dx, dy) < np.minimum(row[b], reach) - margin
         counts[near[through]] += 1
     return counts
-
-
-#: Positions whose distances :func:`seen_through` reads at once.
-_POSITIONS_AT_ONCE = 1024
