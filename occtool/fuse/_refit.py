@@ -1,6 +1,6 @@
 """Refitting a run into its world map (:func:`build_world_map`): walls fitted to the returns,
-trusted by the beams that saw through them, over the region the positions observed
-(:mod:`occtool.fuse._world` says what the map is)."""
+trusted by their share of returns among what the beams sampled in their bands, over the
+region the positions observed (:mod:`occtool.fuse._world` says what the map is)."""
 
 from __future__ import annotations
 
@@ -12,14 +12,33 @@ from numpy.typing import NDArray
 
 from occtool.errors import InputError
 from occtool.fuse._sightings import RunReturns, returns_of_fused
-from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
+from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, free_in_bands
 from occtool.fuse._world import WorldMap
 from occtool.limits import release_free_memory
 
 FloatArray = NDArray[np.float64]
 
-#: A beam passing a segment's middle more than this in front of its own return saw through it (metres).
+#: A beam is free up to this before its own return where it passes a wall's band (metres).
 THROUGH_MARGIN = 0.1
+
+#: A wall's trust is a counting model over its band: its returns' share among them and the
+#: points its beams' free parts inside the band would hold every FREE_STEP metres (the
+#: held-out scorers' spacing of free points); the band is the wall's line widened to
+#: BAND_HALF_WIDTH either side (or its thickness) and lengthened by it past each end, and
+#: measured at points BAND_SPACING apart (:func:`occtool.fuse._walls.free_in_bands`).
+#: Chosen on inner splits of the training scans (docs/figures.md, 2026-12-05): half-width
+#: 0.01 / **0.02** / 0.03 m, step 0.05 / **0.1** / 0.2 m.
+FREE_STEP = 0.1
+BAND_HALF_WIDTH = 0.02
+BAND_SPACING = 0.1
+
+#: The Nav2 raster draws the walls of at least this trust and keeps the rims of those of at
+#: least NAV2_DOUBTED_SHARE (:attr:`WorldMap.wall_share`, :attr:`WorldMap.doubted_share`):
+#: the trust above is lower than the positions' share that maps kept before it (a wall the
+#: beams graze is passed along its band), chosen on the same inner splits for the trinary
+#: map's AUC with no more held-out returns on its free cells than before (docs/figures.md).
+NAV2_WALL_SHARE = 0.15
+NAV2_DOUBTED_SHARE = 0.05
 
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
@@ -152,6 +171,16 @@ def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach
                       for f in ("start", "end", "thickness", "hits", "facing")))
 
 
+def wall_trust(segments: Segments, run: RunReturns, reach: float) -> FloatArray:
+    """Each segment's trust: the share of its returns among them and the free points its band
+    holds, the beams of ``run`` up to ``reach`` inside it every :data:`FREE_STEP` metres up to
+    :data:`THROUGH_MARGIN` before their own return (:func:`occtool.fuse._walls.free_in_bands`):
+    the counting model of a grid whose cells are the walls' bands."""
+    free = free_in_bands(segments.start, segments.end, segments.thickness, run.poses, run.ranges,
+                         margin=THROUGH_MARGIN, reach=reach, half_width=BAND_HALF_WIDTH, spacing=BAND_SPACING)
+    return np.asarray(segments.hits / np.maximum(segments.hits + free / FREE_STEP, 1e-12), dtype=np.float64)
+
+
 def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: float = CELL,
                     max_thickness: float = MAX_THICKNESS, min_returns: int = MIN_RETURNS, reach: float = WALL_REACH,
                     far_reach: float = FAR_WALL_REACH, region_reach: float = REGION_REACH,
@@ -162,13 +191,15 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
 
     ``sightings`` is what every position of the run saw (:func:`returns_of_positions`; by
     default ``fused``'s own positions, :func:`returns_of_fused`): the walls are fitted to
-    its returns and its beams see through them; the observed region is swept by ``fused``'s
+    its returns and its beams measure their trust; the observed region is swept by ``fused``'s
     positions (a :class:`FusedMap`), which hold the run's local models.
     The walls are fitted to the returns no farther than ``reach`` from their position
     (:func:`occtool.fuse._walls.fit_segments`
     with ``cell``, ``max_thickness`` and ``min_returns``), and apart from them to the returns
     up to ``far_reach`` that lie farther than :data:`FAR_WALL_GAP` from all of those (walls
-    the run saw only from afar); the beams up to ``region_reach`` see through them. The
+    the run saw only from afar); each is trusted by its returns' share among them and its
+    band's free points, the beams' free parts up to ``region_reach`` inside it every
+    :data:`FREE_STEP` metres (:func:`occtool.fuse._walls.free_in_bands`). The
     beams up to ``observed_reach`` sweep the observed region, those up to ``region_reach``
     the part of it the Nav2 raster may call free (:attr:`WorldMap.free_region`, kept in
     memory, not in the file; the file keeps ``region_reach`` as :attr:`WorldMap.free_reach`);
@@ -196,15 +227,16 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
         segments = _with_far_walls(segments, run, points, reach, far_reach, one_sided, fit)
     del points, owner  # a large run's returns: not held through the unions below
     release_free_memory()
-    through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
-    trust = segments.hits / np.maximum(segments.hits + through, 1)
+    trust = wall_trust(segments, run, region_reach)
     own = run if sightings is None else returns_of_fused(fused)
     regions = [_observed_region(own.ranges, own.poses, r, simplify)
                for r in (observed_reach, min(region_reach, observed_reach))]
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
     maps = [WorldMap(segments.start, segments.end, segments.thickness, trust, g, band=(z0 + low, z0 + high),
-                     positions=own.poses[:, :2], facing=segments.facing, **{"free_reach": region_reach, **params})
+                     positions=own.poses[:, :2], facing=segments.facing,
+                     **{"free_reach": region_reach, "wall_share": NAV2_WALL_SHARE, "doubted_share": NAV2_DOUBTED_SHARE,
+                        **params})
             # Rounded to the file's precision now, so that the map written is the map used.
             .quantised() for g in regions]
     world = maps[0]
@@ -215,5 +247,6 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     return world
 
 
-__all__ = ["FAR_WALL_GAP", "FAR_WALL_REACH", "OBSERVED_REACH", "REGION_REACH", "THROUGH_MARGIN", "WALL_REACH",
-           "build_world_map"]
+__all__ = ["BAND_HALF_WIDTH", "BAND_SPACING", "FAR_WALL_GAP", "FAR_WALL_REACH", "FREE_STEP", "NAV2_DOUBTED_SHARE",
+           "NAV2_WALL_SHARE", "OBSERVED_REACH", "REGION_REACH", "THROUGH_MARGIN", "WALL_REACH", "build_world_map",
+           "wall_trust"]
