@@ -628,6 +628,41 @@ def test_a_lasers_every_beam_places_walls_a_cameras_cloud_its_nearest_per_degree
     assert run.scanning_laser and not dense.scanning_laser
 
 
+def test_a_position_of_several_scans_gives_each_scans_nearest_returns_from_its_own_sensor():
+    """returns_of_positions: a position gathering two scans (io's group_scans) gives a row for
+    each, placed at its own sensor: the wall one scan saw behind the person the other saw is
+    kept."""
+    from occtool.features import Features, Pose, Position
+    from occtool.fuse import returns_of_positions
+
+    robot = Robot()
+    z = 0.5 * sum(robot.body_band)
+    beams = np.radians(np.arange(-90.0, 90.0, 0.5) + 0.25)
+    # The position's frame: its pose at (1, 2) facing +y. Scan A from its origin sees a wall
+    # 3 m ahead; scan B, 0.2 m ahead of it (x in the position's frame), a person 1 m ahead of
+    # its own sensor within 5 degrees.
+    wall = np.column_stack([3.0 * np.cos(beams), 3.0 * np.sin(beams), np.full(beams.size, z)])
+    near = np.abs(beams) < np.radians(5.0)
+    person = np.column_stack([0.2 + np.cos(beams[near]), np.sin(beams[near]), np.full(near.sum(), z)])
+    position = Position(0, Features(np.vstack([wall, person]), np.full(beams.size + near.sum(), 0.9)),
+                        pose=Pose(1.0, 2.0, 0.0, math.pi / 2),
+                        scan_origins=np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]]),
+                        scan_sizes=np.array([beams.size, near.sum()]))
+    run = returns_of_positions([position], robot)
+    assert len(run) == 2
+    assert np.allclose(run.poses, [[1.0, 2.0, 0.0, math.pi / 2], [1.0, 2.2, 0.0, math.pi / 2]])
+    assert run.returned[0].sum() == beams.size and np.allclose(run.ranges[0][run.returned[0]], 3.0, atol=1e-3)
+    assert run.returned[1].sum() == near.sum() and np.allclose(run.ranges[1][run.returned[1]], 1.0, atol=1e-3)
+    # Each return where it was: the person 1.2 m ahead of the position (+y), the wall 3 m.
+    points, owner = run.return_points(16.0)
+    assert np.allclose(points[owner == 1], [1.0, 3.2], atol=0.1)
+    assert np.allclose(np.hypot(*(points[owner == 0] - [1.0, 2.0]).T), 3.0, atol=1e-3)
+    # The position as one scan: the person hides the wall behind it.
+    alone = returns_of_positions([Position(0, position.features, pose=position.pose)], robot)
+    assert len(alone) == 1 and alone.returned[0].sum() == beams.size
+    assert (alone.ranges[0][alone.returned[0]] < 2.0).sum() > near.sum() // 2
+
+
 @pytest.mark.parametrize("facing", [0, 1, -1])
 def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_them(facing):
     """Safety of the trinary cells: a free cell is observed, at most RASTER_FREE, farther

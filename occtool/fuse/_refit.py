@@ -50,6 +50,8 @@ FAR_WALL_REACH = 50.0
 #: run saw only from afar (ACES seed 1, docs/figures.md), fitted on their own so that the
 #: nearer walls stay as they were (at 0.3 m they lowered ACES seed 0's held-out AUC).
 FAR_WALL_GAP = 2.0
+#: Near returns indexed at once when the far returns are checked against them.
+FAR_TREE_RETURNS = 1 << 18
 
 #: Beams see through walls no farther than this from their position, and the Nav2 raster
 #: calls observed space free no farther than this from a position (metres): a far beam's
@@ -162,7 +164,13 @@ def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach
     points, owner = run.return_points(far_reach, beyond=reach - 1e-6)
     far = np.hypot(*(points - run.poses[owner, :2]).T) > reach
     if far.any() and near.shape[0]:
-        far[far] = np.isinf(cKDTree(near).query(points[far], distance_upper_bound=FAR_WALL_GAP)[0])
+        # A tree of a block of the near returns at a time (every scan's returns: 1.5 M on
+        # FR-079, 50 MB in one tree): a far return is near one when a block's is within the gap.
+        alone = np.ones(int(far.sum()), dtype=bool)
+        for low in range(0, near.shape[0], FAR_TREE_RETURNS):
+            alone &= np.isinf(cKDTree(near[low:low + FAR_TREE_RETURNS]).query(
+                points[far], distance_upper_bound=FAR_WALL_GAP)[0])
+        far[far] = alone
     if not far.any():
         return segments
     points, owner = points[far], owner[far]
