@@ -476,6 +476,17 @@ def test_the_room_log_walls_free_inside_unknown_behind(room_map):
     assert (world.facing != 0).mean() > 0.9
     assert fused.scanning_laser and build_world_map(fused, sightings=None).facing.any()
     assert not build_world_map(fused, sightings=None, one_sided=False).facing.any()
+    # A laser's map takes the Nav2 shares chosen for its trust; another sensor's keeps the old.
+    from occtool.fuse._refit import NAV2_DOUBTED_SHARE, NAV2_WALL_SHARE
+    from occtool.fuse._world import DOUBTED_TRUST, WALL_SHARE
+
+    assert (world.wall_share, world.doubted_share) == (NAV2_WALL_SHARE, NAV2_DOUBTED_SHARE) == (0.15, 0.05)
+    fused.scanning_laser = False  # the module's fixture: put back below
+    try:
+        other = build_world_map(fused, sightings=None)
+    finally:
+        fused.scanning_laser = True
+    assert (other.wall_share, other.doubted_share) == (WALL_SHARE, DOUBTED_TRUST) == (0.5, 0.3)
     near = np.array([[x1 - 0.08, 0.3, 0.0], [x1 + 0.08, 0.3, 0.0]])
     assert np.diff(world.predict(near))[0] > 0.2
     # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.
