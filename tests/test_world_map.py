@@ -18,7 +18,7 @@ from occtool.errors import InputError
 from occtool.fit import OccupancyRegressor
 from occtool.formats.occmap import encode
 from occtool.fuse import FREE, OCCUPIED, UNKNOWN, WorldMap, build_world_map, decode_map, fuse_log, load_map
-from occtool.fuse._walls import fit_segments, seen_through
+from occtool.fuse._walls import fit_segments, free_in_bands
 from occtool.io import read_log
 from occtool.robot import Robot
 
@@ -43,7 +43,7 @@ def test_returns_on_a_line_make_one_segment_end_to_end():
     assert seg.thickness[0] == pytest.approx(0.003 * math.cos(math.atan(0.5)), rel=0.3)
     direction = (seg.end - seg.start)[0]
     assert abs(direction[1] / direction[0] - 0.5) < 0.02
-    assert seg.hits[0] == 1
+    assert seg.hits[0] == 200  # its returns
 
 
 def test_a_corner_is_split_until_each_cell_holds_one_line():
@@ -57,19 +57,72 @@ def test_a_corner_is_split_until_each_cell_holds_one_line():
     assert ((seg.thickness <= 0.005 + 1e-9) | (lengths <= 0.04 * math.sqrt(2))).all()
     assert (seg.thickness > 0.005).sum() == 1
     assert lengths.sum() == pytest.approx(2.0, abs=0.15)
-    # Cells over the corner's two legs hold returns of both positions only near the corner.
-    assert seg.hits.max() == 2 and (seg.hits == 1).sum() > (seg.hits == 2).sum()
+    # Every return lies on one segment.
+    assert seg.hits.sum() == corner.shape[0]
 
 
-def test_seen_through_counts_positions_whose_beams_passed_in_front_of_their_return():
-    poses = np.array([[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, math.pi]])
-    ranges = np.full((2, 360), 3.0)  # both see 3 m all round
-    middle = np.array([[1.0, 0.0], [2.95, 0.0], [-2.0, 0.0], [5.0, 0.0]])
-    counts = seen_through(middle, poses, ranges, margin=0.1, reach=8.0)
-    # 1 m in front of both walls: both saw through; 5 cm in front of the 3 m return: neither;
-    # 5 m away: past both returns.
-    assert counts.tolist() == [2, 0, 2, 0]
-    assert seen_through(middle, poses, ranges, margin=0.1, reach=0.5).tolist() == [0, 0, 0, 0]
+def test_free_in_bands_is_the_length_of_free_beams_inside_each_band():
+    # One position at the origin seeing 3 m all round in 720 bins; walls 10 cm long across
+    # the x axis. The band of one at 1 m is 4 cm deep (half-width 2 cm) and 14 cm long (2 cm
+    # past each end): about 16 beams cross it, 4 cm each.
+    poses = np.array([[0.0, 0.0, 0.0, 0.0]])
+    ranges = np.full((1, 720), 3.0)
+    x = np.array([1.0, 2.95, -2.0, 5.0])
+    start, end = np.column_stack([x, np.full(4, -0.05)]), np.column_stack([x, np.full(4, 0.05)])
+
+    def free(reach=8.0, thickness=0.0):
+        return free_in_bands(start, end, np.full(4, thickness), poses, ranges, margin=0.1, reach=reach,
+                             half_width=0.02, spacing=0.1)
+
+    # Each beam's chord through the band at 1 m, summed over the 720 beams, for the first:
+    angle = -math.pi + (np.arange(720) + 0.5) * 2 * math.pi / 720
+    y_at = np.tan(angle) * 0.98, np.tan(angle) * 1.02
+    inside = (np.cos(angle) > 0) & (np.abs(y_at[0]) <= 0.07) & (np.abs(y_at[1]) <= 0.07)
+    chords = 0.04 / np.cos(angle[inside])
+    assert chords.sum() == pytest.approx(0.64, abs=0.04)
+    got = free()
+    # The band's area over the beams' spacing:
+    assert got[0] == pytest.approx(0.14 * 0.04 / (2 * math.pi / 720), rel=0.01)
+    assert got[0] == pytest.approx(chords.sum(), rel=0.1)
+    # 5 cm in front of the 3 m return the beams are not free (10 cm margin); 2 m behind the
+    # position they are, over a band 2 m away (half as many beams); 5 m away, past the returns.
+    assert got[1] == 0.0 and got[3] == 0.0
+    assert got[2] == pytest.approx(got[0] / 2.0, rel=0.01)
+    # Beyond the reach nothing is free; a thicker wall's band is its thickness either side.
+    assert free(reach=0.5).tolist() == [0.0] * 4
+    assert free(thickness=0.04)[0] == pytest.approx(2.0 * got[0], rel=0.01)
+
+
+def test_a_wall_the_beams_pass_through_is_trusted_by_its_share_of_returns():
+    from occtool.fuse._refit import wall_trust
+    from occtool.fuse._sightings import RunReturns
+    from occtool.observation import BIN_CENTRE
+
+    # Ten scans from the origin, every beam ahead returning from a wall across x = 2 m; in
+    # four of them a person 10 cm wide stands at 1 m, and in the six others those beams pass
+    # where the person stood.
+    angle = -math.pi + (np.arange(720) + 0.5) * 2 * math.pi / 720
+    ahead = np.cos(angle) > 0.5
+    ranges = np.zeros((10, 720))
+    ranges[:, ahead] = 2.0 / np.cos(angle[ahead])
+    person = ahead & (np.abs(np.tan(angle)) <= 0.05)
+    ranges[:4, person] = 1.0 / np.cos(angle[person])
+    run = RunReturns(np.zeros((10, 4)), ranges, ranges > 0, np.full(ranges.shape, BIN_CENTRE, dtype=np.uint8),
+                     scanning_laser=True)
+    points, owner = run.return_points(16.0)
+    segments = fit_segments(points, owner, owner_positions=run.poses[:, :2])
+    trust = wall_trust(segments, run, 8.0)
+    at_person = np.abs(segments.middle[:, 0] - 1.0) < 0.01
+    assert at_person.sum() == 1 and segments.hits[at_person][0] == 4 * person.sum() == 48
+    # The six scans' beams through the person's band (its 10 cm and 2 cm past each end, by
+    # 4 cm, at 1 m; the beams 0.5 degree apart) are free over its area over their spacing,
+    # a free point every 0.1 m of them.
+    length = float(np.hypot(*(segments.end - segments.start)[at_person][0]))
+    assert length == pytest.approx(0.1, abs=0.01)
+    free_points = 6 * (length + 0.04) * 0.04 / (2 * math.pi / 720) / 0.1
+    assert trust[at_person][0] == pytest.approx(48 / (48 + free_points), rel=0.01)
+    # The wall at 2 m: no beam passes it free (each ends at its return).
+    assert np.all(trust[~at_person] == 1.0)
 
 
 def test_a_wall_seen_from_one_side_faces_it():
@@ -423,6 +476,17 @@ def test_the_room_log_walls_free_inside_unknown_behind(room_map):
     assert (world.facing != 0).mean() > 0.9
     assert fused.scanning_laser and build_world_map(fused, sightings=None).facing.any()
     assert not build_world_map(fused, sightings=None, one_sided=False).facing.any()
+    # A laser's map takes the Nav2 shares chosen for its trust; another sensor's keeps the old.
+    from occtool.fuse._refit import NAV2_DOUBTED_SHARE, NAV2_WALL_SHARE
+    from occtool.fuse._world import DOUBTED_TRUST, WALL_SHARE
+
+    assert (world.wall_share, world.doubted_share) == (NAV2_WALL_SHARE, NAV2_DOUBTED_SHARE) == (0.15, 0.05)
+    fused.scanning_laser = False  # the module's fixture: put back below
+    try:
+        other = build_world_map(fused, sightings=None)
+    finally:
+        fused.scanning_laser = True
+    assert (other.wall_share, other.doubted_share) == (WALL_SHARE, DOUBTED_TRUST) == (0.5, 0.3)
     near = np.array([[x1 - 0.08, 0.3, 0.0], [x1 + 0.08, 0.3, 0.0]])
     assert np.diff(world.predict(near))[0] > 0.2
     # Far smaller than the fused map it came from, and than a 0.1 m byte grid of its extent.
@@ -575,6 +639,41 @@ def test_a_lasers_every_beam_places_walls_a_cameras_cloud_its_nearest_per_degree
     assert run.scanning_laser and not dense.scanning_laser
 
 
+def test_a_position_of_several_scans_gives_each_scans_nearest_returns_from_its_own_sensor():
+    """returns_of_positions: a position gathering two scans (io's group_scans) gives a row for
+    each, placed at its own sensor: the wall one scan saw behind the person the other saw is
+    kept."""
+    from occtool.features import Features, Pose, Position
+    from occtool.fuse import returns_of_positions
+
+    robot = Robot()
+    z = 0.5 * sum(robot.body_band)
+    beams = np.radians(np.arange(-90.0, 90.0, 0.5) + 0.25)
+    # The position's frame: its pose at (1, 2) facing +y. Scan A from its origin sees a wall
+    # 3 m ahead; scan B, 0.2 m ahead of it (x in the position's frame), a person 1 m ahead of
+    # its own sensor within 5 degrees.
+    wall = np.column_stack([3.0 * np.cos(beams), 3.0 * np.sin(beams), np.full(beams.size, z)])
+    near = np.abs(beams) < np.radians(5.0)
+    person = np.column_stack([0.2 + np.cos(beams[near]), np.sin(beams[near]), np.full(near.sum(), z)])
+    position = Position(0, Features(np.vstack([wall, person]), np.full(beams.size + near.sum(), 0.9)),
+                        pose=Pose(1.0, 2.0, 0.0, math.pi / 2),
+                        scan_origins=np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]]),
+                        scan_sizes=np.array([beams.size, near.sum()]))
+    run = returns_of_positions([position], robot)
+    assert len(run) == 2
+    assert np.allclose(run.poses, [[1.0, 2.0, 0.0, math.pi / 2], [1.0, 2.2, 0.0, math.pi / 2]])
+    assert run.returned[0].sum() == beams.size and np.allclose(run.ranges[0][run.returned[0]], 3.0, atol=1e-3)
+    assert run.returned[1].sum() == near.sum() and np.allclose(run.ranges[1][run.returned[1]], 1.0, atol=1e-3)
+    # Each return where it was: the person 1.2 m ahead of the position (+y), the wall 3 m.
+    points, owner = run.return_points(16.0)
+    assert np.allclose(points[owner == 1], [1.0, 3.2], atol=0.1)
+    assert np.allclose(np.hypot(*(points[owner == 0] - [1.0, 2.0]).T), 3.0, atol=1e-3)
+    # The position as one scan: the person hides the wall behind it.
+    alone = returns_of_positions([Position(0, position.features, pose=position.pose)], robot)
+    assert len(alone) == 1 and alone.returned[0].sum() == beams.size
+    assert (alone.ranges[0][alone.returned[0]] < 2.0).sum() > near.sum() // 2
+
+
 @pytest.mark.parametrize("facing", [0, 1, -1])
 def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_them(facing):
     """Safety of the trinary cells: a free cell is observed, at most RASTER_FREE, farther
@@ -604,6 +703,34 @@ def test_the_nav2_raster_is_free_only_clear_of_trusted_walls_and_occupied_on_the
     # drawn, unknown on its line, free 10 cm off it, away from the other.
     row, col, _ = raster.cell_of([[2.2, 1.0], [2.1, 1.0]])
     assert raster.cells[row, col].tolist() == [UNKNOWN, FREE]
+
+
+def test_the_nav2_rasters_shares_are_the_maps_own_and_a_file_without_them_keeps_its_old_ones(tmp_path):
+    """WorldMap.wall_share and doubted_share: a wall of trust 0.2 is drawn at a share of 0.15,
+    only doubted (its line unknown) at 0.5 with a doubted share of 0.1, and free at 0.3 (the
+    share files kept before doubted_share, which a file without it reads)."""
+    from occtool.fuse._world import DOUBTED_TRUST
+
+    region = shapely.MultiPolygon([shapely.box(0.0, 0.0, 3.0, 2.0)])
+
+    def on_the_wall(**shares):
+        world = WorldMap([[1.5, 0.0]], [[1.5, 2.0]], [0.01], [0.2], region, band=BAND, positions=[[0.5, 1.0]],
+                         **shares).quantised()
+        raster = world.rasterise(0.05)
+        row, col, _ = raster.cell_of([[1.5, 1.0]])
+        return int(raster.cells[row[0], col[0]]), world
+
+    assert on_the_wall(wall_share=0.15, doubted_share=0.05)[0] == OCCUPIED
+    assert on_the_wall(wall_share=0.5, doubted_share=0.1)[0] == UNKNOWN
+    cell, world = on_the_wall()
+    assert cell == FREE and world.doubted_share == DOUBTED_TRUST == 0.3
+    # The header keeps the shares; one without doubted_share (files before it) reads 0.3.
+    world.doubted_share = 0.05
+    world.save(tmp_path / "w.occmap")
+    assert load_map(tmp_path / "w.occmap").doubted_share == 0.05
+    assert b"doubted_share" not in (FIXTURES / "maps" / "intel.occmap").read_bytes()
+    old = load_map(FIXTURES / "maps" / "intel.occmap")
+    assert old.doubted_share == DOUBTED_TRUST and old.wall_share == 0.5
 
 
 @pytest.mark.parametrize("name", ["intel", "fr079"])

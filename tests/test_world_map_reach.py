@@ -97,6 +97,32 @@ def test_walls_seen_only_from_afar_are_added_and_nearer_walls_kept():
     assert _with_far_walls(segments, run, near, 16.0, 30.0, True, fit) is segments
 
 
+@pytest.mark.parametrize("block", [1, 7, 1 << 18])
+def test_far_returns_checked_a_block_of_near_returns_at_a_time_are_those_of_one_tree(monkeypatch, block):
+    """The far returns within FAR_WALL_GAP of a near one are found a block of near returns
+    at a time (FAR_TREE_RETURNS): the same far walls as one tree of them all."""
+    from occtool.fuse import _refit
+
+    fit = {"cell": 0.64, "max_thickness": 0.03, "min_returns": 3}
+    # A wall 20 m from the origin and 3.5 m from a second position, which places it: the
+    # origin's far returns on it are dropped; another 25 m from the origin, which only it
+    # saw: its far returns make walls.
+    run = _wall_returns([[0.0, 0.0, 0.0, 0.0], [16.5, 3.0, 0.0, 0.0]], 20.0)
+    extra = _wall_returns([[0.0, 0.0, 0.0, 0.0]], 25.0)
+    run = RunReturns(np.vstack([run.poses, extra.poses]), np.vstack([run.ranges, extra.ranges]),
+                     np.vstack([run.returned, extra.returned]), np.vstack([run.offsets, extra.offsets]),
+                     scanning_laser=True)
+    near, owner = run.return_points(16.0)
+    segments = fit_segments(near, owner, viewpoints=run.poses[owner, :2], **fit)
+    whole = _with_far_walls(segments, run, near, 16.0, 30.0, True, fit)
+    monkeypatch.setattr(_refit, "FAR_TREE_RETURNS", block)
+    blocks = _with_far_walls(segments, run, near, 16.0, 30.0, True, fit)
+    added = whole.middle[len(segments):]
+    assert len(added) > 0 and np.allclose(added[:, 0], 25.0, atol=0.05) and len(blocks) == len(whole)
+    for field in ("start", "end", "thickness", "hits", "facing"):
+        assert np.array_equal(getattr(blocks, field), getattr(whole, field))
+
+
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**16), gap=st.sampled_from([0.01, 0.05, 0.2, 5.0]))
 def test_a_region_simplified_a_group_of_polygons_at_a_time_is_simplified_whole(seed, gap):

@@ -1,6 +1,6 @@
 """Refitting a run into its world map (:func:`build_world_map`): walls fitted to the returns,
-trusted by the beams that saw through them, over the region the positions observed
-(:mod:`occtool.fuse._world` says what the map is)."""
+trusted by their share of returns among what the beams sampled in their bands, over the
+region the positions observed (:mod:`occtool.fuse._world` says what the map is)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,37 @@ from numpy.typing import NDArray
 from occtool.errors import InputError
 from occtool.formats.occmap import quantise_region
 from occtool.fuse._sightings import RunReturns, returns_of_fused
-from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, seen_through
+from occtool.fuse._walls import CELL, MAX_THICKNESS, MIN_RETURNS, Segments, fit_segments, free_in_bands
 from occtool.fuse._world import WorldMap, extent
 from occtool.limits import release_free_memory
 
 FloatArray = NDArray[np.float64]
 
-#: A beam passing a segment's middle more than this in front of its own return saw through it (metres).
+#: A beam is free up to this before its own return where it passes a wall's band (metres).
 THROUGH_MARGIN = 0.1
+
+#: A wall's trust is a counting model over its band: its returns' share among them and the
+#: points its beams' free parts inside the band would hold every FREE_STEP metres (the
+#: held-out scorers' spacing of free points); the band is the wall's line widened to
+#: BAND_HALF_WIDTH either side (or its thickness) and lengthened by it past each end, and
+#: measured at points BAND_SPACING apart (:func:`occtool.fuse._walls.free_in_bands`).
+#: Chosen on inner splits of the training scans (docs/figures.md, 2026-12-05): half-width
+#: 0.01 / **0.02** / 0.03 m, step 0.05 / **0.1** / 0.2 m.
+FREE_STEP = 0.1
+BAND_HALF_WIDTH = 0.02
+BAND_SPACING = 0.1
+
+#: The Nav2 raster of a scanning laser's map draws the walls of at least this trust and keeps
+#: the rims of those of at least NAV2_DOUBTED_SHARE (:attr:`WorldMap.wall_share`,
+#: :attr:`WorldMap.doubted_share`): the trust above is lower than the positions' share that
+#: maps kept before it (a wall the beams graze is passed along its band), chosen on the same
+#: inner splits for the trinary map's AUC with no more held-out returns on its free cells
+#: than before (docs/figures.md). Other sensors' maps keep the shares chosen before
+#: (:data:`occtool.fuse._world.WALL_SHARE`, :data:`occtool.fuse._world.DOUBTED_TRUST`): on
+#: the depth frames of fixtures/tum-fr3-cabinet mapped in 2D these would take 22 % of the
+#: free floor (3,058 free cells against 3,935 before; 4,292 with the shares before).
+NAV2_WALL_SHARE = 0.15
+NAV2_DOUBTED_SHARE = 0.05
 
 #: Returns no farther than this from their position place walls (metres).
 WALL_REACH = 16.0
@@ -32,6 +55,8 @@ FAR_WALL_REACH = 50.0
 #: run saw only from afar (ACES seed 1, docs/figures.md), fitted on their own so that the
 #: nearer walls stay as they were (at 0.3 m they lowered ACES seed 0's held-out AUC).
 FAR_WALL_GAP = 2.0
+#: Near returns indexed at once when the far returns are checked against them.
+FAR_TREE_RETURNS = 1 << 18
 
 #: Beams see through walls no farther than this from their position, and the Nav2 raster
 #: calls observed space free no farther than this from a position (metres): a far beam's
@@ -152,18 +177,33 @@ def _with_far_walls(segments: Segments, run: RunReturns, near: FloatArray, reach
         high = low + _FAR_AT_ONCE
         far[low:high] = np.hypot(*(points[low:high] - run.poses[owner[low:high], :2]).T) > reach
     if far.any() and near.shape[0]:
-        # The near returns are not copied into the tree (campus x10: 2.7 M of them, 41 MB).
-        tree = cKDTree(np.ascontiguousarray(near), copy_data=False)
-        for low in blocks:
-            chosen = low + np.flatnonzero(far[low:low + _FAR_AT_ONCE])
-            far[chosen] = np.isinf(tree.query(points[chosen], distance_upper_bound=FAR_WALL_GAP)[0])
-        del tree
+        # A tree of a block of the near returns at a time, not copied into it (every scan's
+        # returns: 1.5 M on FR-079, 50 MB in one tree): a far return is near one when a
+        # block's is within the gap, and only those still alone are asked of the next block.
+        near = np.ascontiguousarray(near)
+        for start in range(0, near.shape[0], FAR_TREE_RETURNS):
+            tree = cKDTree(near[start:start + FAR_TREE_RETURNS], copy_data=False)
+            for low in blocks:
+                chosen = low + np.flatnonzero(far[low:low + _FAR_AT_ONCE])
+                if chosen.size:
+                    far[chosen] = np.isinf(tree.query(points[chosen], distance_upper_bound=FAR_WALL_GAP)[0])
+            del tree
     if not far.any():
         return segments
     points, owner = points[far], owner[far]
     extra = fit_segments(points, owner, owner_positions=run.poses[:, :2] if one_sided else None, **fit)
     return Segments(*(np.concatenate([getattr(segments, f), getattr(extra, f)])
                       for f in ("start", "end", "thickness", "hits", "facing")))
+
+
+def wall_trust(segments: Segments, run: RunReturns, reach: float) -> FloatArray:
+    """Each segment's trust: the share of its returns among them and the free points its band
+    holds, the beams of ``run`` up to ``reach`` inside it every :data:`FREE_STEP` metres up to
+    :data:`THROUGH_MARGIN` before their own return (:func:`occtool.fuse._walls.free_in_bands`):
+    the counting model of a grid whose cells are the walls' bands."""
+    free = free_in_bands(segments.start, segments.end, segments.thickness, run.poses, run.ranges,
+                         margin=THROUGH_MARGIN, reach=reach, half_width=BAND_HALF_WIDTH, spacing=BAND_SPACING)
+    return np.asarray(segments.hits / np.maximum(segments.hits + free / FREE_STEP, 1e-12), dtype=np.float64)
 
 
 def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: float = CELL,
@@ -176,13 +216,15 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
 
     ``sightings`` is what every position of the run saw (:func:`returns_of_positions`; by
     default ``fused``'s own positions, :func:`returns_of_fused`): the walls are fitted to
-    its returns and its beams see through them; the observed region is swept by ``fused``'s
+    its returns and its beams measure their trust; the observed region is swept by ``fused``'s
     positions (a :class:`FusedMap`), which hold the run's local models.
     The walls are fitted to the returns no farther than ``reach`` from their position
     (:func:`occtool.fuse._walls.fit_segments`
     with ``cell``, ``max_thickness`` and ``min_returns``), and apart from them to the returns
     up to ``far_reach`` that lie farther than :data:`FAR_WALL_GAP` from all of those (walls
-    the run saw only from afar); the beams up to ``region_reach`` see through them. The
+    the run saw only from afar); each is trusted by its returns' share among them and its
+    band's free points, the beams' free parts up to ``region_reach`` inside it every
+    :data:`FREE_STEP` metres (:func:`occtool.fuse._walls.free_in_bands`). The
     beams up to ``observed_reach`` sweep the observed region, those up to ``region_reach``
     the part of it the Nav2 raster may call free (:attr:`WorldMap.free_region`, kept in
     memory, not in the file; the file keeps ``region_reach`` as :attr:`WorldMap.free_reach`);
@@ -211,8 +253,7 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
         segments = _with_far_walls(segments, run, points, reach, far_reach, one_sided, fit)
     del points  # a large run's returns: not held through the unions below
     release_free_memory()
-    through = seen_through(segments.middle, run.poses, run.ranges, margin=THROUGH_MARGIN, reach=region_reach)
-    trust = segments.hits / np.maximum(segments.hits + through, 1)
+    trust = wall_trust(segments, run, region_reach)
     own = run if sightings is None else returns_of_fused(fused)
     regions = [_observed_region(own.ranges, own.poses, r, simplify)
                for r in (observed_reach, min(region_reach, observed_reach))]
@@ -220,8 +261,10 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
 
     low, high = fused.robot.body_band
     z0 = float(np.median(fused._pose_array[:, 2]))
+    shares = {"wall_share": NAV2_WALL_SHARE, "doubted_share": NAV2_DOUBTED_SHARE} if run.scanning_laser else {}
     world = WorldMap(segments.start, segments.end, segments.thickness, trust, regions[0], band=(z0 + low, z0 + high),
-                     positions=own.poses[:, :2], facing=segments.facing, **{"free_reach": region_reach, **params})
+                     positions=own.poses[:, :2], facing=segments.facing,
+                     **{"free_reach": region_reach, **shares, **params})
     # Rounded to the file's precision now, so that the map written is the map used.
     world = world.quantised()
     # The Nav2 raster's free space: the region the beams swept within region_reach, as
@@ -235,5 +278,6 @@ def build_world_map(fused: Any, *, sightings: RunReturns | None = None, cell: fl
     return world
 
 
-__all__ = ["FAR_WALL_GAP", "FAR_WALL_REACH", "OBSERVED_REACH", "REGION_REACH", "THROUGH_MARGIN", "WALL_REACH",
-           "build_world_map"]
+__all__ = ["BAND_HALF_WIDTH", "BAND_SPACING", "FAR_WALL_GAP", "FAR_WALL_REACH", "FREE_STEP", "NAV2_DOUBTED_SHARE",
+           "NAV2_WALL_SHARE", "OBSERVED_REACH", "REGION_REACH", "THROUGH_MARGIN", "WALL_REACH", "build_world_map",
+           "wall_trust"]

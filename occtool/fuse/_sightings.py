@@ -34,7 +34,8 @@ SIGHTING_BINS = 720
 class RunReturns:
     """What every position of a run saw, per pan bin: the world frame's input to :func:`build_world_map`.
 
-    ``poses`` ``(P, 4)`` x, y, z, yaw; ``ranges`` ``(P, bins)`` the horizontal distance to
+    ``poses`` ``(P, 4)`` x, y, z, yaw of each viewpoint (a position, or each scan of one that
+    gathers several: :func:`returns_of_positions`); ``ranges`` ``(P, bins)`` the horizontal distance to
     each bin's nearest return, or where the bin has none how far the position saw (its
     farthest free ray, or a model's reach; 0 where it saw nothing): an array, or the uint16 it
     is made of (:class:`StoredRanges`, as :func:`returns_of_positions` and
@@ -100,7 +101,11 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
     not: their nearest returns in each of ``bins`` pan bins
     (:func:`occtool.observation.nearest_returns` at ``level``) and their reach
     (:func:`occtool.observation.observed_reach`). A run's keyframes are a share of its
-    positions; the others' returns still place walls. ``bins=None``: :data:`SIGHTING_BINS`
+    positions; the others' returns still place walls. A position that gathers several scans
+    (:attr:`occtool.features.Position.scan_origins`) gives a row for each, measured from the
+    scan's own sensor: every scan's nearest returns, not only the position's (a robot standing
+    still while people pass by keeps the walls behind them; FR-079's 4,311 training scans are
+    1,342 positions, docs/figures.md). ``bins=None``: :data:`SIGHTING_BINS`
     for a scanning laser's positions, the return guard's one a degree for denser clouds
     (:data:`LASER_RETURNS_PER_DEGREE`)."""
     from occtool.guard import GUARD_BINS
@@ -111,16 +116,56 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
     laser = is_scanning_laser([returns_per_degree(p.features, robot, level) for p in positions])
     if bins is None:
         bins = SIGHTING_BINS if laser else GUARD_BINS
-    returns, offsets, reaches = [], [], []
-    for item in positions:  # a loop over positions, each vectorised over its features
-        nearest, offset = nearest_returns(item.features, robot, level=level, bins=bins)
-        returns.append(nearest)
-        offsets.append(offset)
+    rows = sum(len(_scans(item)) for item in positions)
+    returns = np.empty((rows, bins), dtype=np.uint16)
+    offsets = np.empty((rows, bins), dtype=np.uint8)
+    poses = np.empty((rows, 4))
+    reaches, of_position = [], np.empty(rows, dtype=np.intp)
+    row = 0
+    for k, item in enumerate(positions):  # a loop over scans, each vectorised over its features
+        # How far the position saw, where a scan's bin holds no return (its scans' origins
+        # lie within the grouping's tolerance, a few decimetres, of the position's).
         reaches.append(observed_reach(item.features, robot, focus_range))
-    poses = np.array([[p.pose.x, p.pose.y, p.pose.z, p.pose.yaw] for p in positions], dtype=np.float64)
-    stacked = np.stack(returns)
-    return RunReturns(poses, StoredRanges(stacked, np.stack(reaches)), stacked != NO_OBSTACLE, np.stack(offsets),
+        for pose, features in _scans_of(item):
+            returns[row], offsets[row] = nearest_returns(features, robot, level=level, bins=bins)
+            poses[row] = pose.x, pose.y, pose.z, pose.yaw
+            of_position[row] = k
+            row += 1
+    # Each scan's row reads its position's reaches (a tenth of its returns' bytes).
+    return RunReturns(poses, StoredRanges(returns, np.stack(reaches)[of_position]), returns != NO_OBSTACLE, offsets,
                       scanning_laser=laser)
+
+
+def _scans(position: Any) -> NDArray[np.int64]:
+    """How many features each scan of a position holds (:attr:`occtool.features.Position.scan_sizes`;
+    one scan of them all when it keeps none)."""
+    sizes = getattr(position, "scan_sizes", None)
+    count = position.features.points.shape[0]
+    if getattr(position, "scan_origins", None) is None or sizes is None or int(np.sum(sizes)) != count:
+        return np.array([count], dtype=np.int64)
+    return np.asarray(sizes, dtype=np.int64)
+
+
+def _scans_of(position: Any) -> Any:
+    """``(pose, features)`` of each scan a position gathers, measured from its own sensor
+    (:attr:`occtool.features.Position.scan_origins`; the position's yaw), or the position's
+    own when it holds one scan."""
+    from occtool.features import Features, Pose
+
+    sizes = _scans(position)
+    features, pose = position.features, position.pose
+    if sizes.size == 1:
+        yield pose, features
+        return
+    origins = position.scan_origins
+    ends = np.cumsum(sizes)
+    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+    for origin, end, size in zip(np.asarray(origins, dtype=np.float64), ends, sizes):
+        points = features.points[end - size:end] - origin
+        kept = (np.abs(points) > 0.0).any(axis=1)  # a point at the scan's own sensor has no direction
+        yield (Pose(pose.x + c * origin[0] - s * origin[1], pose.y + s * origin[0] + c * origin[1], pose.z + origin[2],
+                    pose.yaw),
+               Features(points[kept], features.evidence[end - size:end][kept]))
 
 
 def position_ranges(fused: Any) -> FloatArray:

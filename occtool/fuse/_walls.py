@@ -10,9 +10,10 @@ returned from it and, given where each return was seen from, the side it was see
 scattered behind its line meet no free beam there). Everything is done on every cell at
 once: a few passes of ``np.unique`` and ``np.bincount``, no loop over points.
 
-:func:`seen_through` counts, per segment, the positions whose beams passed its middle
-well before their own return: a wall many positions saw through was not there for long
-(people, doors), and the map trusts it less.
+:func:`free_in_bands` measures, per segment, how much of the positions' beams passed
+through its band well before their own return: a wall the beams often passed through was
+not there for long (people, doors), and the map trusts it less: a counting model whose
+cells are the segments' bands.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ FACING_SHARE = 0.9
 class Segments:
     """Line pieces in the world frame: ``start``, ``end`` ``(S, 2)`` metres, ``thickness``
     ``(S,)`` (the returns' standard deviation across the line), ``hits`` ``(S,)`` (the
-    positions whose returns lie on it) and ``facing`` ``(S,)``: +1 when its returns were
+    returns it was fitted to) and ``facing`` ``(S,)``: +1 when its returns were
     seen from the left of start -> end (the side of the normal ``(-dy, dx)``), -1 from the
     right, 0 from both or unknown."""
 
@@ -116,7 +117,6 @@ def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: Flo
         empty = np.zeros((0, 2))
         return Segments(empty, empty.copy(), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int8))
     origin = points.min(axis=0)
-    owners = int(owner.max()) + 1
     column = np.floor((points[:, 0] - origin[0]) / cell)
     stripes = _stripes(np.bincount(column.astype(np.int64)), STRIPE_RETURNS)
     by_side: dict[int, list[tuple[NDArray[np.generic], ...]]] = {}
@@ -124,7 +124,7 @@ def fit_segments(points: FloatArray, owner: NDArray[np.intp], *, viewpoints: Flo
         taken = slice(None) if len(stripes) == 1 else np.flatnonzero((column >= low) & (column < high))
         sights = (viewpoints[taken] if viewpoints is not None else
                   owner_positions[owner[taken]] if owner_positions is not None else None)
-        for depth, fields in _fit_cells(points[taken], owner[taken], sights, origin, owners, cell=float(cell),
+        for depth, fields in _fit_cells(points[taken], sights, origin, cell=float(cell),
                                         min_cell=min_cell, max_thickness=max_thickness, min_returns=min_returns,
                                         facing_share=facing_share):
             by_side.setdefault(depth, []).append(fields)
@@ -147,8 +147,8 @@ def _stripes(counts: NDArray[np.int64], most: int) -> list[tuple[int, int]]:
     return stripes
 
 
-def _fit_cells(points: FloatArray, owner: NDArray[np.int64], viewpoints: FloatArray | None, origin: FloatArray,
-               owners: int, *, cell: float, min_cell: float, max_thickness: float, min_returns: int,
+def _fit_cells(points: FloatArray, viewpoints: FloatArray | None, origin: FloatArray, *, cell: float,
+               min_cell: float, max_thickness: float, min_returns: int,
                facing_share: float) -> list[tuple[int, tuple[NDArray[np.generic], ...]]]:
     """:func:`fit_segments` of the returns of whole cells of side ``cell`` from ``origin``:
     for each side (0 the first, ``cell``) that made segments, their start, end, thickness,
@@ -181,12 +181,11 @@ def _fit_cells(points: FloatArray, owner: NDArray[np.int64], viewpoints: FloatAr
             np.maximum.at(high, c, along)
             centre = np.column_stack([mx[rows], my[rows]])
             axis = np.column_stack([ux[rows], uy[rows]])
-            pairs = np.unique(c * owners + owner[pending[taken]])
             sides = _facing(q, viewpoints[pending[taken]] if viewpoints is not None else None,
                             ux[w], uy[w], c, rows.size, facing_share)
             sides[high - low <= 1e-9] = 0  # a dot has no line to face from
             out.append((depth, (centre + low[:, None] * axis, centre + high[:, None] * axis, spread[rows],
-                                np.bincount(pairs // owners, minlength=rows.size).astype(np.int64),
+                                count[rows].astype(np.int64),
                                 sides.astype(np.int8))))
         pending = pending[~taken]
         side /= 2.0
@@ -209,23 +208,41 @@ def _facing(returns: FloatArray, viewpoints: FloatArray | None, ux: FloatArray, 
     return out
 
 
-def seen_through(middle: FloatArray, poses: FloatArray, distances: Any, *, margin: float,
-                 reach: float) -> NDArray[np.int64]:
-    """How many positions saw through each of the world points ``middle`` ``(S, 2)``.
+def free_in_bands(start: FloatArray, end: FloatArray, thickness: FloatArray, poses: FloatArray,
+                  distances: Any, *, margin: float, reach: float, half_width: float,
+                  spacing: float) -> FloatArray:
+    """Metres of the positions' free beams inside each segment's band.
 
-    ``poses`` ``(P, 4)`` are x, y, z, yaw; ``distances`` ``(P, bins)`` (an array, or
-    :class:`occtool.fuse._sightings.StoredRanges`, read a block of rows at a time) each position's range
-    per pan bin (its nearest return, or how far it saw where it had none; 0 where it saw
-    nothing). A point is seen through by a position when it lies in the position's pan bin
-    more than ``margin`` in front of that bin's range, and no farther than ``reach``.
+    A segment's band is its line widened to ``half_width`` or its ``thickness`` either side,
+    whichever is more, and lengthened by ``half_width`` past each end. ``poses`` ``(P, 4)``
+    are x, y, z, yaw; ``distances`` ``(P, bins)`` (an array, or
+    :class:`occtool.fuse._sightings.StoredRanges`, read a block of rows at a time) each position's
+    range per pan bin (its nearest return, or how far it saw where it had none; 0 where it saw
+    nothing). A beam is
+    free up to ``margin`` before its range, and no farther than ``reach``.
+
+    Summed over a position's beams, the length of their free parts inside a small area is
+    the area over the beams' spacing there (``distance * 2 pi / bins``); each band is
+    measured so at points no more than ``spacing`` apart along it (each standing for its
+    share of the band's area), each counted where its own bin's beam passed it free.
     """
     from scipy.spatial import cKDTree
 
-    counts = np.zeros(middle.shape[0], dtype=np.int64)
-    if middle.shape[0] == 0:
-        return counts
-    index = cKDTree(middle)
+    vector = end - start
+    length = np.hypot(vector[:, 0], vector[:, 1])
+    axis = vector / np.maximum(length, 1e-12)[:, None]
+    along, width = length + 2.0 * half_width, 2.0 * np.maximum(thickness, half_width)
+    parts = np.maximum(np.ceil(along / spacing - 1e-9).astype(np.int64), 1)
+    owner = np.repeat(np.arange(start.shape[0]), parts)
+    step = np.arange(owner.size) - np.repeat(np.cumsum(parts) - parts, parts)
+    offset = ((step + 0.5) / parts[owner] - 0.5) * along[owner]
+    points = 0.5 * (start + end)[owner] + offset[:, None] * axis[owner]
     bins = distances.shape[1]
+    # Sum over the positions that passed each point of 1 / distance (the beams' spacing there).
+    inverse = np.zeros(points.shape[0])
+    if points.shape[0] == 0:
+        return inverse
+    index = cKDTree(points)
     block = np.zeros((0, bins))
     for k in range(poses.shape[0]):  # a loop over positions, each vectorised over its points
         if k % _POSITIONS_AT_ONCE == 0:  # the distances read a block of positions at a time
@@ -238,10 +255,13 @@ def seen_through(middle: FloatArray, poses: FloatArray, distances: Any, *, margi
         near = np.asarray(index.query_ball_point((x, y), far), dtype=np.intp)
         if near.size == 0:
             continue
-        dx, dy = middle[near, 0] - x, middle[near, 1] - y
+        dx, dy = points[near, 0] - x, points[near, 1] - y
         c, s = math.cos(yaw), math.sin(yaw)
         alpha = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
         b = np.clip(np.floor((alpha + math.pi) / (2.0 * math.pi) * bins).astype(np.intp), 0, bins - 1)
-        through = np.hypot(dx, dy) < np.minimum(row[b], reach) - margin
-        counts[near[through]] += 1
-    return counts
+        distance = np.hypot(dx, dy)
+        passed = distance < np.minimum(row[b], reach) - margin
+        inverse[near[passed]] += 1.0 / np.maximum(distance[passed], margin)
+    area = (along * width / parts)[owner]
+    free = np.bincount(owner, inverse * area * (bins / (2.0 * math.pi)), minlength=start.shape[0]).astype(np.float64)
+    return free

@@ -9,10 +9,10 @@ models observed into one world-frame function of a few kilobytes:
   ``MIN(p_s, p_s - k_s (u - t_s), p_s + k_s (u + t_s), p_s - k_s (v - l_s), p_s + k_s (v + l_s))``
   with ``u``, ``v`` the point's offsets across and along the segment from its middle
   (each linear in world x, y), ``t_s`` its thickness, ``l_s`` its half-length,
-  ``k_s = p_s / WIDTH`` and ``p_s`` the share of positions that returned from it among
-  those that returned from it or saw through it (:func:`occtool.fuse._walls.seen_through`),
-  lifted to ``[0.5, 1]``: a MIN node over five linear pieces, the paper's form in world
-  coordinates. A segment seen from one side only (its *facing*) falls over
+  ``k_s = p_s / WIDTH`` and ``p_s`` its trust, the share of its returns among them and
+  the points the beams' free parts inside its band hold every 0.1 m
+  (:func:`occtool.fuse._refit.wall_trust`), lifted to ``[0.5, 1]``: a MIN node over five
+  linear pieces, the paper's form in world coordinates. A segment seen from one side only (its *facing*) falls over
   :data:`FRONT_WIDTH` on that side and :data:`BACK_WIDTH` behind: every free beam near it
   came from the front, and the returns its positions' pose errors scatter lie on both;
 * **the observed region**: the union of what each local model saw (its rays up to its
@@ -79,17 +79,20 @@ WALL_HALF_WIDTH = 0.025
 #: inner splits, docs/map.md).
 WALL_RIM = 0.125
 #: ... nor this near a *doubted* wall (metres, past its thickness): one not trusted, but
-#: returned from by at least :data:`DOUBTED_TRUST` of the positions that saw it: a door, a
+#: of a trust of at least :attr:`WorldMap.doubted_share`: a door, a
 #: chair or a person some positions returned from and more saw through is not drawn, but its
 #: cells are not known free either (chosen on inner splits, docs/map.md: held-out returns on
 #: free cells fall on all four CARMEN logs, Intel 0.44 -> 0.33 %, FR-079 2.16 -> 1.57 %) ...
 DOUBTED_WALL_RIM = 0.05
-#: ... the share: below it a wall is the noise of a depth camera's floor (half the segments
-#: of fixtures/tum-fr3-cabinet are untrusted, most under 0.3; all of them would take 12 % of
-#: its free floor, these 3.5 %).
+#: ... the trust (:attr:`WorldMap.doubted_share`; what a file without it reads as): below it
+#: a wall is the noise of a depth camera's floor (half the segments of
+#: fixtures/tum-fr3-cabinet were untrusted, most under 0.3; all of them would take 12 % of its
+#: free floor, these 3.5 %). Chosen for the trust of maps written before 2026-12-05 (the
+#: share of the positions that returned from a wall among those that returned from it or saw
+#: through its middle); :func:`build_world_map` gives its maps their own
+#: (:data:`occtool.fuse._refit.NAV2_WALL_SHARE`, :data:`occtool.fuse._refit.NAV2_DOUBTED_SHARE`).
 DOUBTED_TRUST = 0.3
-#: A wall is drawn in the raster when at least this share of the positions that returned
-#: from it or saw through it returned from it.
+#: A wall is drawn in the raster when its trust reaches this (:attr:`WorldMap.wall_share`).
 WALL_SHARE = 0.5
 def _peak_of(trust: FloatArray) -> FloatArray:
     """Ridge heights of walls of this ``trust`` (:attr:`WorldMap.peak`)."""
@@ -149,8 +152,9 @@ class WorldMap:
     width, front_width, back_width, free_level, free_slope, unknown_level
         See :data:`WIDTH`, :data:`FRONT_WIDTH`, :data:`BACK_WIDTH`, :data:`FREE_LEVEL`,
         :data:`FREE_SLOPE`, :data:`UNKNOWN_LEVEL`.
-    wall_half_width, wall_share, wall_rim, doubted_wall_rim
-        The Nav2 raster's walls and their uncertain edges (:meth:`rasterise`).
+    wall_half_width, wall_share, wall_rim, doubted_wall_rim, doubted_share
+        The Nav2 raster's walls and their uncertain edges (:meth:`rasterise`): a wall of trust
+        ``wall_share`` or more is drawn, one of trust ``doubted_share`` or more keeps its rim.
     free_reach
         The Nav2 raster calls observed space free no farther than this from a position
         (metres; 0: anywhere), unless :attr:`free_region` says where (:meth:`free_space`).
@@ -162,7 +166,8 @@ class WorldMap:
                  free_level: float = FREE_LEVEL, free_slope: float = FREE_SLOPE,
                  unknown_level: float = UNKNOWN_LEVEL, wall_half_width: float = WALL_HALF_WIDTH,
                  wall_share: float = WALL_SHARE, wall_rim: float = WALL_RIM,
-                 doubted_wall_rim: float = DOUBTED_WALL_RIM, free_reach: float = 0.0) -> None:
+                 doubted_wall_rim: float = DOUBTED_WALL_RIM, free_reach: float = 0.0,
+                 doubted_share: float = DOUBTED_TRUST) -> None:
         import shapely
 
         self.start = np.asarray(start, dtype=np.float64).reshape(-1, 2)
@@ -190,7 +195,8 @@ class WorldMap:
                           else np.asarray(positions, dtype=np.float64).reshape(-1, 2))
         if not np.isfinite(self.positions).all():
             raise InputError("positions must be finite x, y")
-        for name, value in (("free_level", free_level), ("unknown_level", unknown_level), ("wall_share", wall_share)):
+        for name, value in (("free_level", free_level), ("unknown_level", unknown_level), ("wall_share", wall_share),
+                            ("doubted_share", doubted_share)):
             if not 0.0 <= value <= 1.0:
                 raise InputError(f"{name} must lie in [0, 1], got {value}")
         if not (len(band) == 2 and band[0] <= band[1]):
@@ -209,6 +215,7 @@ class WorldMap:
         self.wall_share = float(wall_share)
         self.wall_rim = float(wall_rim)
         self.doubted_wall_rim = float(doubted_wall_rim)
+        self.doubted_share = float(doubted_share)
         self.free_reach = float(free_reach)
         #: Where the Nav2 raster may call observed space free (a shapely geometry inside the
         #: region, or ``None``: :meth:`free_space` says what then); not written to the file.
@@ -456,7 +463,7 @@ class WorldMap:
         angle and its pose's error clear space less surely), it is at most
         :data:`occtool.raster.RASTER_FREE` and the cell lies farther than :attr:`wall_rim` from a
         trusted wall's band and than
-        :attr:`doubted_wall_rim` from a doubted one's (trust >= :data:`DOUBTED_TRUST`);
+        :attr:`doubted_wall_rim` from a doubted one's (trust >= :attr:`doubted_share`);
         unknown elsewhere (a wall's uncertain edge, what nobody observed). Row 0 is the
         bottom; ``probability`` is :meth:`predict` at the cell centres; ``explored`` marks
         the cells the run observed or placed a wall near (within those rims: the unknown
@@ -481,19 +488,20 @@ class WorldMap:
         # Cell by cell as described above, a strip of rows at a time (occtool.fuse._rasterise):
         # one query for the bands round the trusted and the doubted walls (exact up to the widest).
         return rasterise_strips(self, float(resolution), nx, ny, origin,
-                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), DOUBTED_TRUST,
+                                max(self.wall_half_width, self.wall_rim, self.doubted_wall_rim), self.doubted_share,
                                 executor=executor, occupancy=occupancy, spill=spill)
 
     def params(self) -> dict[str, Any]:
         """The map's scalar settings (what the file's header holds besides the arrays; a file
         written before :attr:`free_reach` reads as 0, so that merging it with a later map is
-        refused as merging maps of other settings is)."""
+        refused as merging maps of other settings is; one written before
+        :attr:`doubted_share` reads as :data:`DOUBTED_TRUST`, the share it was drawn with)."""
         return {"band": list(self.band), "width": self.width, "front_width": self.front_width,
                 "back_width": self.back_width, "free_level": self.free_level,
                 "free_slope": self.free_slope,
                 "unknown_level": self.unknown_level, "wall_half_width": self.wall_half_width,
                 "wall_share": self.wall_share, "wall_rim": self.wall_rim, "doubted_wall_rim": self.doubted_wall_rim,
-                "free_reach": self.free_reach}
+                "free_reach": self.free_reach, "doubted_share": self.doubted_share}
 
     def save(self, path: Any, *, overwrite: bool = True) -> int:
         """Write the map to ``path`` (:mod:`occtool.formats.occmap`, atomically); returns its bytes."""
