@@ -29,6 +29,9 @@ MAX_ROBOT_SIZE = 100.0
 #: Largest distance option (max range, focus range, background range, a simulated sensor's
 #: range, a laser's no-return range), metres.
 MAX_DISTANCE = 1e4
+#: Smallest length a map file may hold (a cell, a falloff), metres: a micrometre. Distances up
+#: to MAX_WORLD_COORDINATE over it stay finite (a falloff of 5e-324 m overflowed queries).
+MIN_DISTANCE = 1e-6
 #: Most bytes a compressed input may expand to; readers hold the text in memory, several
 #: times over while parsing (the largest shared log expands to 9.5 MB).
 MAX_DECOMPRESSED_BYTES = 2**30

@@ -54,7 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from occtool.errors import InputError
 from occtool.formats.occmap import MAGIC, MAX_HEADER, framed, write_file
-from occtool.limits import MAX_DISTANCE, MAX_WORLD_COORDINATE
+from occtool.limits import MAX_DISTANCE, MAX_WORLD_COORDINATE, MIN_DISTANCE
 
 FloatArray = NDArray[np.float64]
 
@@ -335,7 +335,7 @@ def decode(data: bytes, name: str = "occmap") -> Map3DArrays:
             and (version == 5 or table.size >= 1) and np.all((table >= 0.0) & (table <= 1.0))):
         raise fail("bad free space or patch extent")
     if lo.shape != (3,) or len(shape) != 3 or min(shape) < 1 or not all(
-            0 < v <= MAX_DISTANCE for v in (resolution, falloff, edge_falloff)):
+            MIN_DISTANCE <= v <= MAX_DISTANCE for v in (resolution, falloff, edge_falloff)):
         raise fail("bad box, resolution or falloff")
     # Lengths a map can hold: finite is not enough (a resolution of 1e153 m passes that, and
     # its queries' reach overflows to infinity).
