@@ -27,7 +27,7 @@ THROUGH_MARGIN = 0.1
 #: held-out scorers' spacing of free points); the band is the wall's line widened to
 #: BAND_HALF_WIDTH either side (or its thickness) and lengthened by it past each end, and
 #: measured at points BAND_SPACING apart (:func:`occtool.fuse._walls.free_in_bands`).
-#: Chosen on inner splits of the training scans (docs/figures.md, 2026-12-05): half-width
+#: Chosen on inner splits of the training scans (docs/figures.md, 2026-12-04): half-width
 #: 0.01 / **0.02** / 0.03 m, step 0.05 / **0.1** / 0.2 m.
 FREE_STEP = 0.1
 BAND_HALF_WIDTH = 0.02

@@ -87,7 +87,7 @@ DOUBTED_WALL_RIM = 0.05
 #: ... the trust (:attr:`WorldMap.doubted_share`; what a file without it reads as): below it
 #: a wall is the noise of a depth camera's floor (half the segments of
 #: fixtures/tum-fr3-cabinet were untrusted, most under 0.3; all of them would take 12 % of its
-#: free floor, these 3.5 %). Chosen for the trust of maps written before 2026-12-05 (the
+#: free floor, these 3.5 %). Chosen for the trust of files written without the key (the
 #: share of the positions that returned from a wall among those that returned from it or saw
 #: through its middle); :func:`build_world_map` gives its maps their own
 #: (:data:`occtool.fuse._refit.NAV2_WALL_SHARE`, :data:`occtool.fuse._refit.NAV2_DOUBTED_SHARE`).
