@@ -257,7 +257,23 @@ def test_a_large_box_walks_to_the_same_map_as_a_small_one(room: WorldMap3D, monk
     assert np.array_equal(sparse.fine_free_keys, room.fine_free_keys)
     monkeypatch.setattr(_patches, "CHUNK_SAMPLES", 5_000)  # many walk chunks: the same sums
     assert build_world_map_3d(*_rays(), resolution=0.2).to_bytes() == room.to_bytes()
+    monkeypatch.setattr(_patches, "MERGE_COUNTS", 64)  # the chunks' counts merged as they come, many times
+    merged = build_world_map_3d(*_rays(), resolution=0.2)
+    assert merged.to_bytes() == room.to_bytes() and np.array_equal(merged.fine_free_keys, room.fine_free_keys)
     monkeypatch.setattr(_patches, "DENSE_CELLS", 1 << 22)  # dense tables, counts by a sort or a bincount
     for chunks in (1, 1 << 10):
         monkeypatch.setattr(_patches, "DENSE_COUNTS", chunks)
         assert build_world_map_3d(*_rays(), resolution=0.2).to_bytes() == room.to_bytes()
+
+
+def test_one_sensors_origin_is_every_rays_and_rays_that_disagree_are_refused() -> None:
+    """``origins`` ``(3,)`` is every ray's (the rays are not copied for it: the same map as
+    the origins written out); origins, ends or hits of other counts are an InputError."""
+    sensor = np.array(SENSORS[0], dtype=np.float64)
+    d = np.random.default_rng(3).normal(size=(3000, 3))
+    ends, hits = _cast(sensor, d / np.linalg.norm(d, axis=1, keepdims=True))
+    one = build_world_map_3d(sensor, ends, hits, resolution=0.2)
+    assert one.to_bytes() == build_world_map_3d(np.tile(sensor, (len(ends), 1)), ends, hits, resolution=0.2).to_bytes()
+    for origins, rays_hits in ((np.zeros((5, 3)), hits), (sensor, hits[:-1]), (np.zeros(2), hits)):
+        with pytest.raises(InputError, match="same rays"):
+            build_world_map_3d(origins, ends, rays_hits, resolution=0.2)

@@ -59,8 +59,11 @@ STRIP_CELL_BYTES = 200
 STRIP_BYTES = 150 * 10**6
 #: Per ray of a 3D world map's build (:func:`occtool.fuse.map_log_3d`): its origin, end and
 #: direction, its samples' cell keys and the free cells' keys. Seosan's whole run, 1.22 M
-#: rays, built its map in 730 MB over what reading it held (963 MB peak for the whole map).
-RAY_BYTES = 650
+#: rays (long outdoor rays: the most distinct cells crossed a ray of the shared data), built
+#: its map in 524 MB over what reading it held (639 MB peak for the whole map; 1,025-1,302 MB
+#: before the build kept one copy of the rays and the walk merged its counts as it went);
+#: the TUM cabinet's frames four times over, 2.3 M rays, in 423 MB.
+RAY_BYTES = 480
 
 
 @dataclass(frozen=True)

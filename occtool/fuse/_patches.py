@@ -210,7 +210,12 @@ def fit_patches(returns: FloatArray, directions: FloatArray, lo: NDArray[np.int6
     corner = key_corners(cells, lo, shape, resolution)
     local = points - np.repeat(corner, counts, axis=0)  # cell-relative: no cancellation in the moments
     mean = np.add.reduceat(local, starts, axis=0) / n[:, None]
-    outer = np.add.reduceat(local[:, :, None] * local[:, None, :], starts, axis=0) / n[:, None, None]
+    # The six distinct second moments one at a time (a (H, 3, 3) array of products is 72
+    # bytes a return), each summed as a column: in order within each cell, as the whole was.
+    outer = np.empty((cells.size, 3, 3))
+    for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+        outer[:, a, b] = outer[:, b, a] = np.add.reduceat(local[:, a:a + 1] * local[:, b:b + 1], starts, axis=0)[:, 0]
+    outer /= n[:, None, None]
     covariance = outer - mean[:, :, None] * mean[:, None, :]
     values, vectors = np.linalg.eigh(covariance)  # ascending
     values = np.maximum(values, 0.0)
@@ -377,15 +382,12 @@ def counted_unique(keys: NDArray[np.int64], weights: NDArray[np.int64] | None = 
     return ordered[starts], np.add.reduceat(weights[order], starts)
 
 
-def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
+def _walk(origins: FloatArray, direction: FloatArray, free_length: FloatArray,
           step: float) -> Iterator[tuple[NDArray[np.int64], FloatArray, tuple[FloatArray, FloatArray, FloatArray]]]:
     """Chunks of ``(ray, distance, (x, y, z))``: points every ``step`` along each ray's free
     part (the last within half a step of its end), one coordinate an array (a point is
-    ``origin + distance * direction``, the same numbers as a ``(K, 3)`` array's)."""
-    vector = ends - origins
-    length = np.maximum(np.linalg.norm(vector, axis=1), 1e-12)
-    direction = vector / length[:, None]
-    columns = [(np.ascontiguousarray(origins[:, a]), np.ascontiguousarray(direction[:, a])) for a in range(3)]
+    ``origin + distance * direction``, ``direction`` the rays' unit vectors: the same numbers
+    as a ``(K, 3)`` array's)."""
     count = np.maximum(np.floor(free_length / step + 0.5).astype(np.int64), 0)
     total = np.cumsum(count)
     begin = 0
@@ -393,11 +395,13 @@ def _walk(origins: FloatArray, ends: FloatArray, free_length: FloatArray,
         reach = int(np.searchsorted(total, (total[begin - 1] if begin else 0) + CHUNK_SAMPLES, side="right"))
         end = max(reach, begin + 1)
         c = count[begin:end]
-        ray = np.repeat(np.arange(begin, end), c)
+        # The chunk's rays' columns only (a copy of the run's would be 48 bytes a ray).
+        local = np.repeat(np.arange(end - begin), c)
         k = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
         t = (k + 0.5) * step
-        x, y, z = (np.take(o, ray) + t * np.take(d, ray) for o, d in columns)
-        yield ray, t, (x, y, z)
+        x, y, z = (np.take(np.ascontiguousarray(origins[begin:end, a]), local)
+                   + t * np.take(np.ascontiguousarray(direction[begin:end, a]), local) for a in range(3))
+        yield local + begin, t, (x, y, z)
         begin = end
 
 
@@ -471,9 +475,22 @@ def _patch_cells(levels: list[PatchCodes], shapes: list[PatchGeometry], lo: NDAr
     return _PatchCells(keys, index, dense)
 
 
+#: The walk's per-chunk cell counts are merged once they hold this many cells (or twice the
+#: merged ones): memory of the cells crossed, a sort of them every so often.
+MERGE_COUNTS = 1 << 22
+
+
+def _merged(parts: list[tuple[NDArray[np.int64], NDArray[np.int64]]]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``(keys, counts)`` pairs as one: the distinct keys, sorted, and their summed counts."""
+    if len(parts) == 1:
+        return parts[0]
+    return counted_unique(np.concatenate([k for k, _ in parts]), np.concatenate([c for _, c in parts]))
+
+
 def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_],
                              levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[int, int, int],
-                             resolution: float, margin: float, extent: float = EXTENT
+                             resolution: float, margin: float, extent: float = EXTENT, *,
+                             direction: FloatArray | None = None, length: FloatArray | None = None
                              ) -> tuple[NDArray[np.int64], NDArray[np.int64], list[NDArray[np.int64]]]:
     """The sorted keys of the cells the rays crossed (a return's ray stops ``margin`` short of
     it; a free-only ray is free to its end), how many of the walk's points (every half cell
@@ -484,25 +501,28 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     (a step on, still short of the ray's return) lies on the other side of its plane, and
     the segment between them meets the plane within the patch's extent. Only the points in
     a patch's cell are looked at for that (found once for every level, :func:`_patch_cells`).
+    ``direction`` and ``length``, the rays' unit vectors and lengths, are made when not given
+    (the build has them: a run's rays are not copied again).
     """
     step = 0.5 * resolution
-    length = np.linalg.norm(ends - origins, axis=1)
+    if direction is None or length is None:
+        direction = ends - origins
+        length = np.linalg.norm(direction, axis=1)
+        direction = direction / np.maximum(length, 1e-12)[:, None]
     free_length = np.where(hits, length - margin, length)
-    vector = ends - origins
-    direction = vector / np.maximum(np.linalg.norm(vector, axis=1), 1e-12)[:, None]
     boxes = [level_box(lo, shape, level) for level in range(len(levels))]
     shapes = [geometry(codes, box[0], box[1], resolution * (1 << level), extent)
               for level, (codes, box) in enumerate(zip(levels, boxes))]
     crossings = [np.zeros(len(codes), dtype=np.int64) for codes in levels]
     reach = step * (1.0 + 1e-6) + 1e-9
-    direction_columns = [np.ascontiguousarray(direction[:, a]) for a in range(3)]
     centres = [[np.ascontiguousarray(g.centres[:, a]) for a in range(3)] for g in shapes]
     normals = [[np.ascontiguousarray(g.normals[:, a]) for a in range(3)] for g in shapes]
     covered = _patch_cells(levels, shapes, lo, shape, resolution, reach)
     cells = int(shape[0]) * int(shape[1]) * int(shape[2])
     dense = np.zeros(cells, dtype=np.int64) if cells <= min(DENSE_CELLS, DENSE_COUNTS * CHUNK_SAMPLES) else None
     free: list[tuple[NDArray[np.int64], NDArray[np.int64]]] = []
-    for ray, t, (x, y, z) in _walk(origins, ends, free_length, step):
+    pending = 0  # cells counted in the chunks since the last merge
+    for ray, t, (x, y, z) in _walk(origins, direction, free_length, step):
         i = np.floor(x / resolution).astype(np.int64) - lo[0]
         j = np.floor(y / resolution).astype(np.int64) - lo[1]
         k = np.floor(z / resolution).astype(np.int64) - lo[2]
@@ -516,6 +536,12 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
             dense += np.bincount(valid, minlength=cells)
         else:
             free.append(counted_unique(valid))
+            pending += free[-1][0].size
+            if pending > max(MERGE_COUNTS, 2 * free[0][0].size):
+                # Merged as they come, so that the cells held are about those crossed, not a
+                # chunk's worth each (Seosan's 0.4 m walk: 470 chunks, 750 MB unmerged).
+                free = [_merged(free)]
+                pending = 0
         if not covered.keys.size:
             continue
         # A crossing is counted only where the next point is still short of the ray's return.
@@ -524,7 +550,7 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
         near = near[t[near] + step <= free_length[ray[near]]]
         # One coordinate an array (the sums below in the order of a (K, 3) row's: x, y, z).
         point = (x[near], y[near], z[near])
-        heading = [np.take(d, ray[near]) for d in direction_columns]
+        heading = list(direction[ray[near]].T)
         index = covered.index[rows[near]]
         for level, (codes, g, centre, normal) in enumerate(zip(levels, shapes, centres, normals)):
             if not len(codes):
@@ -554,7 +580,7 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
         return keys.astype(np.int64), dense[keys], crossings
     if not free:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), crossings
-    keys, counts = counted_unique(np.concatenate([k for k, _ in free]), np.concatenate([c for _, c in free]))
+    keys, counts = _merged(free)
     return keys, counts, crossings
 
 

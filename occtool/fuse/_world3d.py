@@ -330,13 +330,21 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         Fewest returns a cell of the finest level needs for a patch (default
         :func:`~occtool.fuse._patches.fewest_returns`: a share of the mean of the cells').
     """
+    # No copies of the rays where none is needed: a run's millions of rays are 48 bytes each
+    # an array of them (:data:`occtool.fuse._memory.RAY_BYTES`).
     end = np.asarray(ends, dtype=np.float64).reshape(-1, 3)
-    origin = np.broadcast_to(np.asarray(origins, dtype=np.float64), end.shape).astype(np.float64)
+    origin = np.asarray(origins, dtype=np.float64)
     hit = np.ones(end.shape[0], dtype=bool) if hits is None else np.asarray(hits, dtype=bool).reshape(-1)
+    if origin.shape != end.shape:
+        try:
+            origin = np.broadcast_to(origin, end.shape)
+        except ValueError:
+            origin = np.zeros(0)  # refused just below
     if hit.shape[0] != end.shape[0] or origin.shape != end.shape:
         raise InputError("origins, ends and hits must describe the same rays")
     finite = np.isfinite(end).all(axis=1) & np.isfinite(origin).all(axis=1)
-    end, origin, hit = end[finite], origin[finite], hit[finite]
+    if not finite.all():
+        end, origin, hit = end[finite], origin[finite], hit[finite]
     if not (resolution > 0.0 and math.isfinite(resolution)):
         raise InputError(f"the resolution must be a positive number of metres, not {resolution}")
     falloff = 0.5 * resolution if falloff is None else float(falloff)
@@ -346,12 +354,13 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     if end.shape[0] == 0:
         lo, size = np.zeros(3, dtype=np.int64), np.ones(3, dtype=np.int64)
     else:
-        every = np.vstack([end, origin])
-        lo = np.floor(every.min(axis=0) / resolution).astype(np.int64)
-        size = np.floor(every.max(axis=0) / resolution).astype(np.int64) - lo + 1
+        lowest = np.minimum(end.min(axis=0), origin.min(axis=0))
+        lo = np.floor(lowest / resolution).astype(np.int64)
+        size = np.floor(np.maximum(end.max(axis=0), origin.max(axis=0)) / resolution).astype(np.int64) - lo + 1
     shape3 = (int(size[0]), int(size[1]), int(size[2]))
-    vector = end - origin
-    direction = vector / np.maximum(np.linalg.norm(vector, axis=1, keepdims=True), 1e-12)
+    direction = end - origin
+    length = np.linalg.norm(direction, axis=1)
+    direction /= np.maximum(length, 1e-12)[:, None]
     # Coarse levels first: a flat coarse cell (a stretch of wall or floor) is one patch; what
     # is left (corners, clutter) goes down a level, and the finest level takes everything.
     remaining = np.flatnonzero(hit)
@@ -368,7 +377,8 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         remaining = remaining[~taken]
     levels, counts = levels[::-1], counts[::-1]
     fine, walked, crossings = free_cells_and_crossings(origin, end, hit, levels, lo, shape3, resolution, margin,
-                                                       extent)
+                                                       extent, direction=direction, length=length)
+    del direction, length
     for codes, hits_per, crossed in zip(levels, counts, crossings):
         codes.trust = trust_codes(hits_per / np.maximum(hits_per + crossed, 1))
     # The free space's coarser cells: the walk's points of the fine cells they hold, as many
