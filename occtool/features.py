@@ -300,6 +300,17 @@ class Position:
     scan_sizes: NDArray[np.int64] | None = None
 
 
+def scans_apart(position: Any) -> NDArray[np.int64] | None:
+    """How many features each scan of ``position`` holds, when it keeps its scans apart
+    (:attr:`Position.scan_origins` and :attr:`Position.scan_sizes`, which account for every
+    feature); ``None`` when every feature's sensor is the position's (or it is no
+    :class:`Position`: a fitted model's position keeps no scans)."""
+    origins, sizes = getattr(position, "scan_origins", None), getattr(position, "scan_sizes", None)
+    if origins is None or sizes is None or int(np.sum(sizes)) != position.features.points.shape[0]:
+        return None
+    return np.asarray(sizes, dtype=np.int64)
+
+
 class Note(str):
     """A note a reader leaves for the user: its text, and the logging level it is reported at.
 

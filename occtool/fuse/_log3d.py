@@ -49,7 +49,7 @@ def rays_of_log(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], ND
     points (its sensor-centred robot-frame point turned by the yaw and moved by the pose),
     hits (evidence above 0; 0 is a free-only ray) and the number of its scan in the log (0, 1,
     ...; a position's own number where it keeps no scans apart)."""
-    from occtool.features import Pose
+    from occtool.features import Pose, scans_apart
 
     origins, ends, hits = [], [], []
     sizes: list[int] = []
@@ -62,12 +62,12 @@ def rays_of_log(log: Any) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], ND
         points = np.asarray(position.features.points, dtype=np.float64).reshape(-1, 3)
         pose = position.pose or Pose(0.0, 0.0, 0.0, 0.0)
         ends.append(points @ pose.rotation.T + pose.translation)
-        scans, scan_sizes = position.scan_origins, position.scan_sizes
-        if scans is not None and scan_sizes is not None and int(np.sum(scan_sizes)) == points.shape[0]:
+        scan_sizes = scans_apart(position)
+        if scan_sizes is not None:
             # Merged scans: a ray from the first scan's sensor would cross space the camera's
             # own ray did not (up to the position tolerance, 0.25 m, off).
-            origins.append(np.repeat(np.asarray(scans, dtype=np.float64), scan_sizes, axis=0) @ pose.rotation.T
-                           + pose.translation)
+            origins.append(np.repeat(np.asarray(position.scan_origins, dtype=np.float64), scan_sizes, axis=0)
+                           @ pose.rotation.T + pose.translation)
             sizes.extend(int(size) for size in scan_sizes)
         else:
             origins.append(np.broadcast_to(pose.translation, points.shape))

@@ -487,10 +487,9 @@ def _merged(parts: list[tuple[NDArray[np.int64], NDArray[np.int64]]]) -> tuple[N
     return counted_unique(np.concatenate([k for k, _ in parts]), np.concatenate([c for _, c in parts]))
 
 
-def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArray[np.bool_],
+def free_cells_and_crossings(origins: FloatArray, direction: FloatArray, length: FloatArray, hits: NDArray[np.bool_],
                              levels: list[PatchCodes], lo: NDArray[np.int64], shape: tuple[int, int, int],
-                             resolution: float, margin: float, extent: float = EXTENT, *,
-                             direction: FloatArray | None = None, length: FloatArray | None = None
+                             resolution: float, margin: float, extent: float = EXTENT
                              ) -> tuple[NDArray[np.int64], NDArray[np.int64], list[NDArray[np.int64]]]:
     """The sorted keys of the cells the rays crossed (a return's ray stops ``margin`` short of
     it; a free-only ray is free to its end), how many of the walk's points (every half cell
@@ -501,14 +500,10 @@ def free_cells_and_crossings(origins: FloatArray, ends: FloatArray, hits: NDArra
     (a step on, still short of the ray's return) lies on the other side of its plane, and
     the segment between them meets the plane within the patch's extent. Only the points in
     a patch's cell are looked at for that (found once for every level, :func:`_patch_cells`).
-    ``direction`` and ``length``, the rays' unit vectors and lengths, are made when not given
-    (the build has them: a run's rays are not copied again).
+    The rays are their ``origins``, unit ``direction`` and ``length`` (as the build holds
+    them: a run's rays are not copied again).
     """
     step = 0.5 * resolution
-    if direction is None or length is None:
-        direction = ends - origins
-        length = np.linalg.norm(direction, axis=1)
-        direction = direction / np.maximum(length, 1e-12)[:, None]
     free_length = np.where(hits, length - margin, length)
     boxes = [level_box(lo, shape, level) for level in range(len(levels))]
     shapes = [geometry(codes, box[0], box[1], resolution * (1 << level), extent)

@@ -137,13 +137,12 @@ def returns_of_positions(positions: Any, robot: Any, *, focus_range: float = mat
 
 
 def _scans(position: Any) -> NDArray[np.int64]:
-    """How many features each scan of a position holds (:attr:`occtool.features.Position.scan_sizes`;
+    """How many features each scan of a position holds (:func:`occtool.features.scans_apart`;
     one scan of them all when it keeps none)."""
-    sizes = getattr(position, "scan_sizes", None)
-    count = position.features.points.shape[0]
-    if getattr(position, "scan_origins", None) is None or sizes is None or int(np.sum(sizes)) != count:
-        return np.array([count], dtype=np.int64)
-    return np.asarray(sizes, dtype=np.int64)
+    from occtool.features import scans_apart
+
+    sizes = scans_apart(position)
+    return np.array([position.features.points.shape[0]], dtype=np.int64) if sizes is None else sizes
 
 
 def _scans_of(position: Any) -> Any:
@@ -159,12 +158,12 @@ def _scans_of(position: Any) -> Any:
         return
     origins = position.scan_origins
     ends = np.cumsum(sizes)
-    c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-    for origin, end, size in zip(np.asarray(origins, dtype=np.float64), ends, sizes):
+    origins = np.asarray(origins, dtype=np.float64)
+    sensors = pose.to_world(origins[:, :2])
+    for origin, sensor, end, size in zip(origins, sensors, ends, sizes):
         points = features.points[end - size:end] - origin
         kept = (np.abs(points) > 0.0).any(axis=1)  # a point at the scan's own sensor has no direction
-        yield (Pose(pose.x + c * origin[0] - s * origin[1], pose.y + s * origin[0] + c * origin[1], pose.z + origin[2],
-                    pose.yaw),
+        yield (Pose(float(sensor[0]), float(sensor[1]), pose.z + origin[2], pose.yaw),
                Features(points[kept], features.evidence[end - size:end][kept]))
 
 

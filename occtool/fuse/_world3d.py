@@ -335,11 +335,8 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
     end = np.asarray(ends, dtype=np.float64).reshape(-1, 3)
     origin = np.asarray(origins, dtype=np.float64)
     hit = np.ones(end.shape[0], dtype=bool) if hits is None else np.asarray(hits, dtype=bool).reshape(-1)
-    if origin.shape != end.shape:
-        try:
-            origin = np.broadcast_to(origin, end.shape)
-        except ValueError:
-            origin = np.zeros(0)  # refused just below
+    if origin.shape != end.shape and origin.size == 3:  # one sensor's origin: every ray's
+        origin = np.broadcast_to(origin.reshape(3), end.shape)
     if hit.shape[0] != end.shape[0] or origin.shape != end.shape:
         raise InputError("origins, ends and hits must describe the same rays")
     finite = np.isfinite(end).all(axis=1) & np.isfinite(origin).all(axis=1)
@@ -376,8 +373,8 @@ def build_world_map_3d(origins: ArrayLike, ends: ArrayLike, hits: ArrayLike | No
         counts.append(taken_counts)
         remaining = remaining[~taken]
     levels, counts = levels[::-1], counts[::-1]
-    fine, walked, crossings = free_cells_and_crossings(origin, end, hit, levels, lo, shape3, resolution, margin,
-                                                       extent, direction=direction, length=length)
+    fine, walked, crossings = free_cells_and_crossings(origin, direction, length, hit, levels, lo, shape3,
+                                                       resolution, margin, extent)
     del direction, length
     for codes, hits_per, crossed in zip(levels, counts, crossings):
         codes.trust = trust_codes(hits_per / np.maximum(hits_per + crossed, 1))
